@@ -1,0 +1,4216 @@
+/* appm.c - Adaptive Progressive Photon Mapping.  The whole implementation.
+ *
+ * Read appm.h for the API and its manual; this file is for those who want to
+ * know how it works.  Sections are numbered; each uses only the ones above it.
+ *
+ * TABLE OF CONTENTS
+ *   1. Platform and threads   feature macros, timer, mutex, spawn-per-call
+ *                             parallel loop over a mutex-guarded task counter
+ *   2. Core utilities         diagnostics, the one allocation wrapper, growable
+ *                             arrays, float3 math, the PCG32 random streams
+ *   3. Image I/O              PFM read/write, PPM (P6), PNG (stored deflate),
+ *                             sRGB transfer, write-to-temporary-then-rename
+ *   4. OBJ/MTL and scenes     locale-free number parser, OBJ/MTL/`.scene`
+ *                             readers with file:line errors, scene assembly
+ *   5. BVH                    binned-SAH build, watertight ray/triangle test,
+ *                             closest-hit and any-hit traversal, ray offsets
+ *   6. Materials and lights   Lambert, mirror, Fresnel dielectric; light choice
+ *                             by power, emission and next-event sampling
+ *   7. Eye pass               camera paths to the first diffuse vertex
+ *   8. Photon pass            photon paths, per-worker stores, chunk order
+ *   9. Hash-grid photon map   counting sort into cells, range queries
+ *  10. Estimators             kernels; ppm (Knaus-Zwicker), sppm
+ *                             (Hachisuka-Jensen), appm (Kaplanyan-Dachsbacher)
+ *  11. Path-tracing reference unidirectional, next-event estimation + MIS
+ *  12. API glue               renderer life cycle, pass loop, statistics
+ *
+ * CONVENTIONS
+ *   Geometry is single precision (float3); every accumulator that grows with the
+ *   number of passes or photons is double or uint64_t.  Directions point away
+ *   from the surface (wo towards the eye, wi towards the light).  Names follow
+ *   the papers: r (radius), M (photon paths per pass), j or N (pass, 1-based),
+ *   W (eye-path weight), gamma (photon weight), Psi = W f gamma.
+ */
+
+/* ==== 1. PLATFORM AND THREADS ============================================
+ *
+ * Everything that differs between operating systems lives here.  The thread
+ * backend is chosen at compile time (APPM_THREADS: 0 none, 1 pthreads, 2 Win32).
+ * Parallel work is a loop over tasks 0..n-1 handed out by a mutex-guarded
+ * counter: tasks are coarse (a row of pixels, a chunk of photon paths), so one
+ * lock per task costs nothing measurable, and no atomics are needed (tcc has
+ * none).  Threads are started and joined inside each call: no pool, no
+ * condition variables, nothing that can deadlock.  Results never depend on which
+ * worker ran a task: workers only ever write to per-task or per-pixel memory.
+ */
+#if defined(__FAST_MATH__) && !defined(APPM_ALLOW_FAST_MATH)
+#error "appm must not be compiled with -ffast-math: it relies on NaN checks and IEEE sums"
+#endif
+
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 200809L
+#endif
+#if defined(_WIN32) && !defined(_CRT_SECURE_NO_WARNINGS)
+#define _CRT_SECURE_NO_WARNINGS
+#endif
+
+#include "appm.h"
+
+#include <float.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#ifndef APPM_THREADS
+#if defined(_WIN32)
+#define APPM_THREADS 2
+#elif defined(__unix__) || defined(__APPLE__)
+#define APPM_THREADS 1
+#else
+#define APPM_THREADS 0
+#endif
+#endif
+
+#if APPM_THREADS == 1
+#include <pthread.h>
+#include <unistd.h>
+typedef pthread_mutex_t appm__mutex;
+#define appm__mutex_init(m) pthread_mutex_init((m), NULL)
+#define appm__mutex_destroy(m) pthread_mutex_destroy(m)
+#define appm__mutex_lock(m) pthread_mutex_lock(m)
+#define appm__mutex_unlock(m) pthread_mutex_unlock(m)
+#elif APPM_THREADS == 2
+#ifndef WIN32_LEAN_AND_MEAN
+#define WIN32_LEAN_AND_MEAN
+#endif
+#include <windows.h>
+typedef CRITICAL_SECTION appm__mutex;
+#define appm__mutex_init(m) InitializeCriticalSection(m)
+#define appm__mutex_destroy(m) DeleteCriticalSection(m)
+#define appm__mutex_lock(m) EnterCriticalSection(m)
+#define appm__mutex_unlock(m) LeaveCriticalSection(m)
+#else
+typedef int appm__mutex;
+#define appm__mutex_init(m) ((void)(m))
+#define appm__mutex_destroy(m) ((void)(m))
+#define appm__mutex_lock(m) ((void)(m))
+#define appm__mutex_unlock(m) ((void)(m))
+#endif
+
+#if defined(_WIN32) && APPM_THREADS != 2
+#ifndef WIN32_LEAN_AND_MEAN
+#define WIN32_LEAN_AND_MEAN
+#endif
+#include <windows.h>
+#endif
+
+#define APPM__MAX_THREADS 256
+
+/* Wall-clock seconds from an arbitrary origin (clock() would be CPU time). */
+static double appm__seconds(void)
+{
+#if defined(_WIN32)
+    LARGE_INTEGER f, c;
+    QueryPerformanceFrequency(&f);
+    QueryPerformanceCounter(&c);
+    return (double)c.QuadPart / (double)f.QuadPart;
+#elif defined(CLOCK_MONOTONIC)
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#else
+    return (double)clock() / (double)CLOCKS_PER_SEC;
+#endif
+}
+
+APPM_API unsigned appm_cpu_count(void)
+{
+#if APPM_THREADS == 1
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    if (n < 1) return 1;
+    return n > APPM__MAX_THREADS ? APPM__MAX_THREADS : (unsigned)n;
+#elif APPM_THREADS == 2
+    SYSTEM_INFO si;
+    GetSystemInfo(&si);
+    if (si.dwNumberOfProcessors < 1) return 1;
+    return si.dwNumberOfProcessors > APPM__MAX_THREADS ? APPM__MAX_THREADS
+                                                         : (unsigned)si.dwNumberOfProcessors;
+#else
+    return 1;
+#endif
+}
+
+/* Replace `to` by `from` (both in one folder).  POSIX rename() replaces; the
+ * Windows C library refuses when `to` exists, so remove it first there. */
+static int appm__rename_replace(const char *from, const char *to)
+{
+#if defined(_WIN32)
+    return MoveFileExA(from, to, MOVEFILE_REPLACE_EXISTING) ? 0 : -1;
+#else
+    return rename(from, to);
+#endif
+}
+
+typedef void (*appm__task_fn)(void *arg, uint32_t task, unsigned worker);
+
+typedef struct appm__queue {
+    appm__mutex lock;
+    uint32_t next, count;
+    appm__task_fn fn;
+    void *arg;
+} appm__queue;
+
+typedef struct appm__worker {
+    appm__queue *q;
+    unsigned id;
+} appm__worker;
+
+static void appm__worker_loop(appm__queue *q, unsigned id)
+{
+    for (;;) {
+        uint32_t t;
+        int ok;
+        appm__mutex_lock(&q->lock);
+        ok = q->next < q->count;
+        t = q->next;
+        if (ok) q->next++;
+        appm__mutex_unlock(&q->lock);
+        if (!ok) return;
+        q->fn(q->arg, t, id);
+    }
+}
+
+#if APPM_THREADS == 1
+static void *appm__thread_main(void *p)
+{
+    appm__worker *w = (appm__worker *)p;
+    appm__worker_loop(w->q, w->id);
+    return NULL;
+}
+#elif APPM_THREADS == 2
+static DWORD WINAPI appm__thread_main(LPVOID p)
+{
+    appm__worker *w = (appm__worker *)p;
+    appm__worker_loop(w->q, w->id);
+    return 0;
+}
+#endif
+
+/* Runs fn(arg, t, worker) for t = 0..count-1 on up to `threads` workers (the
+ * caller is worker 0).  A thread that cannot be started simply leaves its share
+ * to the others, so this never fails. */
+static void appm__parallel_for(unsigned threads, uint32_t count, appm__task_fn fn, void *arg)
+{
+    appm__queue q;
+    unsigned n = threads < 1 ? 1 : threads, i;
+    if (n > APPM__MAX_THREADS) n = APPM__MAX_THREADS;
+    if (n > count) n = count ? count : 1;
+    q.next = 0;
+    q.count = count;
+    q.fn = fn;
+    q.arg = arg;
+    appm__mutex_init(&q.lock);
+#if APPM_THREADS == 1 || APPM_THREADS == 2
+    if (n > 1) {
+        appm__worker w[APPM__MAX_THREADS];
+#if APPM_THREADS == 1
+        pthread_t th[APPM__MAX_THREADS];
+#else
+        HANDLE th[APPM__MAX_THREADS];
+#endif
+        int started[APPM__MAX_THREADS];
+        for (i = 1; i < n; ++i) {
+            w[i].q = &q;
+            w[i].id = i;
+#if APPM_THREADS == 1
+            started[i] = pthread_create(&th[i], NULL, appm__thread_main, &w[i]) == 0;
+#else
+            th[i] = CreateThread(NULL, 0, appm__thread_main, &w[i], 0, NULL);
+            started[i] = th[i] != NULL;
+#endif
+        }
+        appm__worker_loop(&q, 0);
+        for (i = 1; i < n; ++i) {
+            if (!started[i]) continue;
+#if APPM_THREADS == 1
+            pthread_join(th[i], NULL);
+#else
+            WaitForSingleObject(th[i], INFINITE);
+            CloseHandle(th[i]);
+#endif
+        }
+    } else
+#endif
+    {
+        (void)i;
+        appm__worker_loop(&q, 0);
+    }
+    appm__mutex_destroy(&q.lock);
+}
+
+/* ==== 2. CORE UTILITIES ==================================================
+ *
+ * Diagnostics: the first error of a call wins (later ones are usually its
+ * consequences) and carries file and line.  Memory: every byte goes through
+ * appm__alloc, which checks count * size for overflow, checks for NULL, zeroes
+ * (uninitialised memory is a classic source of non-determinism) and counts live
+ * and peak bytes.  A 16-byte header keeps the size, so the user's free hook gets
+ * the exact size that was allocated.  Growth is allocate-copy-free: no realloc.
+ */
+#define APPM__PI 3.14159265358979323846
+#define APPM__PIF 3.14159265358979323846f
+#define APPM__INV_PI 0.31830988618379067154
+
+static const char *const appm__status_text[APPM_STATUS_COUNT] = {
+    "ok", "out of memory", "input/output error", "malformed input",
+    "invalid argument", "not supported by this build", "cancelled"};
+
+APPM_API const char *appm_status_string(appm_status s)
+{
+    if ((int)s < 0 || s >= APPM_STATUS_COUNT) return "unknown status";
+    return appm__status_text[s];
+}
+
+APPM_API const char *appm_version(void) { return APPM_VERSION; }
+
+static void appm__diag_clear(appm_diag *d)
+{
+    if (!d) return;
+    d->status = APPM_OK;
+    d->line = 0;
+    d->file[0] = 0;
+    d->message[0] = 0;
+}
+
+static void appm__copy_str(char *dst, size_t cap, const char *src)
+{
+    size_t n = strlen(src);
+    if (n >= cap) n = cap - 1;
+    memcpy(dst, src, n);
+    dst[n] = 0;
+}
+
+static appm_status appm__fail(appm_diag *d, appm_status s, const char *file, unsigned line,
+                              const char *fmt, ...)
+{
+    va_list ap;
+    if (d && d->status == APPM_OK) {
+        d->status = s;
+        d->line = line;
+        appm__copy_str(d->file, sizeof d->file, file ? file : "");
+        va_start(ap, fmt);
+        vsnprintf(d->message, sizeof d->message, fmt, ap);
+        va_end(ap);
+    }
+    return s;
+}
+
+typedef struct appm__mem {
+    appm_allocator a;
+    appm_diag *diag; /* where an allocation failure is reported (may be NULL) */
+    size_t live, peak;
+} appm__mem;
+
+static void *appm__default_alloc(void *user, size_t size)
+{
+    (void)user;
+    return malloc(size);
+}
+
+static void appm__default_free(void *user, void *p, size_t size)
+{
+    (void)user;
+    (void)size;
+    free(p);
+}
+
+static void appm__mem_init(appm__mem *m, const appm_config *cfg)
+{
+    memset(m, 0, sizeof *m);
+    if (cfg && cfg->allocator.alloc && cfg->allocator.free) {
+        m->a = cfg->allocator;
+    } else {
+        m->a.alloc = appm__default_alloc;
+        m->a.free = appm__default_free;
+        m->a.user = NULL;
+    }
+}
+
+#define APPM__ALLOC_HEADER 16
+
+static void *appm__alloc(appm__mem *m, size_t count, size_t size)
+{
+    size_t bytes;
+    unsigned char *p;
+    if (size != 0 && count > (SIZE_MAX - APPM__ALLOC_HEADER) / size) {
+        appm__fail(m->diag, APPM_ERR_NOMEM, NULL, 0, "allocation of %.0f x %.0f bytes overflows",
+                   (double)count, (double)size);
+        return NULL;
+    }
+    bytes = count * size + APPM__ALLOC_HEADER;
+    p = (unsigned char *)m->a.alloc(m->a.user, bytes);
+    if (!p) {
+        appm__fail(m->diag, APPM_ERR_NOMEM, NULL, 0, "out of memory (%.0f bytes)", (double)bytes);
+        return NULL;
+    }
+    memset(p, 0, bytes);
+    memcpy(p, &bytes, sizeof bytes);
+    m->live += bytes;
+    if (m->live > m->peak) m->peak = m->live;
+    return p + APPM__ALLOC_HEADER;
+}
+
+static void appm__free(appm__mem *m, void *ptr)
+{
+    unsigned char *p;
+    size_t bytes;
+    if (!ptr) return;
+    p = (unsigned char *)ptr - APPM__ALLOC_HEADER;
+    memcpy(&bytes, p, sizeof bytes);
+    m->live -= bytes;
+    m->a.free(m->a.user, p, bytes);
+}
+
+/* Growable array of fixed-size elements (doubling; allocate-copy-free). */
+typedef struct appm__array {
+    void *data;
+    size_t count, cap, elem;
+} appm__array;
+
+static void appm__array_init(appm__array *a, size_t elem)
+{
+    a->data = NULL;
+    a->count = a->cap = 0;
+    a->elem = elem;
+}
+
+static int appm__array_reserve(appm__mem *m, appm__array *a, size_t want)
+{
+    void *nd;
+    size_t ncap;
+    if (want <= a->cap) return 1;
+    ncap = a->cap ? a->cap : 16;
+    while (ncap < want) {
+        if (ncap > SIZE_MAX / 2) return 0;
+        ncap *= 2;
+    }
+    nd = appm__alloc(m, ncap, a->elem);
+    if (!nd) return 0;
+    if (a->count) memcpy(nd, a->data, a->count * a->elem);
+    appm__free(m, a->data);
+    a->data = nd;
+    a->cap = ncap;
+    return 1;
+}
+
+/* Appends one element and returns it (zeroed), or NULL when out of memory. */
+static void *appm__array_push(appm__mem *m, appm__array *a)
+{
+    char *slot;
+    if (a->count == a->cap && !appm__array_reserve(m, a, a->count + 1)) return NULL;
+    slot = (char *)a->data + a->count * a->elem;
+    memset(slot, 0, a->elem);
+    a->count++;
+    return slot;
+}
+
+static void appm__array_free(appm__mem *m, appm__array *a)
+{
+    appm__free(m, a->data);
+    a->data = NULL;
+    a->count = a->cap = 0;
+}
+
+/* ---- 2.1 Float3 ---------------------------------------------------------- */
+
+typedef struct appm__v3 {
+    float x, y, z;
+} appm__v3;
+
+static inline appm__v3 appm__v(float x, float y, float z)
+{
+    appm__v3 r;
+    r.x = x;
+    r.y = y;
+    r.z = z;
+    return r;
+}
+static inline appm__v3 appm__add(appm__v3 a, appm__v3 b) { return appm__v(a.x + b.x, a.y + b.y, a.z + b.z); }
+static inline appm__v3 appm__sub(appm__v3 a, appm__v3 b) { return appm__v(a.x - b.x, a.y - b.y, a.z - b.z); }
+static inline appm__v3 appm__mul(appm__v3 a, appm__v3 b) { return appm__v(a.x * b.x, a.y * b.y, a.z * b.z); }
+static inline appm__v3 appm__scale(appm__v3 a, float s) { return appm__v(a.x * s, a.y * s, a.z * s); }
+static inline appm__v3 appm__neg(appm__v3 a) { return appm__v(-a.x, -a.y, -a.z); }
+static inline float appm__dot(appm__v3 a, appm__v3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline appm__v3 appm__cross(appm__v3 a, appm__v3 b)
+{
+    return appm__v(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+static inline float appm__length(appm__v3 a) { return sqrtf(appm__dot(a, a)); }
+static inline appm__v3 appm__normalize(appm__v3 a)
+{
+    float l = appm__length(a);
+    return l > 0.0f ? appm__scale(a, 1.0f / l) : a;
+}
+static inline appm__v3 appm__vmin(appm__v3 a, appm__v3 b)
+{
+    return appm__v(a.x < b.x ? a.x : b.x, a.y < b.y ? a.y : b.y, a.z < b.z ? a.z : b.z);
+}
+static inline appm__v3 appm__vmax(appm__v3 a, appm__v3 b)
+{
+    return appm__v(a.x > b.x ? a.x : b.x, a.y > b.y ? a.y : b.y, a.z > b.z ? a.z : b.z);
+}
+static inline float appm__comp(appm__v3 a, int i) { return i == 0 ? a.x : (i == 1 ? a.y : a.z); }
+static inline float appm__maxc(appm__v3 a)
+{
+    float m = a.x > a.y ? a.x : a.y;
+    return m > a.z ? m : a.z;
+}
+static inline int appm__finite3(appm__v3 a)
+{
+    return a.x - a.x == 0.0f && a.y - a.y == 0.0f && a.z - a.z == 0.0f; /* false for NaN, inf */
+}
+/* Rec. 709 luminance: the scalar the adaptive statistics work with. */
+static inline float appm__lum(appm__v3 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
+static inline double appm__lumd(const double *c) { return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]; }
+
+/* Orthonormal basis (t, b) around unit n without a branch on a "pick an axis"
+ * heuristic (Duff et al., "Building an Orthonormal Basis, Revisited", 2017). */
+static void appm__basis(appm__v3 n, appm__v3 *t, appm__v3 *b)
+{
+    float sign = n.z >= 0.0f ? 1.0f : -1.0f;
+    float a = -1.0f / (sign + n.z);
+    float c = n.x * n.y * a;
+    *t = appm__v(1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x);
+    *b = appm__v(c, sign + n.y * n.y * a, -n.y);
+}
+
+/* ---- 2.2 Random streams ----------------------------------------------------
+ *
+ * PCG32 (O'Neill 2014): 64-bit state, 32-bit output, a stream selector.  Every
+ * pixel and every photon path gets its own generator seeded from
+ * (seed, pass, domain, index) through the SplitMix64 finaliser, so a sample
+ * never depends on which thread drew it or in which order.                   */
+typedef struct appm__rng {
+    uint64_t state, inc;
+} appm__rng;
+
+static uint64_t appm__mix64(uint64_t z)
+{
+    z += 0x9E3779B97F4A7C15ull;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static uint32_t appm__rng_u32(appm__rng *r)
+{
+    uint64_t old = r->state;
+    uint32_t xorshifted, rot;
+    r->state = old * 6364136223846793005ull + r->inc;
+    xorshifted = (uint32_t)(((old >> 18) ^ old) >> 27);
+    rot = (uint32_t)(old >> 59);
+    return (xorshifted >> rot) | (xorshifted << ((32u - rot) & 31u));
+}
+
+enum { APPM__DOMAIN_EYE = 1, APPM__DOMAIN_PHOTON = 2, APPM__DOMAIN_TEST = 3 };
+
+static void appm__rng_seed(appm__rng *r, uint64_t seed, uint64_t pass, uint64_t domain,
+                           uint64_t index)
+{
+    uint64_t k = appm__mix64(seed ^ appm__mix64(pass * 4 + domain) ^ appm__mix64(~index));
+    r->state = 0;
+    r->inc = (appm__mix64(k ^ 0xDA942042E4DD58B5ull) << 1) | 1u;
+    appm__rng_u32(r);
+    r->state += k;
+    appm__rng_u32(r);
+}
+
+/* Uniform in [0, 1): 24 random bits, so 1 - 2^-24 is the largest value and a
+ * CDF lookup can never run past its end. */
+static inline float appm__rng_float(appm__rng *r)
+{
+    return (float)(appm__rng_u32(r) >> 8) * (1.0f / 16777216.0f);
+}
+
+/* ==== 3. IMAGE I/O =======================================================
+ *
+ * PFM (linear float): header "PF\n<w> <h>\n<scale>\n", then rows from the
+ * BOTTOM of the picture to the top; a negative scale means little-endian floats.
+ * We write the host's byte order (found with memcpy, not pointer punning) and
+ * read either.  PPM (P6) and PNG are 8-bit sRGB after an exposure multiply.  The
+ * PNG writer stores the pixels in uncompressed deflate blocks: no zlib, yet a
+ * valid file (CRC-32 per chunk, Adler-32 over the zlib stream).  Every writer
+ * writes "<name>.tmp" and renames it, so a failed write never leaves a
+ * half-written file under the final name.
+ */
+static int appm__host_little_endian(void)
+{
+    const uint32_t one = 1u;
+    unsigned char b;
+    memcpy(&b, &one, 1);
+    return b == 1;
+}
+
+/* The sRGB transfer curve of x * exposure, clamped to [0,1], as a byte.  NaN
+ * goes to 0; the clamp comes before the float-to-int conversion. */
+static unsigned char appm__to_srgb8(float x, float exposure)
+{
+    float v = x * exposure;
+    if (!(v > 0.0f)) return 0;
+    if (v >= 1.0f) return 255;
+    v = v <= 0.0031308f ? 12.92f * v : 1.055f * powf(v, 1.0f / 2.4f) - 0.055f;
+    v = v * 255.0f + 0.5f;
+    return (unsigned char)(v >= 255.0f ? 255.0f : v);
+}
+
+typedef struct appm__out {
+    FILE *f;
+    int ok;
+    uint32_t crc;
+} appm__out;
+
+static void appm__put(appm__out *o, const void *p, size_t n)
+{
+    if (o->ok && n && fwrite(p, 1, n, o->f) != n) o->ok = 0;
+}
+
+/* CRC-32 (IEEE, reflected 0xEDB88320), four bits at a time from a constant
+ * 16-entry table: no table built at run time, so no global mutable state. */
+static uint32_t appm__crc32_update(uint32_t crc, const unsigned char *p, size_t n)
+{
+    static const uint32_t t[16] = {
+        0x00000000u, 0x1DB71064u, 0x3B6E20C8u, 0x26D930ACu, 0x76DC4190u, 0x6B6B51F4u,
+        0x4DB26158u, 0x5005713Cu, 0xEDB88320u, 0xF00F9344u, 0xD6D6A3E8u, 0xCB61B38Cu,
+        0x9B64C2B0u, 0x86D3D2D4u, 0xA00AE278u, 0xBDBDF21Cu};
+    size_t i;
+    for (i = 0; i < n; ++i) {
+        crc ^= p[i];
+        crc = (crc >> 4) ^ t[crc & 15u];
+        crc = (crc >> 4) ^ t[crc & 15u];
+    }
+    return crc;
+}
+
+static void appm__put_crc(appm__out *o, const void *p, size_t n)
+{
+    o->crc = appm__crc32_update(o->crc, (const unsigned char *)p, n);
+    appm__put(o, p, n);
+}
+
+static void appm__be32(unsigned char *b, uint32_t v)
+{
+    b[0] = (unsigned char)(v >> 24);
+    b[1] = (unsigned char)(v >> 16);
+    b[2] = (unsigned char)(v >> 8);
+    b[3] = (unsigned char)v;
+}
+
+static void appm__png_chunk_begin(appm__out *o, const char *type, uint32_t len)
+{
+    unsigned char b[4];
+    appm__be32(b, len);
+    appm__put(o, b, 4);
+    o->crc = 0xFFFFFFFFu;
+    appm__put_crc(o, type, 4);
+}
+
+static void appm__png_chunk_end(appm__out *o)
+{
+    unsigned char b[4];
+    appm__be32(b, o->crc ^ 0xFFFFFFFFu);
+    appm__put(o, b, 4);
+}
+
+/* The zlib stream of a PNG made of stored deflate blocks: each block is a
+ * 5-byte header (BFINAL, LEN, ~LEN) and up to 65535 raw bytes. */
+typedef struct appm__zstore {
+    appm__out *o;
+    size_t raw, done, left_in_block;
+    uint32_t s1, s2; /* Adler-32 halves */
+} appm__zstore;
+
+static void appm__zstore_feed(appm__zstore *z, const unsigned char *p, size_t n)
+{
+    while (n > 0) {
+        size_t take, k;
+        if (z->left_in_block == 0) {
+            unsigned char b[5];
+            size_t len = z->raw - z->done < 65535 ? z->raw - z->done : 65535;
+            b[0] = (unsigned char)(z->done + len == z->raw);
+            b[1] = (unsigned char)(len & 255);
+            b[2] = (unsigned char)(len >> 8);
+            b[3] = (unsigned char)(~len & 255);
+            b[4] = (unsigned char)((~len >> 8) & 255);
+            appm__put_crc(z->o, b, 5);
+            z->left_in_block = len;
+        }
+        take = n < z->left_in_block ? n : z->left_in_block;
+        for (k = 0; k < take; ++k) {
+            z->s1 = (z->s1 + p[k]) % 65521u;
+            z->s2 = (z->s2 + z->s1) % 65521u;
+        }
+        appm__put_crc(z->o, p, take);
+        p += take;
+        n -= take;
+        z->done += take;
+        z->left_in_block -= take;
+    }
+}
+
+/* Converts row y to sRGB bytes piece by piece through a stack buffer (no heap
+ * use at all) and hands each piece to `emit`. */
+#define APPM__ROW_PIECE 256
+typedef void (*appm__emit_fn)(void *ctx, const unsigned char *p, size_t n);
+
+static void appm__emit_srgb_row(const appm_image *img, uint32_t y, float exposure,
+                                appm__emit_fn emit, void *ctx)
+{
+    unsigned char buf[3 * APPM__ROW_PIECE];
+    uint32_t x = 0;
+    while (x < img->width) {
+        uint32_t n = img->width - x < APPM__ROW_PIECE ? img->width - x : APPM__ROW_PIECE, i;
+        for (i = 0; i < n; ++i) {
+            const float *p = img->rgb + 3 * ((size_t)y * img->width + x + i);
+            buf[3 * i] = appm__to_srgb8(p[0], exposure);
+            buf[3 * i + 1] = appm__to_srgb8(p[1], exposure);
+            buf[3 * i + 2] = appm__to_srgb8(p[2], exposure);
+        }
+        emit(ctx, buf, (size_t)n * 3);
+        x += n;
+    }
+}
+
+static void appm__emit_png(void *ctx, const unsigned char *p, size_t n)
+{
+    appm__zstore_feed((appm__zstore *)ctx, p, n);
+}
+
+static void appm__emit_plain(void *ctx, const unsigned char *p, size_t n)
+{
+    appm__put((appm__out *)ctx, p, n);
+}
+
+static void appm__write_png_body(appm__out *o, const appm_image *img, float exposure)
+{
+    static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
+    const uint32_t w = img->width, h = img->height;
+    const size_t raw = (size_t)h * (1 + (size_t)w * 3); /* filter byte + RGB per row */
+    const size_t nblocks = raw / 65535 + (raw % 65535 != 0);
+    const size_t zlen = 2 + raw + 5 * nblocks + 4;
+    unsigned char b[13];
+    appm__zstore z;
+    uint32_t y;
+    appm__put(o, sig, 8);
+    appm__png_chunk_begin(o, "IHDR", 13);
+    appm__be32(b, w);
+    appm__be32(b + 4, h);
+    b[8] = 8;  /* bit depth */
+    b[9] = 2;  /* colour type: RGB */
+    b[10] = 0; /* compression: deflate */
+    b[11] = 0; /* filter method 0 (each row then says filter type 0: none) */
+    b[12] = 0; /* no interlace */
+    appm__put_crc(o, b, 13);
+    appm__png_chunk_end(o);
+    appm__png_chunk_begin(o, "IDAT", (uint32_t)zlen);
+    b[0] = 0x78; /* zlib: deflate, 32K window */
+    b[1] = 0x01; /* check bits: 0x7801 is a multiple of 31; no dictionary */
+    appm__put_crc(o, b, 2);
+    z.o = o;
+    z.raw = raw;
+    z.done = z.left_in_block = 0;
+    z.s1 = 1;
+    z.s2 = 0;
+    for (y = 0; y < h; ++y) {
+        unsigned char filter = 0;
+        appm__zstore_feed(&z, &filter, 1);
+        appm__emit_srgb_row(img, y, exposure, appm__emit_png, &z);
+    }
+    appm__be32(b, (z.s2 << 16) | z.s1);
+    appm__put_crc(o, b, 4);
+    appm__png_chunk_end(o);
+    appm__png_chunk_begin(o, "IEND", 0);
+    appm__png_chunk_end(o);
+}
+
+static void appm__write_ppm_body(appm__out *o, const appm_image *img, float exposure)
+{
+    char head[64];
+    uint32_t y;
+    int n = sprintf(head, "P6\n%lu %lu\n255\n", (unsigned long)img->width,
+                    (unsigned long)img->height);
+    appm__put(o, head, (size_t)n);
+    for (y = 0; y < img->height; ++y) appm__emit_srgb_row(img, y, exposure, appm__emit_plain, o);
+}
+
+static void appm__write_pfm_body(appm__out *o, const appm_image *img)
+{
+    char head[80];
+    uint32_t y;
+    int n = sprintf(head, "PF\n%lu %lu\n%s\n", (unsigned long)img->width,
+                    (unsigned long)img->height, appm__host_little_endian() ? "-1.0" : "1.0");
+    appm__put(o, head, (size_t)n);
+    for (y = img->height; y-- > 0;) /* bottom row first */
+        appm__put(o, img->rgb + (size_t)y * img->width * 3, sizeof(float) * img->width * 3);
+}
+
+static int appm__ends_with(const char *s, const char *suffix)
+{
+    size_t n = strlen(s), k = strlen(suffix), i;
+    if (k > n) return 0;
+    for (i = 0; i < k; ++i) {
+        char c = s[n - k + i];
+        if (c >= 'A' && c <= 'Z') c = (char)(c - 'A' + 'a');
+        if (c != suffix[i]) return 0;
+    }
+    return 1;
+}
+
+APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
+                                      appm_diag *diag)
+{
+    enum { PFM, PPM, PNG } kind;
+    char tmp[4096];
+    appm__out o;
+    appm__diag_clear(diag);
+    if (!path || !img || !img->rgb || img->width == 0 || img->height == 0 ||
+        img->width > 32768 || img->height > 32768)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no image to write");
+    if (!(exposure >= 0.0) || exposure > 1e30)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "exposure must be a positive number");
+    if (exposure == 0.0) exposure = 1.0;
+    if (appm__ends_with(path, ".pfm")) kind = PFM;
+    else if (appm__ends_with(path, ".ppm")) kind = PPM;
+    else if (appm__ends_with(path, ".png")) kind = PNG;
+    else
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0,
+                          "unknown image format (use .pfm, .ppm or .png)");
+    if (strlen(path) + 5 > sizeof tmp)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "path too long");
+    sprintf(tmp, "%s.tmp", path);
+    o.f = fopen(tmp, "wb");
+    o.ok = o.f != NULL;
+    o.crc = 0;
+    if (o.ok) {
+        if (kind == PFM) appm__write_pfm_body(&o, img);
+        else if (kind == PPM) appm__write_ppm_body(&o, img, (float)exposure);
+        else appm__write_png_body(&o, img, (float)exposure);
+        if (fclose(o.f) != 0) o.ok = 0;
+        if (o.ok && appm__rename_replace(tmp, path) != 0) o.ok = 0;
+        if (!o.ok) remove(tmp);
+    }
+    if (!o.ok) return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot write the image");
+    return APPM_OK;
+}
+
+/* Reads a whole file through the allocator; one extra zero byte is appended so
+ * that callers can print from it, but no parser relies on that terminator. */
+static appm_status appm__read_file(appm__mem *m, const char *path, char **out, size_t *len,
+                                   appm_diag *diag)
+{
+    FILE *f = fopen(path, "rb");
+    char *buf = NULL;
+    size_t cap = 0, n = 0;
+    *out = NULL;
+    *len = 0;
+    if (!f) return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot open file");
+    for (;;) {
+        size_t got;
+        if (cap - n < 2) { /* grow geometrically: allocate, copy, free */
+            size_t ncap = cap ? cap * 2 : 65536;
+            char *nb;
+            if (ncap < cap) break;
+            nb = (char *)appm__alloc(m, ncap, 1);
+            if (!nb) {
+                appm__free(m, buf);
+                fclose(f);
+                return appm__fail(diag, APPM_ERR_NOMEM, path, 0, "out of memory reading the file");
+            }
+            if (n) memcpy(nb, buf, n);
+            appm__free(m, buf);
+            buf = nb;
+            cap = ncap;
+        }
+        got = fread(buf + n, 1, cap - n - 1, f);
+        n += got;
+        if (got == 0) break;
+    }
+    if (ferror(f)) {
+        fclose(f);
+        appm__free(m, buf);
+        return appm__fail(diag, APPM_ERR_IO, path, 0, "read error");
+    }
+    fclose(f);
+    buf[n] = 0;
+    *out = buf;
+    *len = n;
+    return APPM_OK;
+}
+
+/* Parses a PFM held in memory.  Accepts "PF" (RGB) and "Pf" (grey, expanded to
+ * RGB), any whitespace between header fields, exactly one whitespace byte after
+ * the scale, and either byte order; rejects sizes above 32768 and short data. */
+static appm_status appm__pfm_parse(appm__mem *m, const unsigned char *p, size_t len,
+                                   const char *name, appm_image *out, appm_diag *diag)
+{
+    size_t pos = 2, y, x;
+    unsigned long dims[2] = {0, 0};
+    double scale = 0.0;
+    int channels, little, k;
+    char num[64];
+    size_t need;
+    out->width = out->height = 0;
+    out->rgb = NULL;
+    if (len < 2 || p[0] != 'P' || (p[1] != 'F' && p[1] != 'f'))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 1, "not a PFM file (no PF/Pf magic)");
+    channels = p[1] == 'F' ? 3 : 1;
+    for (k = 0; k < 3; ++k) {
+        size_t n = 0;
+        while (pos < len && (p[pos] == ' ' || p[pos] == '\t' || p[pos] == '\n' || p[pos] == '\r'))
+            pos++;
+        while (pos < len && n + 1 < sizeof num && p[pos] != ' ' && p[pos] != '\t' &&
+               p[pos] != '\n' && p[pos] != '\r')
+            num[n++] = (char)p[pos++];
+        num[n] = 0;
+        if (n == 0 || n + 1 >= sizeof num)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "truncated or malformed PFM header");
+        if (k < 2) {
+            char *end;
+            long v = strtol(num, &end, 10);
+            if (*end || v <= 0 || v > 32768)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                                  "PFM size '%s' is not an integer in 1..32768", num);
+            dims[k] = (unsigned long)v;
+        } else {
+            char *end;
+            scale = strtod(num, &end);
+            if (*end || !(scale == scale) || scale == 0.0)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PFM scale '%s' is not a non-zero number", num);
+        }
+    }
+    if (pos >= len) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PFM has no pixel data");
+    pos++; /* the single whitespace byte after the scale */
+    little = scale < 0.0;
+    need = (size_t)dims[0] * dims[1] * (size_t)channels * 4;
+    if (len - pos < need)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "PFM data is short: %.0f bytes for %lux%lu pixels", (double)(len - pos),
+                          dims[0], dims[1]);
+    out->rgb = (float *)appm__alloc(m, (size_t)dims[0] * dims[1], 3 * sizeof(float));
+    if (!out->rgb) return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "out of memory");
+    out->width = (uint32_t)dims[0];
+    out->height = (uint32_t)dims[1];
+    for (y = 0; y < dims[1]; ++y) {
+        float *row = out->rgb + (dims[1] - 1 - y) * dims[0] * 3; /* file row 0 = bottom */
+        for (x = 0; x < dims[0] * (size_t)channels; ++x) {
+            const unsigned char *q = p + pos + (y * dims[0] * (size_t)channels + x) * 4;
+            uint32_t bits = little ? ((uint32_t)q[0] | (uint32_t)q[1] << 8 | (uint32_t)q[2] << 16 |
+                                      (uint32_t)q[3] << 24)
+                                   : ((uint32_t)q[3] | (uint32_t)q[2] << 8 | (uint32_t)q[1] << 16 |
+                                      (uint32_t)q[0] << 24);
+            float v;
+            memcpy(&v, &bits, 4);
+            if (channels == 3) row[x] = v;
+            else row[3 * x] = row[3 * x + 1] = row[3 * x + 2] = v;
+        }
+    }
+    return APPM_OK;
+}
+
+APPM_API appm_status appm_image_read_pfm(const char *path, const appm_config *cfg,
+                                         appm_image *out, appm_diag *diag)
+{
+    appm__mem m;
+    char *buf;
+    size_t len;
+    appm_status s;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no output image");
+    out->width = out->height = 0;
+    out->rgb = NULL;
+    if (!path) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no path");
+    appm__mem_init(&m, cfg);
+    m.diag = diag;
+    s = appm__read_file(&m, path, &buf, &len, diag);
+    if (s != APPM_OK) return s;
+    s = appm__pfm_parse(&m, (const unsigned char *)buf, len, path, out, diag);
+    appm__free(&m, buf);
+    return s;
+}
+
+APPM_API void appm_image_free(const appm_config *cfg, appm_image *img)
+{
+    appm__mem m;
+    if (!img) return;
+    appm__mem_init(&m, cfg);
+    appm__free(&m, img->rgb);
+    img->rgb = NULL;
+    img->width = img->height = 0;
+}
+
+APPM_API appm_status appm_image_compare(const appm_image *a, const appm_image *b,
+                                        appm_compare_result *out)
+{
+    double se = 0, rel = 0, ae = 0, sa = 0, sb = 0, n;
+    size_t i, count;
+    if (!a || !b || !out || !a->rgb || !b->rgb) return APPM_ERR_INVALID_ARG;
+    if (a->width != b->width || a->height != b->height) return APPM_ERR_INVALID_ARG;
+    count = (size_t)a->width * a->height * 3;
+    for (i = 0; i < count; ++i) {
+        double x = a->rgb[i], r = b->rgb[i], d = x - r;
+        se += d * d;
+        rel += d * d / (r * r + 0.01);
+        ae += fabs(d);
+        sa += x;
+        sb += r;
+    }
+    n = (double)(count ? count : 1);
+    out->rmse = sqrt(se / n);
+    out->relmse = rel / n;
+    out->mae = ae / n;
+    out->mean_a = sa / n;
+    out->mean_b = sb / n;
+    return APPM_OK;
+}
+
+/* ==== 4. OBJ/MTL AND SCENES ==============================================
+ *
+ * Readers for the three text formats of the scene contract: `.scene` (camera,
+ * image, lights, meshes), Wavefront OBJ and MTL.  All three are read from memory
+ * buffers with explicit lengths (no reliance on a terminating NUL), line by line
+ * (LF, CRLF or CR), with a locale-free number parser.  Every malformed input is
+ * an error naming file and line; statements that are understood but not modelled
+ * (textures, Ns, glossy Ks, ...) are warnings, sent once per kind and file.
+ *
+ * Materials map to exactly one of three BSDFs (interface contract, section 2):
+ *   illum 4, 6, 7, 9 -> smooth dielectric, index Ni (1.5)
+ *   illum 3, 5       -> perfect mirror, reflectance Ks (1 1 1)
+ *   anything else    -> two-sided Lambert, albedo Kd (0.8), clamped to [0,1]
+ * and Ke > 0 adds one-sided Lambertian emission on the counter-clockwise side.
+ *
+ * Invariants after loading: no triangle has zero area or a non-finite vertex
+ * (such faces are dropped and counted); material 0 is the default diffuse.
+ */
+enum { APPM__MAT_DIFFUSE = 0, APPM__MAT_MIRROR, APPM__MAT_DIELECTRIC };
+
+typedef struct appm__material {
+    int kind;
+    int emissive;
+    appm__v3 color; /* Kd (diffuse albedo) or Ks (mirror reflectance) */
+    appm__v3 ke;    /* emitted radiance, front side only */
+    float ior;
+    uint32_t name;  /* offset of the name in the loader's string pool */
+} appm__material;
+
+typedef struct appm__tri { /* 36 bytes: just what the intersection test reads */
+    appm__v3 p0, p1, p2;
+} appm__tri;
+
+typedef struct appm__tri_info { /* 32 bytes: what shading reads after a hit */
+    appm__v3 ng;                /* unit geometric normal, counter-clockwise side */
+    float area;
+    uint32_t mat;
+    int32_t light;   /* index of its area light, or -1 */
+    int32_t n0;      /* first of three shading normals in scene->normals, or -1 */
+    uint32_t pad;
+} appm__tri_info;
+
+enum { APPM__LIGHT_AREA = 0, APPM__LIGHT_POINT, APPM__LIGHT_SPOT, APPM__LIGHT_ENV };
+
+typedef struct appm__light {
+    int kind;
+    uint32_t tri;    /* area: the emitting triangle */
+    appm__v3 pos;    /* point, spot */
+    appm__v3 axis;   /* spot: unit axis */
+    appm__v3 value;  /* area, environment: radiance; point, spot: intensity (W/sr) */
+    float cos_cone, cos_inner; /* spot: cos(cone), cos(cone - falloff) */
+    double power[3]; /* emitted power (W), RGB */
+    double pick;     /* probability of choosing this light for a photon or a shadow ray */
+    unsigned line;   /* line of the `.scene` statement (0 for area lights) */
+} appm__light;
+
+typedef struct appm__camera {
+    appm__v3 eye, forward, right, up;
+    float fov, tan_half; /* full vertical field of view, degrees; tan(fov/2) */
+    float aperture, focus;
+} appm__camera;
+
+typedef struct appm__loader {
+    appm__mem *mem;
+    appm_diag *diag;
+    appm_log_fn log;
+    void *log_user;
+    const char *file;       /* file being read, for messages */
+    uint32_t warned;        /* warning kinds already sent for `file` */
+    appm__array pos;        /* appm__v3: the current OBJ's `v` */
+    appm__array vn;         /* appm__v3: the current OBJ's `vn` */
+    appm__array nrm;        /* appm__v3: shading normals, three per smooth triangle */
+    size_t nvt;             /* `vt` count of the current OBJ (read, unused) */
+    appm__array tri;        /* appm__tri */
+    appm__array info;       /* appm__tri_info */
+    appm__array mat;        /* appm__material */
+    size_t mat_base;        /* first material of the current OBJ's libraries */
+    appm__array names;      /* char: NUL-terminated material names */
+    appm__array face;       /* int64_t pairs (position, normal) of the face being read */
+    appm__array lights;     /* appm__light: point, spot, environment */
+    uint64_t dropped;
+    appm__camera cam;
+    int have_camera;
+    uint32_t width, height;
+    const char *mem_mtl;    /* in-memory MTL text (appm_scene_load_obj_memory) */
+    size_t mem_mtl_len;
+} appm__loader;
+
+enum {
+    APPM__W_IGNORED = 1u << 0, /* reserved: the per-statement ignores use bits 8.. */
+    APPM__W_CLAMPED = 1u << 1,
+    APPM__W_DEGENERATE = 1u << 2,
+    APPM__W_NO_MTL = 1u << 3,
+    APPM__W_UNKNOWN_MAT = 1u << 4,
+    APPM__W_SHORT_FACE = 1u << 5,
+    APPM__W_EXTRA = 1u << 6,
+    APPM__W_BEFORE_NEWMTL = 1u << 7
+};
+
+static void appm__warn(appm__loader *L, uint32_t kind, unsigned line, const char *fmt, ...)
+{
+    char msg[256];
+    va_list ap;
+    if (!L->log || (L->warned & kind)) return;
+    L->warned |= kind;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    L->log(L->log_user, L->file ? L->file : "", line, msg);
+}
+
+/* ---- 4.1 Lines, tokens, numbers ------------------------------------------- */
+
+typedef struct appm__lines {
+    const char *p, *end;
+    unsigned line;
+} appm__lines;
+
+/* Next line as [*s, *e) without its terminator; comments (#...) stripped. */
+static int appm__next_line(appm__lines *it, const char **s, const char **e)
+{
+    const char *p = it->p, *q;
+    if (p >= it->end) return 0;
+    q = p;
+    while (q < it->end && *q != '\n' && *q != '\r') q++;
+    *s = p;
+    *e = q;
+    if (q < it->end && *q == '\r') q++;
+    if (q < it->end && *q == '\n' && (q == p || q[-1] != '\n')) q++;
+    it->p = q;
+    it->line++;
+    {
+        const char *c = *s;
+        while (c < *e && *c != '#') c++;
+        *e = c;
+    }
+    return 1;
+}
+
+static int appm__is_space(char c) { return c == ' ' || c == '\t' || c == '\v' || c == '\f'; }
+
+/* Next whitespace-separated token of [*s, e) as [*ts, *te); 0 at the end. */
+static int appm__token(const char **s, const char *e, const char **ts, const char **te)
+{
+    const char *p = *s;
+    while (p < e && appm__is_space(*p)) p++;
+    if (p >= e) {
+        *s = p;
+        return 0;
+    }
+    *ts = p;
+    while (p < e && !appm__is_space(*p)) p++;
+    *te = p;
+    *s = p;
+    return 1;
+}
+
+static int appm__token_is(const char *s, const char *e, const char *word)
+{
+    size_t n = strlen(word);
+    return (size_t)(e - s) == n && memcmp(s, word, n) == 0;
+}
+
+static int appm__lower_eq(const char *s, size_t n, const char *word)
+{
+    size_t i;
+    if (strlen(word) != n) return 0;
+    for (i = 0; i < n; ++i) {
+        char c = s[i];
+        if (c >= 'A' && c <= 'Z') c = (char)(c - 'A' + 'a');
+        if (c != word[i]) return 0;
+    }
+    return 1;
+}
+
+/* A whole token as a number, C strtod syntax without hex, independent of the
+ * locale: [+-] digits [. digits] [(e|E) [+-] digits], or nan / inf / infinity.
+ * Mantissa digits beyond 19 only shift the exponent; the exponent saturates, so
+ * "3E4570711268" is +inf, not an integer overflow.  Returns 0 if malformed. */
+static int appm__parse_number(const char *s, const char *e, double *out)
+{
+    int neg = 0, any = 0;
+    uint64_t mant = 0;
+    long exp10 = 0;
+    double v;
+    if (s < e && (*s == '+' || *s == '-')) neg = *s++ == '-';
+    if (appm__lower_eq(s, (size_t)(e - s), "nan")) {
+        *out = neg ? -(double)NAN : (double)NAN;
+        return 1;
+    }
+    if (appm__lower_eq(s, (size_t)(e - s), "inf") ||
+        appm__lower_eq(s, (size_t)(e - s), "infinity")) {
+        *out = neg ? -HUGE_VAL : HUGE_VAL;
+        return 1;
+    }
+    for (; s < e && *s >= '0' && *s <= '9'; ++s) {
+        any = 1;
+        if (mant < 1000000000000000000ull) mant = mant * 10 + (uint64_t)(*s - '0');
+        else exp10++;
+    }
+    if (s < e && *s == '.') {
+        for (++s; s < e && *s >= '0' && *s <= '9'; ++s) {
+            any = 1;
+            if (mant < 1000000000000000000ull) {
+                mant = mant * 10 + (uint64_t)(*s - '0');
+                exp10--;
+            }
+        }
+    }
+    if (!any) return 0;
+    if (s < e && (*s == 'e' || *s == 'E')) {
+        int eneg = 0, edig = 0;
+        long ev = 0;
+        ++s;
+        if (s < e && (*s == '+' || *s == '-')) eneg = *s++ == '-';
+        for (; s < e && *s >= '0' && *s <= '9'; ++s) {
+            edig = 1;
+            if (ev < 100000) ev = ev * 10 + (*s - '0');
+        }
+        if (!edig) return 0;
+        exp10 += eneg ? -ev : ev;
+    }
+    if (s != e) return 0;
+    v = (double)mant;
+    if (mant == 0) v = 0.0;
+    else if (exp10 > 400) v = HUGE_VAL;
+    else if (exp10 < -400) v = 0.0;
+    else if (exp10 < 0) v = exp10 < -300 ? v / 1e300 / pow(10.0, (double)(-exp10 - 300))
+                                         : v / pow(10.0, (double)-exp10);
+    else if (exp10 > 0) v = v * pow(10.0, (double)exp10);
+    *out = neg ? -v : v;
+    return 1;
+}
+
+/* Reads `n` numbers from the rest of a line into out[]; all must be finite. */
+static appm_status appm__numbers(appm__loader *L, const char **s, const char *e, unsigned line,
+                                 const char *what, double *out, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        const char *ts, *te;
+        if (!appm__token(s, e, &ts, &te))
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "%s: expected %d numbers, got %d",
+                              what, n, i);
+        if (!appm__parse_number(ts, te, &out[i]))
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "%s: malformed number '%.*s'",
+                              what, (int)(te - ts > 40 ? 40 : te - ts), ts);
+        if (!(out[i] - out[i] == 0.0))
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "%s: %s value '%.*s'", what,
+                              out[i] == out[i] ? "infinite" : "NaN",
+                              (int)(te - ts > 40 ? 40 : te - ts), ts);
+        if (fabs(out[i]) > 1e18)
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
+                              "%s: value %g is too large (|x| > 1e18)", what, out[i]);
+    }
+    return APPM_OK;
+}
+
+/* The rest of the line with surrounding blanks trimmed (file names may hold spaces). */
+static int appm__rest(const char *s, const char *e, const char **rs, const char **re)
+{
+    while (s < e && appm__is_space(*s)) s++;
+    while (e > s && appm__is_space(e[-1])) e--;
+    *rs = s;
+    *re = e;
+    return e > s;
+}
+
+/* dir of `path` + `rel` (unless rel is absolute) into out[cap]. */
+static int appm__join_path(char *out, size_t cap, const char *path, const char *rel, size_t rel_len)
+{
+    size_t dir = 0, i;
+    int absolute = rel_len > 0 && (rel[0] == '/' || rel[0] == '\\' || (rel_len > 1 && rel[1] == ':'));
+    if (!absolute && path)
+        for (i = 0; path[i]; ++i)
+            if (path[i] == '/' || path[i] == '\\') dir = i + 1;
+    if (dir + rel_len + 1 > cap) return 0;
+    if (dir) memcpy(out, path, dir);
+    memcpy(out + dir, rel, rel_len);
+    out[dir + rel_len] = 0;
+    return 1;
+}
+
+/* ---- 4.2 MTL --------------------------------------------------------------- */
+
+static const char *appm__mat_name(const appm__loader *L, const appm__material *m)
+{
+    return (const char *)L->names.data + m->name;
+}
+
+/* Decides the material kind once its block is complete. */
+static void appm__mtl_finish(appm__loader *L, appm__material *m, int illum, int have_ks,
+                             appm__v3 ks, appm__v3 kd, unsigned line)
+{
+    int c;
+    float *kdc[3];
+    m->emissive = m->ke.x > 0 || m->ke.y > 0 || m->ke.z > 0;
+    if (illum == 4 || illum == 6 || illum == 7 || illum == 9) {
+        m->kind = APPM__MAT_DIELECTRIC;
+        m->color = appm__v(1, 1, 1);
+    } else if (illum == 3 || illum == 5) {
+        m->kind = APPM__MAT_MIRROR;
+        m->color = have_ks ? ks : appm__v(1, 1, 1);
+    } else {
+        m->kind = APPM__MAT_DIFFUSE;
+        m->color = kd;
+        if (have_ks && (ks.x > 0 || ks.y > 0 || ks.z > 0))
+            appm__warn(L, 1u << 8, line, "glossy Ks is not modelled (material '%s' is diffuse)",
+                       appm__mat_name(L, m));
+    }
+    kdc[0] = &m->color.x;
+    kdc[1] = &m->color.y;
+    kdc[2] = &m->color.z;
+    for (c = 0; c < 3; ++c) {
+        if (*kdc[c] > 1.0f || *kdc[c] < 0.0f) {
+            appm__warn(L, APPM__W_CLAMPED, line,
+                       "reflectance of material '%s' outside [0,1], clamped", appm__mat_name(L, m));
+            *kdc[c] = *kdc[c] > 1.0f ? 1.0f : 0.0f;
+        }
+    }
+}
+
+static appm_status appm__mtl_parse(appm__loader *L, const char *buf, size_t len)
+{
+    appm__lines it;
+    const char *s, *e;
+    appm__material *cur = NULL;
+    int illum = 2, have_ks = 0;
+    appm__v3 ks = appm__v(0, 0, 0), kd = appm__v(0.8f, 0.8f, 0.8f);
+    appm_status st;
+    unsigned cur_line = 0;
+    static const char *const ignored[] = {"Ka", "Ns", "Tf", "d", "Tr", "sharpness", "Pr", "Pm",
+                                          "Ps", "Pc", "Pcr", "aniso", "anisor", "norm", "bump",
+                                          "disp", "decal", "refl"};
+    it.p = buf;
+    it.end = buf + len;
+    it.line = 0;
+    while (appm__next_line(&it, &s, &e)) {
+        const char *ts, *te;
+        double v[3];
+        if (!appm__token(&s, e, &ts, &te)) continue;
+        if (appm__token_is(ts, te, "newmtl")) {
+            const char *ns, *ne;
+            char *name;
+            size_t off = L->names.count, k;
+            if (cur) appm__mtl_finish(L, cur, illum, have_ks, ks, kd, cur_line);
+            if (!appm__rest(s, e, &ns, &ne))
+                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "newmtl without a name");
+            if (!appm__array_reserve(L->mem, &L->names, off + (size_t)(ne - ns) + 1))
+                return APPM_ERR_NOMEM;
+            name = (char *)L->names.data + off;
+            for (k = 0; k < (size_t)(ne - ns); ++k) name[k] = ns[k] ? ns[k] : '?';
+            name[ne - ns] = 0;
+            L->names.count += (size_t)(ne - ns) + 1;
+            cur = (appm__material *)appm__array_push(L->mem, &L->mat);
+            if (!cur) return APPM_ERR_NOMEM;
+            cur->name = (uint32_t)off;
+            cur->ior = 1.5f;
+            illum = 2;
+            have_ks = 0;
+            ks = appm__v(0, 0, 0);
+            kd = appm__v(0.8f, 0.8f, 0.8f);
+            cur_line = it.line;
+            continue;
+        }
+        if (!cur) {
+            appm__warn(L, APPM__W_BEFORE_NEWMTL, it.line, "statement before any newmtl ignored");
+            continue;
+        }
+        if (appm__token_is(ts, te, "Kd") || appm__token_is(ts, te, "Ks") ||
+            appm__token_is(ts, te, "Ke")) {
+            char which = ts[1];
+            if ((st = appm__numbers(L, &s, e, it.line, which == 'd' ? "Kd" : which == 's' ? "Ks" : "Ke",
+                                    v, 3)) != APPM_OK)
+                return st;
+            if (which == 'd') kd = appm__v((float)v[0], (float)v[1], (float)v[2]);
+            else if (which == 's') {
+                ks = appm__v((float)v[0], (float)v[1], (float)v[2]);
+                have_ks = 1;
+            } else {
+                if (v[0] < 0 || v[1] < 0 || v[2] < 0)
+                    return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "negative Ke");
+                cur->ke = appm__v((float)v[0], (float)v[1], (float)v[2]);
+                if (!appm__finite3(cur->ke))
+                    return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "Ke overflows a float");
+            }
+        } else if (appm__token_is(ts, te, "Ni")) {
+            if ((st = appm__numbers(L, &s, e, it.line, "Ni", v, 1)) != APPM_OK) return st;
+            if (!(v[0] > 0.0) || v[0] > 100.0)
+                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line,
+                                  "index of refraction Ni %g is not in (0, 100]", v[0]);
+            cur->ior = (float)v[0];
+        } else if (appm__token_is(ts, te, "illum")) {
+            if ((st = appm__numbers(L, &s, e, it.line, "illum", v, 1)) != APPM_OK) return st;
+            if (v[0] < 0 || v[0] > 10 || v[0] != floor(v[0]))
+                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line,
+                                  "illum must be an integer 0..10");
+            illum = (int)v[0];
+        } else if (te - ts > 4 && memcmp(ts, "map_", 4) == 0) {
+            appm__warn(L, 1u << 9, it.line, "texture maps are not modelled: '%.*s' ignored",
+                       (int)(te - ts > 30 ? 30 : te - ts), ts);
+        } else {
+            size_t k, n = sizeof ignored / sizeof ignored[0];
+            for (k = 0; k < n; ++k)
+                if (appm__token_is(ts, te, ignored[k])) break;
+            if (k < n)
+                appm__warn(L, 1u << (10 + k), it.line, "MTL statement '%s' is not modelled, ignored",
+                           ignored[k]);
+            else
+                appm__warn(L, 1u << 30, it.line, "unknown MTL statement '%.*s' ignored",
+                           (int)(te - ts > 30 ? 30 : te - ts), ts);
+        }
+    }
+    if (cur) appm__mtl_finish(L, cur, illum, have_ks, ks, kd, cur_line);
+    return APPM_OK;
+}
+
+static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const char *rel,
+                                  size_t rel_len, unsigned line)
+{
+    char path[4096];
+    char *buf;
+    size_t len;
+    appm_status st;
+    const char *saved_file = L->file;
+    uint32_t saved_warned = L->warned;
+    appm_diag quiet;
+    if (L->mem_mtl) { /* in-memory scene: every mtllib means the given MTL text */
+        L->file = "(mtl)";
+        L->warned = 0;
+        st = appm__mtl_parse(L, L->mem_mtl, L->mem_mtl_len);
+        L->file = saved_file;
+        L->warned = saved_warned;
+        return st;
+    }
+    if (!appm__join_path(path, sizeof path, obj_path, rel, rel_len))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "mtllib path too long");
+    appm__diag_clear(&quiet);
+    L->mem->diag = &quiet;
+    st = appm__read_file(L->mem, path, &buf, &len, &quiet);
+    L->mem->diag = L->diag;
+    if (st == APPM_ERR_IO) {
+        appm__warn(L, APPM__W_NO_MTL, line, "cannot open material library '%s': default material used",
+                   path);
+        return APPM_OK;
+    }
+    if (st != APPM_OK) return appm__fail(L->diag, st, path, 0, "%s", quiet.message);
+    L->file = path;
+    L->warned = 0;
+    st = appm__mtl_parse(L, buf, len);
+    L->file = saved_file;
+    L->warned = saved_warned;
+    appm__free(L->mem, buf);
+    return st;
+}
+
+/* ---- 4.3 OBJ --------------------------------------------------------------- */
+
+/* Resolves a 1-based (or negative, relative) OBJ index against `count` items
+ * read so far; -1 if out of range.  Zero is never valid. */
+static int64_t appm__obj_index(const char *s, const char *e, size_t count, int *ok)
+{
+    int neg = 0;
+    int64_t v = 0;
+    *ok = 0;
+    if (s < e && (*s == '-' || *s == '+')) neg = *s++ == '-';
+    if (s >= e) return -1;
+    for (; s < e; ++s) {
+        if (*s < '0' || *s > '9') return -1;
+        if (v > (INT64_MAX - 9) / 10) v = INT64_MAX / 2; /* saturate: surely out of range */
+        else v = v * 10 + (*s - '0');
+    }
+    *ok = 1; /* well-formed number; range is checked below */
+    if (v == 0) return -1;
+    if (neg) v = (int64_t)count - v;
+    else v = v - 1;
+    if (v < 0 || (uint64_t)v >= (uint64_t)count) return -1;
+    return v;
+}
+
+static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e, unsigned line,
+                                  uint32_t mat)
+{
+    const char *ts, *te;
+    int64_t *f;
+    size_t k, n;
+    L->face.count = 0;
+    while (appm__token(s, e, &ts, &te)) {
+        const char *slash1 = ts, *slash2;
+        int64_t vi, ni = -1;
+        int ok;
+        int64_t *pair;
+        while (slash1 < te && *slash1 != '/') slash1++;
+        vi = appm__obj_index(ts, slash1, L->pos.count, &ok);
+        if (vi < 0)
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
+                              ok ? "vertex index '%.*s' out of range (%.0f vertices so far)"
+                                 : "malformed vertex index '%.*s'",
+                              (int)(slash1 - ts > 30 ? 30 : slash1 - ts), ts, (double)L->pos.count);
+        if (slash1 < te) {
+            slash2 = slash1 + 1;
+            while (slash2 < te && *slash2 != '/') slash2++;
+            if (slash2 > slash1 + 1 && appm__obj_index(slash1 + 1, slash2, L->nvt, &ok) < 0)
+                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
+                                  ok ? "texture index out of range" : "malformed texture index");
+            if (slash2 < te) {
+                ni = appm__obj_index(slash2 + 1, te, L->vn.count, &ok);
+                if (ni < 0)
+                    return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
+                                      ok ? "normal index '%.*s' out of range" : "malformed normal index '%.*s'",
+                                      (int)(te - slash2 - 1 > 30 ? 30 : te - slash2 - 1), slash2 + 1);
+            }
+        }
+        if (!appm__array_reserve(L->mem, &L->face, L->face.count + 1)) return APPM_ERR_NOMEM;
+        pair = (int64_t *)L->face.data + 2 * L->face.count++;
+        pair[0] = vi;
+        pair[1] = ni;
+    }
+    n = L->face.count;
+    if (n < 3) {
+        appm__warn(L, APPM__W_SHORT_FACE, line, "face with fewer than 3 vertices skipped");
+        return APPM_OK;
+    }
+    f = (int64_t *)L->face.data;
+    for (k = 1; k + 1 < n; ++k) { /* fan: (0, k, k+1) */
+        const appm__v3 *P = (const appm__v3 *)L->pos.data;
+        appm__v3 a = P[f[0]], b = P[f[2 * k]], c = P[f[2 * k + 2]];
+        appm__v3 cr = appm__cross(appm__sub(b, a), appm__sub(c, a));
+        float area2 = appm__length(cr);
+        appm__tri *t;
+        appm__tri_info *in;
+        if (!(area2 > 0.0f) || !(area2 < FLT_MAX)) {
+            L->dropped++;
+            appm__warn(L, APPM__W_DEGENERATE, line, "degenerate (zero-area) triangles dropped");
+            continue;
+        }
+        t = (appm__tri *)appm__array_push(L->mem, &L->tri);
+        in = (appm__tri_info *)appm__array_push(L->mem, &L->info);
+        if (!t || !in) return APPM_ERR_NOMEM;
+        if (L->info.count > 0x7FFFFFF0u)
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "too many triangles");
+        t->p0 = a;
+        t->p1 = b;
+        t->p2 = c;
+        in->ng = appm__scale(cr, 1.0f / area2);
+        in->area = 0.5f * area2;
+        in->mat = mat;
+        in->light = -1;
+        in->n0 = -1;
+        if (f[1] >= 0 && f[2 * k + 1] >= 0 && f[2 * k + 3] >= 0) {
+            /* shading normals are stored per triangle corner, three in a row */
+            size_t base = L->nrm.count, j;
+            const int64_t idx[3] = {f[1], f[2 * k + 1], f[2 * k + 3]};
+            if (!appm__array_reserve(L->mem, &L->nrm, base + 3)) return APPM_ERR_NOMEM;
+            for (j = 0; j < 3; ++j)
+                ((appm__v3 *)L->nrm.data)[base + j] = ((appm__v3 *)L->vn.data)[idx[j]];
+            L->nrm.count += 3;
+            in->n0 = (int32_t)base;
+        }
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len, const char *path)
+{
+    appm__lines it;
+    const char *s, *e;
+    uint32_t mat = 0;
+    appm_status st;
+    size_t i;
+    static const char *const ignored[] = {"vp", "l", "p", "cstype", "deg", "bmat", "step",
+                                          "curv", "curv2", "surf", "parm", "trim", "hole",
+                                          "scrv", "sp", "end", "con", "mg", "lod", "usemap",
+                                          "maplib", "shadow_obj", "trace_obj", "ctech", "stech",
+                                          "bevel", "c_interp", "d_interp", "call", "csh"};
+    L->pos.count = 0;
+    L->nvt = 0;
+    L->vn.count = 0;
+    L->mat_base = L->mat.count;
+    for (i = 0; i < len; ++i)
+        if (buf[i] == 0)
+            return appm__fail(L->diag, APPM_ERR_PARSE, path, 0,
+                              "binary data (NUL byte at offset %.0f): not an OBJ text file", (double)i);
+    it.p = buf;
+    it.end = buf + len;
+    it.line = 0;
+    while (appm__next_line(&it, &s, &e)) {
+        const char *ts, *te;
+        double v[3];
+        if (!appm__token(&s, e, &ts, &te)) continue;
+        if (appm__token_is(ts, te, "v")) {
+            appm__v3 *p;
+            if ((st = appm__numbers(L, &s, e, it.line, "v", v, 3)) != APPM_OK) return st;
+            if (appm__token(&s, e, &ts, &te))
+                appm__warn(L, APPM__W_EXTRA, it.line, "extra vertex components (w, colours) ignored");
+            p = (appm__v3 *)appm__array_push(L->mem, &L->pos);
+            if (!p) return APPM_ERR_NOMEM;
+            *p = appm__v((float)v[0], (float)v[1], (float)v[2]);
+        } else if (appm__token_is(ts, te, "vn")) {
+            appm__v3 *p;
+            if ((st = appm__numbers(L, &s, e, it.line, "vn", v, 3)) != APPM_OK) return st;
+            p = (appm__v3 *)appm__array_push(L->mem, &L->vn);
+            if (!p) return APPM_ERR_NOMEM;
+            *p = appm__normalize(appm__v((float)v[0], (float)v[1], (float)v[2]));
+            if (!(appm__dot(*p, *p) > 0.5f))
+                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "zero-length normal");
+        } else if (appm__token_is(ts, te, "vt")) {
+            L->nvt++;
+        } else if (appm__token_is(ts, te, "f")) {
+            if ((st = appm__obj_face(L, &s, e, it.line, mat)) != APPM_OK) return st;
+        } else if (appm__token_is(ts, te, "usemtl")) {
+            const char *ns, *ne;
+            size_t k;
+            mat = 0;
+            if (appm__rest(s, e, &ns, &ne)) {
+                for (k = L->mat.count; k-- > L->mat_base;) {
+                    const char *name = appm__mat_name(L, (appm__material *)L->mat.data + k);
+                    if (strlen(name) == (size_t)(ne - ns) && memcmp(name, ns, (size_t)(ne - ns)) == 0) {
+                        mat = (uint32_t)k;
+                        break;
+                    }
+                }
+                if (mat == 0)
+                    appm__warn(L, APPM__W_UNKNOWN_MAT, it.line,
+                               "unknown material '%.*s': default diffuse used",
+                               (int)(ne - ns > 60 ? 60 : ne - ns), ns);
+            }
+        } else if (appm__token_is(ts, te, "mtllib")) {
+            const char *ns, *ne;
+            if (appm__rest(s, e, &ns, &ne) &&
+                (st = appm__mtl_load(L, path, ns, (size_t)(ne - ns), it.line)) != APPM_OK)
+                return st;
+        } else if (appm__token_is(ts, te, "o") || appm__token_is(ts, te, "g") ||
+                   appm__token_is(ts, te, "s")) {
+            /* grouping and smoothing groups: nothing to do */
+        } else {
+            size_t k, n = sizeof ignored / sizeof ignored[0];
+            int word = 1;
+            const char *c;
+            for (c = ts; c < te; ++c)
+                if (!((*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || *c == '_' ||
+                      (c > ts && *c >= '0' && *c <= '9')))
+                    word = 0;
+            if (!word)
+                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line,
+                                  "'%.*s' is not an OBJ statement", (int)(te - ts > 30 ? 30 : te - ts), ts);
+            for (k = 0; k < n; ++k)
+                if (appm__token_is(ts, te, ignored[k])) break;
+            appm__warn(L, k < n ? 1u << (8 + k % 20) : 1u << 30, it.line,
+                       "OBJ statement '%.*s' is not modelled, ignored",
+                       (int)(te - ts > 30 ? 30 : te - ts), ts);
+        }
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned line)
+{
+    char *buf;
+    size_t len;
+    appm_status st;
+    const char *saved_file = L->file;
+    uint32_t saved_warned = L->warned;
+    appm_diag quiet;
+    appm__diag_clear(&quiet);
+    L->mem->diag = &quiet;
+    st = appm__read_file(L->mem, path, &buf, &len, &quiet);
+    L->mem->diag = L->diag;
+    if (st == APPM_ERR_IO)
+        return appm__fail(L->diag, APPM_ERR_IO, saved_file ? saved_file : path, saved_file ? line : 0,
+                          "cannot open mesh '%s'", path);
+    if (st != APPM_OK) return appm__fail(L->diag, st, path, 0, "%s", quiet.message);
+    L->file = path;
+    L->warned = 0;
+    st = appm__obj_parse(L, buf, len, path);
+    L->file = saved_file;
+    L->warned = saved_warned;
+    appm__free(L->mem, buf);
+    return st;
+}
+
+/* ---- 4.4 `.scene` files ---------------------------------------------------- */
+
+/* Reads "key x y z" pairs of a statement in any order into the slots of `keys`. */
+typedef struct appm__kv {
+    const char *key;
+    int n;        /* numbers that follow the key */
+    double v[3];
+    int seen;
+} appm__kv;
+
+static appm_status appm__keyvals(appm__loader *L, const char **s, const char *e, unsigned line,
+                                 const char *stmt, appm__kv *kv, int nkv)
+{
+    const char *ts, *te;
+    appm_status st;
+    while (appm__token(s, e, &ts, &te)) {
+        int k;
+        for (k = 0; k < nkv; ++k)
+            if (appm__token_is(ts, te, kv[k].key)) break;
+        if (k == nkv)
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "%s: unknown keyword '%.*s'", stmt,
+                              (int)(te - ts > 30 ? 30 : te - ts), ts);
+        if ((st = appm__numbers(L, s, e, line, kv[k].key, kv[k].v, kv[k].n)) != APPM_OK) return st;
+        kv[k].seen = 1;
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__need(appm__loader *L, unsigned line, const char *stmt, const appm__kv *kv,
+                              int nkv)
+{
+    int k;
+    for (k = 0; k < nkv; ++k)
+        if (!kv[k].seen && kv[k].n > 0 && kv[k].key[0] != '?')
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "%s: missing '%s'", stmt, kv[k].key);
+    return APPM_OK;
+}
+
+static appm__v3 appm__kv3(const appm__kv *kv)
+{
+    return appm__v((float)kv->v[0], (float)kv->v[1], (float)kv->v[2]);
+}
+
+static appm_status appm__camera_set(appm__loader *L, unsigned line, appm__v3 eye, appm__v3 target,
+                                    appm__v3 up, double fov)
+{
+    appm__camera *c = &L->cam;
+    appm__v3 f = appm__sub(target, eye), r;
+    if (!(appm__length(f) > 0.0f))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "camera: eye and target coincide");
+    f = appm__normalize(f);
+    r = appm__cross(f, up);
+    if (!(appm__length(r) > 1e-6f * appm__length(up)) || !(appm__length(up) > 0.0f))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "camera: up is parallel to the view direction");
+    if (!(fov > 0.0 && fov < 180.0))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "camera: fov %g is not in (0, 180)", fov);
+    c->eye = eye;
+    c->forward = f;
+    c->right = appm__normalize(r);
+    c->up = appm__cross(c->right, f);
+    c->fov = (float)fov;
+    c->tan_half = (float)tan(0.5 * fov * APPM__PI / 180.0);
+    L->have_camera = 1;
+    return APPM_OK;
+}
+
+static appm_status appm__scene_parse(appm__loader *L, const char *buf, size_t len, const char *path)
+{
+    appm__lines it;
+    const char *s, *e;
+    appm_status st;
+    size_t i;
+    int meshes = 0;
+    for (i = 0; i < len; ++i)
+        if (buf[i] == 0)
+            return appm__fail(L->diag, APPM_ERR_PARSE, path, 0, "binary data: not a scene file");
+    it.p = buf;
+    it.end = buf + len;
+    it.line = 0;
+    while (appm__next_line(&it, &s, &e)) {
+        const char *ts, *te;
+        if (!appm__token(&s, e, &ts, &te)) continue;
+        if (appm__token_is(ts, te, "mesh")) {
+            const char *ns, *ne;
+            char mpath[4096];
+            if (!appm__rest(s, e, &ns, &ne))
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "mesh: missing file name");
+            if (!appm__join_path(mpath, sizeof mpath, path, ns, (size_t)(ne - ns)))
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "mesh: path too long");
+            if ((st = appm__obj_load(L, mpath, it.line)) != APPM_OK) return st;
+            meshes++;
+        } else if (appm__token_is(ts, te, "camera")) {
+            appm__kv kv[4] = {{"eye", 3, {0, 0, 0}, 0}, {"target", 3, {0, 0, 0}, 0},
+                              {"up", 3, {0, 1, 0}, 0}, {"fov", 1, {40, 0, 0}, 0}};
+            if ((st = appm__keyvals(L, &s, e, it.line, "camera", kv, 4)) != APPM_OK) return st;
+            if (!kv[0].seen || !kv[1].seen)
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "camera: needs eye and target");
+            if ((st = appm__camera_set(L, it.line, appm__kv3(&kv[0]), appm__kv3(&kv[1]),
+                                       appm__kv3(&kv[2]), kv[3].v[0])) != APPM_OK)
+                return st;
+        } else if (appm__token_is(ts, te, "lens")) {
+            appm__kv kv[2] = {{"aperture", 1, {0, 0, 0}, 0}, {"focus", 1, {0, 0, 0}, 0}};
+            if ((st = appm__keyvals(L, &s, e, it.line, "lens", kv, 2)) != APPM_OK) return st;
+            if ((st = appm__need(L, it.line, "lens", kv, 2)) != APPM_OK) return st;
+            if (kv[0].v[0] < 0 || !(kv[1].v[0] > 0))
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
+                                  "lens: aperture must be >= 0 and focus > 0");
+            L->cam.aperture = (float)kv[0].v[0];
+            L->cam.focus = (float)kv[1].v[0];
+        } else if (appm__token_is(ts, te, "image")) {
+            double v[2];
+            if ((st = appm__numbers(L, &s, e, it.line, "image", v, 2)) != APPM_OK) return st;
+            if (v[0] < 1 || v[1] < 1 || v[0] > 32768 || v[1] > 32768 || v[0] != floor(v[0]) ||
+                v[1] != floor(v[1]))
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
+                                  "image: width and height must be integers in 1..32768");
+            L->width = (uint32_t)v[0];
+            L->height = (uint32_t)v[1];
+        } else if (appm__token_is(ts, te, "light") || appm__token_is(ts, te, "environment")) {
+            appm__light *l;
+            int env = ts[0] == 'e';
+            const char *ks = NULL, *ke = NULL;
+            if (!env && !appm__token(&s, e, &ks, &ke))
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "light: missing kind (point or spot)");
+            l = (appm__light *)appm__array_push(L->mem, &L->lights);
+            if (!l) return APPM_ERR_NOMEM;
+            l->line = it.line;
+            if (env) {
+                double v[3];
+                if ((st = appm__numbers(L, &s, e, it.line, "environment", v, 3)) != APPM_OK) return st;
+                if (v[0] < 0 || v[1] < 0 || v[2] < 0)
+                    return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "environment: negative radiance");
+                l->kind = APPM__LIGHT_ENV;
+                l->value = appm__v((float)v[0], (float)v[1], (float)v[2]);
+            } else if (appm__token_is(ks, ke, "point")) {
+                appm__kv kv[2] = {{"position", 3, {0, 0, 0}, 0}, {"intensity", 3, {0, 0, 0}, 0}};
+                if ((st = appm__keyvals(L, &s, e, it.line, "light point", kv, 2)) != APPM_OK) return st;
+                if ((st = appm__need(L, it.line, "light point", kv, 2)) != APPM_OK) return st;
+                l->kind = APPM__LIGHT_POINT;
+                l->pos = appm__kv3(&kv[0]);
+                l->value = appm__kv3(&kv[1]);
+            } else if (appm__token_is(ks, ke, "spot")) {
+                appm__kv kv[5] = {{"position", 3, {0, 0, 0}, 0}, {"target", 3, {0, 0, 0}, 0},
+                                  {"intensity", 3, {0, 0, 0}, 0}, {"cone", 1, {30, 0, 0}, 0},
+                                  {"falloff", 1, {0, 0, 0}, 0}};
+                double cone, fall;
+                if ((st = appm__keyvals(L, &s, e, it.line, "light spot", kv, 5)) != APPM_OK) return st;
+                if ((st = appm__need(L, it.line, "light spot", kv, 3)) != APPM_OK) return st;
+                cone = kv[3].v[0];
+                fall = kv[4].v[0];
+                if (!(cone > 0 && cone < 180) || fall < 0 || fall > cone)
+                    return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
+                                      "light spot: need 0 < cone < 180 and 0 <= falloff <= cone");
+                l->kind = APPM__LIGHT_SPOT;
+                l->pos = appm__kv3(&kv[0]);
+                l->axis = appm__sub(appm__kv3(&kv[1]), l->pos);
+                if (!(appm__length(l->axis) > 0))
+                    return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "light spot: target equals position");
+                l->axis = appm__normalize(l->axis);
+                l->value = appm__kv3(&kv[2]);
+                l->cos_cone = (float)cos(cone * APPM__PI / 180.0);
+                l->cos_inner = (float)cos((cone - fall) * APPM__PI / 180.0);
+            } else {
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
+                                  "light: unknown kind '%.*s' (point or spot)", (int)(ke - ks > 30 ? 30 : ke - ks), ks);
+            }
+            if (l->value.x < 0 || l->value.y < 0 || l->value.z < 0)
+                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "light: negative intensity");
+        } else {
+            return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "unknown keyword '%.*s'",
+                              (int)(te - ts > 30 ? 30 : te - ts), ts);
+        }
+    }
+    if (meshes == 0 && L->lights.count == 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, 0, "empty scene: no mesh and no light");
+    return APPM_OK;
+}
+
+/* ==== 5. BVH ==============================================================
+ *
+ * A binary BVH over triangles in one flat array of 32-byte nodes.  Build:
+ * binned surface-area heuristic (16 bins on each axis), iterative with an
+ * explicit stack; when the centroids of a node coincide (duplicate triangles) or
+ * the tree gets deep, the node is split at its median index instead, so the
+ * depth stays below APPM__BVH_MAX_DEPTH and traversal needs a fixed stack.
+ *
+ * Intersection is the watertight test of Woop, Benthin and Wald (JCGT 2013):
+ * the ray is sheared to +z, edge functions are evaluated in 2-D and recomputed
+ * in double when one is exactly zero, so a ray through a shared edge or vertex
+ * of a closed mesh hits at least one of its triangles.
+ *
+ * Ray origins leaving a surface are pushed off along the geometric normal by a
+ * bound on the rounding error of the hit point (pbrt-v3, section 3.9): the point
+ * is interpolated from the vertices with barycentrics, its error is at most
+ * gamma(7) sum |b_i p_i| per axis, and the offset grows with that - so a scene
+ * in millimetres or kilometres, or far from the origin, behaves alike.
+ */
+#define APPM__BVH_BINS 16
+#define APPM__BVH_MAX_DEPTH 96
+#define APPM__BVH_FORCE_MEDIAN 64
+
+typedef struct appm__node { /* 32 bytes */
+    float bmin[3], bmax[3];
+    uint32_t first; /* leaf: first triangle; interior: left child (right = first + 1) */
+    uint32_t count; /* triangles in a leaf; 0 for an interior node */
+} appm__node;
+
+struct appm_scene {
+    appm__mem mem;
+    appm__tri *tri;        /* BVH order */
+    appm__tri_info *info;  /* same order */
+    uint32_t ntri;
+    appm__v3 *normals;     /* shading normals, three per smooth triangle */
+    uint32_t nnormals;
+    appm__material *mat;
+    uint32_t nmat;
+    appm__light *light;
+    uint32_t nlight;
+    double *light_cdf;     /* nlight + 1 entries, light_cdf[nlight] == 1 */
+    int env;               /* index of the environment light, or -1 */
+    appm__node *node;
+    uint32_t nnode, depth;
+    appm__camera cam;
+    uint32_t width, height;
+    appm__v3 bmin, bmax, center;
+    float radius;          /* bounding-sphere radius of the geometry */
+    uint64_t dropped;
+    char name[256];
+};
+
+typedef struct appm__ray {
+    appm__v3 o, d;
+    float tmin, tmax;
+    /* precomputed by appm__ray_setup */
+    appm__v3 inv;
+    int kx, ky, kz;
+    float sx, sy, sz;
+    int valid;
+} appm__ray;
+
+typedef struct appm__hit {
+    float t, b1, b2; /* barycentrics of p1 and p2 */
+    uint32_t tri;
+} appm__hit;
+
+static void appm__ray_setup(appm__ray *r)
+{
+    float ax = fabsf(r->d.x), ay = fabsf(r->d.y), az = fabsf(r->d.z), dz;
+    r->valid = appm__finite3(r->o) && appm__finite3(r->d) && (ax > 0 || ay > 0 || az > 0) &&
+               r->tmax == r->tmax && r->tmin == r->tmin;
+    if (!r->valid) return;
+    r->kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
+    r->kx = (r->kz + 1) % 3;
+    r->ky = (r->kx + 1) % 3;
+    dz = appm__comp(r->d, r->kz);
+    if (dz < 0.0f) { /* keep the winding: swap x and y */
+        int t = r->kx;
+        r->kx = r->ky;
+        r->ky = t;
+    }
+    r->sx = appm__comp(r->d, r->kx) / dz;
+    r->sy = appm__comp(r->d, r->ky) / dz;
+    r->sz = 1.0f / dz;
+    r->inv = appm__v(1.0f / r->d.x, 1.0f / r->d.y, 1.0f / r->d.z);
+}
+
+/* Woop-Benthin-Wald watertight test; on a hit in (tmin, tmax) fills h. */
+static int appm__tri_hit(const appm__ray *r, const appm__tri *tr, appm__hit *h)
+{
+    appm__v3 A = appm__sub(tr->p0, r->o), B = appm__sub(tr->p1, r->o), C = appm__sub(tr->p2, r->o);
+    float Akz = appm__comp(A, r->kz), Bkz = appm__comp(B, r->kz), Ckz = appm__comp(C, r->kz);
+    float Ax = appm__comp(A, r->kx) - r->sx * Akz, Ay = appm__comp(A, r->ky) - r->sy * Akz;
+    float Bx = appm__comp(B, r->kx) - r->sx * Bkz, By = appm__comp(B, r->ky) - r->sy * Bkz;
+    float Cx = appm__comp(C, r->kx) - r->sx * Ckz, Cy = appm__comp(C, r->ky) - r->sy * Ckz;
+    float U = Cx * By - Cy * Bx, V = Ax * Cy - Ay * Cx, W = Bx * Ay - By * Ax;
+    float det, T, t;
+    if (U == 0.0f || V == 0.0f || W == 0.0f) { /* on an edge: decide in double */
+        U = (float)((double)Cx * By - (double)Cy * Bx);
+        V = (float)((double)Ax * Cy - (double)Ay * Cx);
+        W = (float)((double)Bx * Ay - (double)By * Ax);
+    }
+    if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return 0;
+    det = U + V + W;
+    if (det == 0.0f || det != det) return 0;
+    T = U * (r->sz * Akz) + V * (r->sz * Bkz) + W * (r->sz * Ckz);
+    t = T / det;
+    if (!(t > r->tmin && t < r->tmax)) return 0;
+    h->t = t;
+    h->b1 = V / det;
+    h->b2 = W / det;
+    return 1;
+}
+
+/* Slab test.  Written so that a NaN from 0 * inf (a ray lying in a slab plane)
+ * keeps the interval open instead of rejecting: false hits are harmless, false
+ * misses are holes.  The far distance is widened by 1 + 2 gamma(3) (pbrt). */
+static int appm__box_hit(const appm__ray *r, const appm__node *n, float tmax, float *tnear)
+{
+    float t0 = r->tmin, t1 = tmax, a, b, lo, hi;
+    a = (n->bmin[0] - r->o.x) * r->inv.x;
+    b = (n->bmax[0] - r->o.x) * r->inv.x;
+    lo = a < b ? a : b;
+    hi = a < b ? b : a;
+    hi *= 1.0f + 2.0f * 3.0f * (FLT_EPSILON * 0.5f);
+    if (lo > t0) t0 = lo;
+    if (hi < t1) t1 = hi;
+    a = (n->bmin[1] - r->o.y) * r->inv.y;
+    b = (n->bmax[1] - r->o.y) * r->inv.y;
+    lo = a < b ? a : b;
+    hi = a < b ? b : a;
+    hi *= 1.0f + 2.0f * 3.0f * (FLT_EPSILON * 0.5f);
+    if (lo > t0) t0 = lo;
+    if (hi < t1) t1 = hi;
+    a = (n->bmin[2] - r->o.z) * r->inv.z;
+    b = (n->bmax[2] - r->o.z) * r->inv.z;
+    lo = a < b ? a : b;
+    hi = a < b ? b : a;
+    hi *= 1.0f + 2.0f * 3.0f * (FLT_EPSILON * 0.5f);
+    if (lo > t0) t0 = lo;
+    if (hi < t1) t1 = hi;
+    *tnear = t0;
+    return t0 <= t1;
+}
+
+/* Closest hit in (tmin, tmax), ignoring triangle `skip` (the one a secondary ray
+ * leaves: a flat triangle cannot be hit again by a ray leaving it). */
+static int appm__intersect(const appm_scene *s, const appm__ray *r, uint32_t skip, appm__hit *h)
+{
+    uint32_t stack[APPM__BVH_MAX_DEPTH + 4];
+    int sp = 0, found = 0;
+    uint32_t ni = 0;
+    float tmax = r->tmax;
+    appm__ray q;
+    if (!r->valid || s->nnode == 0) return 0;
+    q = *r;
+    for (;;) {
+        const appm__node *n = &s->node[ni];
+        if (n->count) {
+            uint32_t i;
+            for (i = n->first; i < n->first + n->count; ++i) {
+                if (i == skip) continue;
+                q.tmax = tmax;
+                if (appm__tri_hit(&q, &s->tri[i], h)) {
+                    tmax = h->t;
+                    h->tri = i;
+                    found = 1;
+                }
+            }
+        } else {
+            float d0, d1;
+            int h0 = appm__box_hit(r, &s->node[n->first], tmax, &d0);
+            int h1 = appm__box_hit(r, &s->node[n->first + 1], tmax, &d1);
+            if (h0 && h1) {
+                if (d1 < d0) {
+                    stack[sp++] = n->first;
+                    ni = n->first + 1;
+                } else {
+                    stack[sp++] = n->first + 1;
+                    ni = n->first;
+                }
+                continue;
+            }
+            if (h0 || h1) {
+                ni = h0 ? n->first : n->first + 1;
+                continue;
+            }
+        }
+        if (sp == 0) break;
+        ni = stack[--sp];
+        { /* pop nodes that now lie beyond the closest hit */
+            float dn;
+            while (!appm__box_hit(r, &s->node[ni], tmax, &dn)) {
+                if (sp == 0) return found;
+                ni = stack[--sp];
+            }
+        }
+    }
+    return found;
+}
+
+/* Any hit in (tmin, tmax), ignoring triangles skip0 and skip1: shadow rays. */
+static int appm__occluded(const appm_scene *s, const appm__ray *r, uint32_t skip0, uint32_t skip1)
+{
+    uint32_t stack[APPM__BVH_MAX_DEPTH + 4];
+    int sp = 0;
+    uint32_t ni = 0;
+    appm__hit h;
+    if (!r->valid || s->nnode == 0) return 0;
+    for (;;) {
+        const appm__node *n = &s->node[ni];
+        float d;
+        if (appm__box_hit(r, n, r->tmax, &d)) {
+            if (n->count) {
+                uint32_t i;
+                for (i = n->first; i < n->first + n->count; ++i)
+                    if (i != skip0 && i != skip1 && appm__tri_hit(r, &s->tri[i], &h)) return 1;
+            } else {
+                stack[sp++] = n->first + 1;
+                ni = n->first;
+                continue;
+            }
+        }
+        if (sp == 0) return 0;
+        ni = stack[--sp];
+    }
+}
+
+/* ---- 5.1 Build ------------------------------------------------------------- */
+
+typedef struct appm__bbox {
+    appm__v3 lo, hi;
+} appm__bbox;
+
+static void appm__bbox_empty(appm__bbox *b)
+{
+    b->lo = appm__v(FLT_MAX, FLT_MAX, FLT_MAX);
+    b->hi = appm__v(-FLT_MAX, -FLT_MAX, -FLT_MAX);
+}
+
+static void appm__bbox_grow(appm__bbox *b, appm__v3 p)
+{
+    b->lo = appm__vmin(b->lo, p);
+    b->hi = appm__vmax(b->hi, p);
+}
+
+static void appm__bbox_join(appm__bbox *b, const appm__bbox *o)
+{
+    b->lo = appm__vmin(b->lo, o->lo);
+    b->hi = appm__vmax(b->hi, o->hi);
+}
+
+static float appm__bbox_area(const appm__bbox *b)
+{
+    appm__v3 d = appm__sub(b->hi, b->lo);
+    if (d.x < 0 || d.y < 0 || d.z < 0) return 0.0f;
+    return 2.0f * (d.x * d.y + d.y * d.z + d.z * d.x);
+}
+
+typedef struct appm__build_item {
+    uint32_t node, start, count, depth;
+} appm__build_item;
+
+/* Chooses a split of idx[start, start+count) and partitions it; returns the
+ * size of the left part, or 0 to make a leaf. */
+static uint32_t appm__bvh_split(const appm__bbox *tb, const appm__v3 *cen, uint32_t *idx,
+                                uint32_t start, uint32_t count, uint32_t depth, float node_area)
+{
+    appm__bbox cb;
+    uint32_t i, best_axis = 3, best_bin = 0, left = 0;
+    float best_cost = (float)count; /* cost of a leaf: one test per triangle */
+    int axis;
+    appm__bbox_empty(&cb);
+    for (i = start; i < start + count; ++i) appm__bbox_grow(&cb, cen[idx[i]]);
+    if (count <= 2) return 0;
+    if (depth < APPM__BVH_FORCE_MEDIAN) {
+        for (axis = 0; axis < 3; ++axis) {
+            float lo = appm__comp(cb.lo, axis), ext = appm__comp(cb.hi, axis) - lo, scale;
+            appm__bbox bin[APPM__BVH_BINS], acc;
+            uint32_t cnt[APPM__BVH_BINS], b, nleft;
+            float area_left[APPM__BVH_BINS];
+            uint32_t count_left[APPM__BVH_BINS];
+            if (!(ext > 0.0f)) continue;
+            scale = (float)APPM__BVH_BINS / ext;
+            for (b = 0; b < APPM__BVH_BINS; ++b) {
+                appm__bbox_empty(&bin[b]);
+                cnt[b] = 0;
+            }
+            for (i = start; i < start + count; ++i) {
+                float f = (appm__comp(cen[idx[i]], axis) - lo) * scale;
+                b = f >= (float)(APPM__BVH_BINS - 1) ? APPM__BVH_BINS - 1 : (f > 0.0f ? (uint32_t)f : 0);
+                cnt[b]++;
+                appm__bbox_join(&bin[b], &tb[idx[i]]);
+            }
+            appm__bbox_empty(&acc);
+            nleft = 0;
+            for (b = 0; b + 1 < APPM__BVH_BINS; ++b) { /* sweep from the left */
+                appm__bbox_join(&acc, &bin[b]);
+                nleft += cnt[b];
+                area_left[b] = appm__bbox_area(&acc);
+                count_left[b] = nleft;
+            }
+            appm__bbox_empty(&acc);
+            for (b = APPM__BVH_BINS - 1; b > 0; --b) { /* and from the right */
+                float cost;
+                appm__bbox_join(&acc, &bin[b]);
+                if (count_left[b - 1] == 0 || count_left[b - 1] == count) continue;
+                cost = 1.0f + (area_left[b - 1] * (float)count_left[b - 1] +
+                               appm__bbox_area(&acc) * (float)(count - count_left[b - 1])) /
+                                  node_area;
+                if (cost < best_cost) {
+                    best_cost = cost;
+                    best_axis = (uint32_t)axis;
+                    best_bin = b;
+                }
+            }
+        }
+    }
+    if (best_axis < 3) {
+        float lo = appm__comp(cb.lo, (int)best_axis);
+        float scale = (float)APPM__BVH_BINS / (appm__comp(cb.hi, (int)best_axis) - lo);
+        uint32_t j = start + count;
+        i = start;
+        while (i < j) { /* partition: bins < best_bin to the left */
+            float f = (appm__comp(cen[idx[i]], (int)best_axis) - lo) * scale;
+            uint32_t b = f >= (float)(APPM__BVH_BINS - 1) ? APPM__BVH_BINS - 1 : (f > 0.0f ? (uint32_t)f : 0);
+            if (b < best_bin) i++;
+            else {
+                uint32_t t = idx[i];
+                idx[i] = idx[--j];
+                idx[j] = t;
+            }
+        }
+        left = i - start;
+        if (left > 0 && left < count) return left;
+    }
+    /* No useful SAH split.  Small nodes become leaves; big ones (duplicates,
+     * or a tree too deep) are halved by index so the depth stays bounded. */
+    if (count <= 8 && (depth < APPM__BVH_FORCE_MEDIAN || count <= 4)) return 0;
+    return count / 2;
+}
+
+static appm_status appm__bvh_build(appm_scene *s, appm_diag *diag)
+{
+    appm__mem *m = &s->mem;
+    uint32_t n = s->ntri, i, nnode = 1, sp = 0;
+    uint32_t *idx = NULL;
+    appm__bbox *tb = NULL;
+    appm__v3 *cen = NULL;
+    appm__build_item *stack = NULL;
+    appm__tri *tri2 = NULL;
+    appm__tri_info *info2 = NULL;
+    s->node = NULL;
+    s->nnode = 0;
+    s->depth = 0;
+    if (n == 0) return APPM_OK;
+    (void)diag;
+    idx = (uint32_t *)appm__alloc(m, n, sizeof *idx);
+    tb = (appm__bbox *)appm__alloc(m, n, sizeof *tb);
+    cen = (appm__v3 *)appm__alloc(m, n, sizeof *cen);
+    stack = (appm__build_item *)appm__alloc(m, APPM__BVH_MAX_DEPTH * 2 + 8, sizeof *stack);
+    s->node = (appm__node *)appm__alloc(m, 2 * (size_t)n, sizeof *s->node);
+    if (!idx || !tb || !cen || !stack || !s->node) goto nomem;
+    for (i = 0; i < n; ++i) {
+        idx[i] = i;
+        appm__bbox_empty(&tb[i]);
+        appm__bbox_grow(&tb[i], s->tri[i].p0);
+        appm__bbox_grow(&tb[i], s->tri[i].p1);
+        appm__bbox_grow(&tb[i], s->tri[i].p2);
+        cen[i] = appm__scale(appm__add(tb[i].lo, tb[i].hi), 0.5f);
+    }
+    stack[sp].node = 0;
+    stack[sp].start = 0;
+    stack[sp].count = n;
+    stack[sp].depth = 1;
+    sp++;
+    while (sp > 0) {
+        appm__build_item it = stack[--sp];
+        appm__node *nd = &s->node[it.node];
+        appm__bbox b;
+        uint32_t left;
+        appm__bbox_empty(&b);
+        for (i = it.start; i < it.start + it.count; ++i) appm__bbox_join(&b, &tb[idx[i]]);
+        nd->bmin[0] = b.lo.x;
+        nd->bmin[1] = b.lo.y;
+        nd->bmin[2] = b.lo.z;
+        nd->bmax[0] = b.hi.x;
+        nd->bmax[1] = b.hi.y;
+        nd->bmax[2] = b.hi.z;
+        if (it.depth > s->depth) s->depth = it.depth;
+        left = it.depth >= APPM__BVH_MAX_DEPTH - 1
+                   ? 0
+                   : appm__bvh_split(tb, cen, idx, it.start, it.count, it.depth, appm__bbox_area(&b));
+        if (left == 0) {
+            nd->first = it.start;
+            nd->count = it.count;
+            continue;
+        }
+        nd->first = nnode;
+        nd->count = 0;
+        stack[sp].node = nnode;
+        stack[sp].start = it.start;
+        stack[sp].count = left;
+        stack[sp].depth = it.depth + 1;
+        sp++;
+        stack[sp].node = nnode + 1;
+        stack[sp].start = it.start + left;
+        stack[sp].count = it.count - left;
+        stack[sp].depth = it.depth + 1;
+        sp++;
+        nnode += 2;
+    }
+    s->nnode = nnode;
+    /* Put the triangles in leaf order, so a leaf reads consecutive memory. */
+    tri2 = (appm__tri *)appm__alloc(m, n, sizeof *tri2);
+    info2 = (appm__tri_info *)appm__alloc(m, n, sizeof *info2);
+    if (!tri2 || !info2) goto nomem;
+    for (i = 0; i < n; ++i) {
+        tri2[i] = s->tri[idx[i]];
+        info2[i] = s->info[idx[i]];
+    }
+    appm__free(m, s->tri);
+    appm__free(m, s->info);
+    s->tri = tri2;
+    s->info = info2;
+    appm__free(m, idx);
+    appm__free(m, tb);
+    appm__free(m, cen);
+    appm__free(m, stack);
+    return APPM_OK;
+nomem:
+    appm__free(m, idx);
+    appm__free(m, tb);
+    appm__free(m, cen);
+    appm__free(m, stack);
+    appm__free(m, tri2);
+    appm__free(m, info2);
+    appm__free(m, s->node);
+    s->node = NULL;
+    return APPM_ERR_NOMEM;
+}
+
+/* ---- 5.2 Surface points and ray offsets ------------------------------------ */
+
+typedef struct appm__surf {
+    appm__v3 p;    /* hit point, interpolated from the vertices */
+    appm__v3 err;  /* bound on its rounding error, per axis */
+    appm__v3 ng;   /* unit geometric normal (counter-clockwise side) */
+    appm__v3 ns;   /* unit shading normal, on the side of ng */
+    uint32_t tri, mat;
+    float t;
+    int smooth;    /* has shading normals */
+} appm__surf;
+
+static void appm__surface(const appm_scene *s, const appm__hit *h, appm__surf *out)
+{
+    const appm__tri *t = &s->tri[h->tri];
+    const appm__tri_info *in = &s->info[h->tri];
+    const float b0 = 1.0f - h->b1 - h->b2, b1 = h->b1, b2 = h->b2;
+    const float g7 = 7.0f * (FLT_EPSILON * 0.5f) / (1.0f - 7.0f * (FLT_EPSILON * 0.5f));
+    appm__v3 a0 = appm__scale(t->p0, b0), a1 = appm__scale(t->p1, b1), a2 = appm__scale(t->p2, b2);
+    out->p = appm__add(appm__add(a0, a1), a2);
+    out->err = appm__scale(appm__v(fabsf(a0.x) + fabsf(a1.x) + fabsf(a2.x),
+                                   fabsf(a0.y) + fabsf(a1.y) + fabsf(a2.y),
+                                   fabsf(a0.z) + fabsf(a1.z) + fabsf(a2.z)),
+                           g7);
+    out->ng = in->ng;
+    out->ns = in->ng;
+    out->smooth = in->n0 >= 0;
+    if (in->n0 >= 0) {
+        const appm__v3 *n = s->normals + in->n0;
+        appm__v3 ns = appm__normalize(
+            appm__add(appm__add(appm__scale(n[0], b0), appm__scale(n[1], b1)), appm__scale(n[2], b2)));
+        if (appm__finite3(ns) && appm__dot(ns, ns) > 0.5f)
+            out->ns = appm__dot(ns, in->ng) < 0.0f ? appm__neg(ns) : ns;
+    }
+    out->tri = h->tri;
+    out->mat = in->mat;
+    out->t = h->t;
+}
+
+/* The origin for a ray leaving `sf` towards w: outside the error box of the hit
+ * point on w's side, then one more float step away (pbrt's OffsetRayOrigin). */
+static appm__v3 appm__offset(const appm__surf *sf, appm__v3 w)
+{
+    appm__v3 n = sf->ng, o;
+    float d = fabsf(n.x) * sf->err.x + fabsf(n.y) * sf->err.y + fabsf(n.z) * sf->err.z;
+    appm__v3 off = appm__scale(n, d);
+    if (appm__dot(w, n) < 0.0f) off = appm__neg(off);
+    o = appm__add(sf->p, off);
+    if (off.x > 0) o.x = nextafterf(o.x, FLT_MAX);
+    else if (off.x < 0) o.x = nextafterf(o.x, -FLT_MAX);
+    if (off.y > 0) o.y = nextafterf(o.y, FLT_MAX);
+    else if (off.y < 0) o.y = nextafterf(o.y, -FLT_MAX);
+    if (off.z > 0) o.z = nextafterf(o.z, FLT_MAX);
+    else if (off.z < 0) o.z = nextafterf(o.z, -FLT_MAX);
+    return o;
+}
+
+static void appm__ray_init(appm__ray *r, appm__v3 o, appm__v3 d, float tmax)
+{
+    r->o = o;
+    r->d = d;
+    r->tmin = 0.0f;
+    r->tmax = tmax;
+    appm__ray_setup(r);
+}
+
+/* ==== 6. MATERIALS AND LIGHTS ============================================
+ *
+ * BSDFs are sampled, never evaluated in a loop: Lambert (cosine-weighted
+ * directions, weight = albedo), perfect mirror (weight = Ks) and a smooth
+ * dielectric (reflect with probability F, the exact unpolarised Fresnel term,
+ * else refract; weight 1).  The weight is f |cos| / pdf.  Two modes:
+ *   radiance   (eye paths):    refraction scales by (eta_wo / eta_wi)^2, because
+ *                              radiance / n^2 is what a refraction preserves;
+ *   importance (photon paths): no eta^2 factor, and with shading normals the
+ *                              adjoint correction |wo.ns||wi.ng| / (|wo.ng||wi.ns|)
+ *                              (Veach 1997, section 5.3) keeps photons honest.
+ * A sample that would leave through the wrong side of the geometric normal
+ * (possible with shading normals) is absorbed: light must not leak.
+ *
+ * Lights are chosen by power (mean of R, G, B) for photon emission and for
+ * shadow rays alike.  Emission is sampled so that a photon's weight gamma is
+ * constant per light (zero-variance emission): gamma = Phi_light / pick.
+ */
+enum { APPM__RADIANCE = 0, APPM__IMPORTANCE = 1 };
+
+/* Cosine-weighted direction around unit n (Shirley-Chiu concentric disk). */
+static appm__v3 appm__cosine_dir(appm__v3 n, float u1, float u2)
+{
+    float a = 2.0f * u1 - 1.0f, b = 2.0f * u2 - 1.0f, r, phi, x, y, z2;
+    appm__v3 t, bt;
+    if (a == 0.0f && b == 0.0f) return n;
+    if (a * a > b * b) {
+        r = a;
+        phi = (APPM__PIF / 4.0f) * (b / a);
+    } else {
+        r = b;
+        phi = (APPM__PIF / 2.0f) - (APPM__PIF / 4.0f) * (a / b);
+    }
+    x = r * cosf(phi);
+    y = r * sinf(phi);
+    z2 = 1.0f - x * x - y * y;
+    appm__basis(n, &t, &bt);
+    return appm__add(appm__add(appm__scale(t, x), appm__scale(bt, y)),
+                     appm__scale(n, z2 > 0.0f ? sqrtf(z2) : 0.0f));
+}
+
+static appm__v3 appm__uniform_sphere(float u1, float u2)
+{
+    float z = 1.0f - 2.0f * u1, r2 = 1.0f - z * z, r = r2 > 0.0f ? sqrtf(r2) : 0.0f;
+    float phi = 2.0f * APPM__PIF * u2;
+    return appm__v(r * cosf(phi), r * sinf(phi), z);
+}
+
+/* Unpolarised Fresnel reflectance for cos_i in [0,1] on the incident side and
+ * eta = n_transmitted / n_incident; 1 under total internal reflection. */
+static float appm__fresnel(float cos_i, float eta)
+{
+    float sin2_t, cos_t, rs, rp;
+    if (cos_i > 1.0f) cos_i = 1.0f;
+    if (!(cos_i > 0.0f)) return 1.0f;
+    sin2_t = (1.0f - cos_i * cos_i) / (eta * eta);
+    if (sin2_t >= 1.0f) return 1.0f;
+    cos_t = sqrtf(1.0f - sin2_t);
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    return 0.5f * (rs * rs + rp * rp);
+}
+
+typedef struct appm__bsdf_sample {
+    appm__v3 wi;
+    appm__v3 weight; /* f |cos| / pdf, with the mode's corrections */
+    float pdf;       /* solid angle; 0 for specular */
+    int specular;
+} appm__bsdf_sample;
+
+/* The adjoint shading-normal factor for photon paths (1 without vn). */
+static float appm__adjoint(const appm__surf *sf, appm__v3 wo, appm__v3 wi)
+{
+    float won, wig, wog, win;
+    if (!sf->smooth) return 1.0f;
+    won = fabsf(appm__dot(wo, sf->ns));
+    wig = fabsf(appm__dot(wi, sf->ng));
+    wog = fabsf(appm__dot(wo, sf->ng));
+    win = fabsf(appm__dot(wi, sf->ns));
+    if (!(wog > 0.0f) || !(win > 0.0f)) return 0.0f;
+    return (won * wig) / (wog * win);
+}
+
+static int appm__bsdf_sample_dir(const appm__material *m, const appm__surf *sf, appm__v3 wo,
+                                 float u1, float u2, float u3, int mode, appm__bsdf_sample *bs)
+{
+    float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f;
+    appm__v3 ng = appm__scale(sf->ng, side), ns = appm__scale(sf->ns, side);
+    bs->specular = m->kind != APPM__MAT_DIFFUSE;
+    bs->pdf = 0.0f;
+    if (m->kind == APPM__MAT_DIFFUSE) {
+        float c;
+        bs->wi = appm__cosine_dir(ns, u1, u2);
+        c = appm__dot(bs->wi, ns);
+        if (!(appm__dot(bs->wi, ng) > 0.0f) || !(c > 0.0f)) return 0;
+        bs->pdf = c * (float)APPM__INV_PI;
+        bs->weight = m->color;
+    } else if (m->kind == APPM__MAT_MIRROR) {
+        float c = appm__dot(wo, ns);
+        bs->wi = appm__sub(appm__scale(ns, 2.0f * c), wo);
+        if (!(appm__dot(bs->wi, ng) > 0.0f)) return 0;
+        bs->weight = m->color;
+    } else {
+        /* side > 0: wo is outside (the counter-clockwise side), entering the medium */
+        float eta_o = side > 0.0f ? 1.0f : m->ior, eta_t = side > 0.0f ? m->ior : 1.0f;
+        float cos_i = appm__dot(wo, ns), F;
+        if (cos_i > 1.0f) cos_i = 1.0f;
+        F = appm__fresnel(cos_i, eta_t / eta_o);
+        if (u3 < F) {
+            bs->wi = appm__sub(appm__scale(ns, 2.0f * cos_i), wo);
+            if (!(appm__dot(bs->wi, ng) > 0.0f)) return 0;
+            bs->weight = appm__v(1, 1, 1);
+        } else {
+            float eta = eta_o / eta_t, k = 1.0f - eta * eta * (1.0f - cos_i * cos_i), cos_t, s;
+            if (!(k > 0.0f)) return 0; /* cannot happen when F < 1; guards rounding */
+            cos_t = sqrtf(k);
+            bs->wi = appm__normalize(
+                appm__add(appm__scale(wo, -eta), appm__scale(ns, eta * cos_i - cos_t)));
+            if (!(appm__dot(bs->wi, ng) < 0.0f)) return 0;
+            s = mode == APPM__RADIANCE ? eta * eta : 1.0f;
+            bs->weight = appm__v(s, s, s);
+        }
+    }
+    if (mode == APPM__IMPORTANCE) bs->weight = appm__scale(bs->weight, appm__adjoint(sf, wo, bs->wi));
+    return appm__finite3(bs->weight) && appm__finite3(bs->wi);
+}
+
+/* ---- 6.1 Lights -------------------------------------------------------------- */
+
+/* Index of the light whose CDF interval holds u (binary search; u < 1 always,
+ * and lights of zero power have empty intervals so are never returned). */
+static uint32_t appm__pick_light(const appm_scene *s, float u)
+{
+    uint32_t lo = 0, hi = s->nlight;
+    double x = (double)u;
+    while (hi - lo > 1) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (s->light_cdf[mid] <= x) lo = mid;
+        else hi = mid;
+    }
+    while (lo + 1 < s->nlight && s->light[lo].pick == 0.0) lo++;
+    return lo;
+}
+
+/* Spot falloff of pbrt-v3: 1 inside cone-falloff, 0 outside cone, d^4 between. */
+static float appm__spot_falloff(const appm__light *l, float cos_theta)
+{
+    float d;
+    if (cos_theta <= l->cos_cone) return 0.0f;
+    if (cos_theta >= l->cos_inner) return 1.0f;
+    d = (cos_theta - l->cos_cone) / (l->cos_inner - l->cos_cone);
+    return (d * d) * (d * d);
+}
+
+static appm__v3 appm__tri_point(const appm__tri *t, float u1, float u2, float *b1, float *b2)
+{
+    float su = sqrtf(u1);
+    *b1 = u2 * su;
+    *b2 = 1.0f - su;
+    return appm__add(appm__add(appm__scale(t->p0, 1.0f - *b1 - *b2), appm__scale(t->p1, *b1)),
+                     appm__scale(t->p2, *b2));
+}
+
+/* A sampled point on an area light as a surface, so that rays can leave it with
+ * the same offsets as from any other hit. */
+static void appm__light_surface(const appm_scene *s, uint32_t tri, float b1, float b2, appm__surf *sf)
+{
+    appm__hit h;
+    h.t = 0.0f;
+    h.b1 = b1;
+    h.b2 = b2;
+    h.tri = tri;
+    appm__surface(s, &h, sf);
+}
+
+typedef struct appm__photon_start {
+    appm__ray ray;
+    appm__v3 gamma;     /* photon weight: flux per emitted path, before dividing by M */
+    uint32_t skip;      /* the emitting triangle, or UINT32_MAX */
+} appm__photon_start;
+
+/* Samples the start of a photon path: light by power, then position and direction. */
+static int appm__emit(const appm_scene *s, appm__rng *rng, appm__photon_start *ps)
+{
+    uint32_t li = appm__pick_light(s, appm__rng_float(rng));
+    const appm__light *l = &s->light[li];
+    float u1 = appm__rng_float(rng), u2 = appm__rng_float(rng);
+    float u3 = appm__rng_float(rng), u4 = appm__rng_float(rng);
+    appm__v3 o, d;
+    float w;
+    ps->skip = UINT32_MAX;
+    if (!(l->pick > 0.0)) return 0;
+    if (l->kind == APPM__LIGHT_AREA) {
+        float b1, b2;
+        appm__surf sf;
+        appm__tri_point(&s->tri[l->tri], u1, u2, &b1, &b2);
+        appm__light_surface(s, l->tri, b1, b2, &sf);
+        d = appm__cosine_dir(sf.ng, u3, u4);
+        o = appm__offset(&sf, d);
+        /* gamma = Le cos / (pick * (1/A) * (cos/pi)) = Le pi A / pick */
+        w = (float)(APPM__PI * s->info[l->tri].area / l->pick);
+        ps->gamma = appm__scale(l->value, w);
+        ps->skip = l->tri;
+    } else if (l->kind == APPM__LIGHT_POINT) {
+        o = l->pos;
+        d = appm__uniform_sphere(u1, u2);
+        ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI / l->pick));
+    } else if (l->kind == APPM__LIGHT_SPOT) {
+        float cos_t = 1.0f - u1 * (1.0f - l->cos_cone), sin_t = sqrtf(fmaxf(0.0f, 1.0f - cos_t * cos_t));
+        float phi = 2.0f * APPM__PIF * u2;
+        appm__v3 t, b;
+        appm__basis(l->axis, &t, &b);
+        o = l->pos;
+        d = appm__add(appm__add(appm__scale(t, sin_t * cosf(phi)), appm__scale(b, sin_t * sinf(phi))),
+                      appm__scale(l->axis, cos_t));
+        w = (float)(2.0 * APPM__PI * (1.0 - (double)l->cos_cone) / l->pick) * appm__spot_falloff(l, cos_t);
+        ps->gamma = appm__scale(l->value, w);
+    } else { /* environment: a direction, then a point on the disk facing it */
+        appm__v3 t, b;
+        float r = s->radius, rr = sqrtf(u3), phi = 2.0f * APPM__PIF * u4;
+        if (!(r > 0.0f)) return 0;
+        d = appm__uniform_sphere(u1, u2);
+        appm__basis(d, &t, &b);
+        o = appm__add(appm__sub(s->center, appm__scale(d, 1.001f * r)),
+                      appm__add(appm__scale(t, r * rr * cosf(phi)), appm__scale(b, r * rr * sinf(phi))));
+        /* gamma = L / (pick * (1/4pi) * (1/(pi R^2))) */
+        ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI * APPM__PI * (double)r * r / l->pick));
+    }
+    appm__ray_init(&ps->ray, o, d, FLT_MAX);
+    return appm__finite3(ps->gamma);
+}
+
+typedef struct appm__light_sample {
+    appm__v3 wi;       /* unit direction from the shading point to the light */
+    appm__v3 li;       /* incident radiance (or intensity / d^2) divided by the pdf */
+    float pdf;         /* solid-angle pdf including the pick; 0 for delta lights */
+    appm__ray shadow;  /* from the shading point to the light sample */
+    uint32_t skip;     /* the light's triangle, or UINT32_MAX */
+} appm__light_sample;
+
+/* Next-event sample from shading point sf (n: the shading normal on the side
+ * the light must be on).  Returns 0 when the sample carries nothing. */
+static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v3 n, float u0,
+                              float u1, float u2, appm__light_sample *ls)
+{
+    uint32_t li = appm__pick_light(s, u0);
+    const appm__light *l = &s->light[li];
+    appm__v3 o, target, d;
+    float dist2;
+    ls->skip = UINT32_MAX;
+    if (!(l->pick > 0.0)) return 0;
+    if (l->kind == APPM__LIGHT_ENV) {
+        float c;
+        ls->wi = appm__cosine_dir(n, u1, u2);
+        c = appm__dot(ls->wi, n);
+        if (!(c > 0.0f)) return 0;
+        ls->pdf = (float)(l->pick * c * APPM__INV_PI);
+        ls->li = appm__scale(l->value, 1.0f / ls->pdf);
+        o = appm__offset(sf, ls->wi);
+        appm__ray_init(&ls->shadow, o, ls->wi, FLT_MAX);
+        return 1;
+    }
+    if (l->kind == APPM__LIGHT_AREA) {
+        float b1, b2, cos_l, dist;
+        appm__surf lf;
+        appm__tri_point(&s->tri[l->tri], u1, u2, &b1, &b2);
+        appm__light_surface(s, l->tri, b1, b2, &lf);
+        d = appm__sub(lf.p, sf->p);
+        dist2 = appm__dot(d, d);
+        if (!(dist2 > 0.0f)) return 0;
+        dist = sqrtf(dist2);
+        ls->wi = appm__scale(d, 1.0f / dist);
+        cos_l = -appm__dot(ls->wi, lf.ng);
+        if (!(cos_l > 0.0f)) return 0; /* one-sided emitter seen from behind */
+        ls->pdf = (float)(l->pick / s->info[l->tri].area * (double)dist2 / cos_l);
+        ls->li = appm__scale(l->value, 1.0f / ls->pdf);
+        target = appm__offset(&lf, appm__neg(ls->wi));
+        ls->skip = l->tri;
+    } else {
+        float f = 1.0f;
+        d = appm__sub(l->pos, sf->p);
+        dist2 = appm__dot(d, d);
+        if (!(dist2 > 0.0f)) return 0;
+        ls->wi = appm__scale(d, 1.0f / sqrtf(dist2));
+        if (l->kind == APPM__LIGHT_SPOT) f = appm__spot_falloff(l, -appm__dot(ls->wi, l->axis));
+        if (!(f > 0.0f)) return 0;
+        ls->pdf = 0.0f;
+        ls->li = appm__scale(l->value, (float)(f / ((double)dist2 * l->pick)));
+        target = l->pos;
+    }
+    o = appm__offset(sf, ls->wi);
+    /* parametric shadow ray o + t (target - o), t in [0, 1 - 1e-4): relative, so
+     * the same in any unit */
+    appm__ray_init(&ls->shadow, o, appm__sub(target, o), 1.0f - 1e-4f);
+    return appm__finite3(ls->li);
+}
+
+/* Solid-angle pdf with which appm__sample_light would have produced direction
+ * wi reaching area light `tri` at distance t (for MIS in the path tracer). */
+static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi, float t)
+{
+    const appm__tri_info *in = &s->info[tri];
+    float cos_l = -appm__dot(wi, in->ng);
+    if (in->light < 0 || !(cos_l > 0.0f)) return 0.0f;
+    return (float)(s->light[in->light].pick / in->area * ((double)t * t) / cos_l);
+}
+
+/* ==== 7. EYE PASS =========================================================
+ *
+ * Every pass traces one eye path per pixel: a uniformly jittered point in the
+ * pixel (box filter) and on the lens, then through mirrors and glass until the
+ * first diffuse vertex x.  There the path stops and becomes the pixel's visible
+ * point for this pass (stochastic PPM: a new x every pass, so anti-aliasing,
+ * depth of field and glossy-free caustic paths all converge).  What the path
+ * meets on the way is added to the pixel's direct term:
+ *   emission Le of every surface hit on its front side (the light seen
+ *   directly, or in a mirror), and at x the direct light by next-event
+ *   estimation (one shadow ray to a light chosen by power).
+ * With --direct photons the shadow ray is skipped and first-bounce photons are
+ * gathered instead (the analytic tests and the teaching mode use this).
+ *
+ * Path length bookkeeping (--max-depth D, in segments from light to camera):
+ * the eye path has e segments to x; emission met after k segments counts if
+ * k <= D; direct light at x counts if e + 1 <= D; a photon that travelled p
+ * segments counts at x if e + p <= D.
+ *
+ * The renderer's state is declared here, since every later section uses it.
+ */
+typedef struct appm__vp { /* visible point of one pixel in the current pass: 52 bytes */
+    appm__v3 x;           /* position */
+    appm__v3 n;           /* unit geometric normal on the eye's side */
+    appm__v3 wf;          /* W f = W albedo / pi: multiplies each photon's gamma */
+    float ld_lum;         /* luminance of this pass's direct term */
+    float footprint;      /* width of the pixel at x, scene units */
+    uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
+    uint8_t pad[3];
+} appm__vp;
+
+typedef struct appm__pixel { /* per-pixel state kept across passes: 104 bytes */
+    double ld[3];   /* sum over passes of emission + direct light (pt: of the whole path) */
+    double acc[3];  /* ppm, appm: running mean I of the photon term; sppm: tau */
+    double n;       /* sppm: accumulated photon count N; appm: photons found so far */
+    double r;       /* sppm, appm: radius of the next gather */
+    double S;       /* appm: running mean of the kernel second moment s_j */
+    double dI;      /* appm: running mean of the pixel Laplacian */
+    double r2sum;   /* appm: sum of r_j^2, for the bias estimate */
+    double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
+} appm__pixel;
+
+typedef struct appm__photon { /* 32 bytes */
+    float x, y, z;
+    float power[3];  /* gamma: flux of the path, before dividing by M */
+    int16_t wi[2];   /* incident direction (towards where it came from), octahedral */
+    int8_t n[2];     /* geometric normal on the side it arrived from, octahedral */
+    uint8_t segs;    /* light-path segments from the light to here */
+    uint8_t pad;
+} appm__photon;
+
+typedef struct appm__chunk_rec { /* where one chunk of photon paths left its photons */
+    uint32_t start, count;
+} appm__chunk_rec;
+
+#define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
+
+struct appm_renderer {
+    appm__mem mem;
+    appm_diag diag;
+    const appm_scene *scene;
+    appm_method method;
+    appm_direct direct;
+    uint32_t w, h;
+    uint64_t M;          /* photon paths per pass */
+    double r1;           /* initial radius */
+    int r1_auto;
+    double alpha;
+    double ppm_r2;       /* ppm: r_j^2 of the current pass */
+    unsigned threads, max_depth;
+    uint64_t seed, pass;
+    float pixel_angle;   /* 2 tan(fov/2) / height */
+    appm__vp *vp;
+    appm__pixel *pix;
+    float *image;
+    float *aux[APPM_AUX_COUNT];
+    int aux_valid;
+    /* photon store: `tasks` regions of `cap` photons; chunk c is traced by task
+     * c % tasks, so the layout does not depend on scheduling */
+    appm__photon *ph;
+    size_t cap, nph;
+    uint32_t tasks, nchunks;
+    appm__chunk_rec *chunk;
+    uint32_t *task_used;
+    int *task_failed;
+    uint32_t *dest;      /* scratch of the counting sort */
+    size_t dest_cap;
+    /* hash grid */
+    uint32_t *cell;      /* table_size + 1 bucket starts */
+    uint32_t table_bits;
+    float cell_size, inv_cell;
+    appm__v3 grid_lo;
+    uint64_t dropped[APPM__MAX_THREADS];
+    appm_stats stats;
+    char last_error[256];
+};
+
+/* ---- 7.1 Octahedral unit vectors (Cigolle et al. 2014) ---------------------- */
+
+static void appm__oct_encode(appm__v3 v, float *a, float *b)
+{
+    float s = fabsf(v.x) + fabsf(v.y) + fabsf(v.z), x, y;
+    if (!(s > 0.0f)) {
+        *a = *b = 0.0f;
+        return;
+    }
+    x = v.x / s;
+    y = v.y / s;
+    if (v.z < 0.0f) {
+        float ox = x, oy = y;
+        x = (1.0f - fabsf(oy)) * (ox >= 0.0f ? 1.0f : -1.0f);
+        y = (1.0f - fabsf(ox)) * (oy >= 0.0f ? 1.0f : -1.0f);
+    }
+    *a = x;
+    *b = y;
+}
+
+static appm__v3 appm__oct_decode(float x, float y)
+{
+    float z = 1.0f - fabsf(x) - fabsf(y);
+    if (z < 0.0f) {
+        float ox = x, oy = y;
+        x = (1.0f - fabsf(oy)) * (ox >= 0.0f ? 1.0f : -1.0f);
+        y = (1.0f - fabsf(ox)) * (oy >= 0.0f ? 1.0f : -1.0f);
+    }
+    return appm__normalize(appm__v(x, y, z));
+}
+
+/* Rounds a value in [-1, 1] to a signed integer of the given scale, clamping
+ * before the conversion (float-to-int of an out-of-range value is undefined). */
+static int appm__quant(float v, float scale)
+{
+    float q = v * scale;
+    q = q > scale ? scale : (q < -scale ? -scale : q);
+    return (int)(q >= 0.0f ? q + 0.5f : q - 0.5f);
+}
+
+/* ---- 7.2 Camera rays ---------------------------------------------------------- */
+
+static void appm__camera_ray(const appm_renderer *r, uint32_t px, uint32_t py, appm__rng *rng,
+                             appm__ray *ray)
+{
+    const appm__camera *c = &r->scene->cam;
+    float u = appm__rng_float(rng), v = appm__rng_float(rng);
+    float aspect = (float)r->w / (float)r->h;
+    float sx = (2.0f * ((float)px + u) / (float)r->w - 1.0f) * c->tan_half * aspect;
+    float sy = (1.0f - 2.0f * ((float)py + v) / (float)r->h) * c->tan_half;
+    appm__v3 d = appm__normalize(
+        appm__add(c->forward, appm__add(appm__scale(c->right, sx), appm__scale(c->up, sy))));
+    appm__v3 o = c->eye;
+    float l1 = appm__rng_float(rng), l2 = appm__rng_float(rng);
+    if (c->aperture > 0.0f) {
+        /* thin lens: a point on the lens disk, aimed at where the pinhole ray
+         * meets the plane of focus */
+        appm__v3 disk = appm__cosine_dir(appm__v(0, 0, 1), l1, l2); /* x, y uniform in the disk */
+        appm__v3 focus = appm__add(c->eye, appm__scale(d, c->focus / appm__dot(d, c->forward)));
+        o = appm__add(c->eye, appm__add(appm__scale(c->right, disk.x * c->aperture),
+                                        appm__scale(c->up, disk.y * c->aperture)));
+        d = appm__normalize(appm__sub(focus, o));
+    }
+    appm__ray_init(ray, o, d, FLT_MAX);
+}
+
+static void appm__add3(double *acc, appm__v3 v)
+{
+    acc[0] += v.x;
+    acc[1] += v.y;
+    acc[2] += v.z;
+}
+
+/* Direct light at diffuse point sf seen from wo, by one shadow ray. */
+static appm__v3 appm__direct(const appm_scene *s, const appm__surf *sf, const appm__material *m,
+                             appm__v3 wo, appm__rng *rng)
+{
+    float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f, c;
+    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side);
+    float u0 = appm__rng_float(rng), u1 = appm__rng_float(rng), u2 = appm__rng_float(rng);
+    appm__light_sample ls;
+    if (!appm__sample_light(s, sf, ns, u0, u1, u2, &ls)) return appm__v(0, 0, 0);
+    c = appm__dot(ls.wi, ns);
+    if (!(c > 0.0f) || !(appm__dot(ls.wi, ng) > 0.0f)) return appm__v(0, 0, 0);
+    if (appm__occluded(s, &ls.shadow, sf->tri, ls.skip)) return appm__v(0, 0, 0);
+    return appm__scale(appm__mul(m->color, ls.li), c * (float)APPM__INV_PI);
+}
+
+static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
+{
+    const appm_scene *s = r->scene;
+    const size_t pi = (size_t)py * r->w + px;
+    appm__vp *vp = &r->vp[pi];
+    appm__rng rng;
+    appm__ray ray;
+    appm__v3 W = appm__v(1, 1, 1), ld = appm__v(0, 0, 0);
+    uint32_t skip = UINT32_MAX;
+    unsigned segs = 0;
+    float travelled = 0.0f;
+    appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_EYE, pi);
+    appm__camera_ray(r, px, py, &rng, &ray);
+    vp->segs = 0;
+    for (;;) {
+        appm__hit h;
+        appm__surf sf;
+        const appm__material *m;
+        appm__v3 wo;
+        appm__bsdf_sample bs;
+        if (++segs > r->max_depth) break;
+        if (!appm__intersect(s, &ray, skip, &h)) {
+            if (s->env >= 0) ld = appm__add(ld, appm__mul(W, s->light[s->env].value));
+            break;
+        }
+        appm__surface(s, &h, &sf);
+        m = &s->mat[sf.mat];
+        wo = appm__neg(ray.d);
+        travelled += h.t;
+        if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) ld = appm__add(ld, appm__mul(W, m->ke));
+        if (m->kind == APPM__MAT_DIFFUSE) {
+            vp->x = sf.p;
+            vp->n = appm__dot(wo, sf.ng) >= 0.0f ? sf.ng : appm__neg(sf.ng);
+            vp->wf = appm__scale(appm__mul(W, m->color), (float)APPM__INV_PI);
+            vp->segs = (uint8_t)(segs > 255 ? 255 : segs);
+            vp->footprint = travelled * r->pixel_angle;
+            if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth)
+                ld = appm__add(ld, appm__mul(W, appm__direct(s, &sf, m, wo, &rng)));
+            if (!appm__finite3(vp->wf)) {
+                vp->segs = 0;
+                r->dropped[worker]++;
+            }
+            break;
+        }
+        if (!appm__bsdf_sample_dir(m, &sf, wo, appm__rng_float(&rng), appm__rng_float(&rng),
+                                   appm__rng_float(&rng), APPM__RADIANCE, &bs))
+            break;
+        W = appm__mul(W, bs.weight);
+        if (segs > 4) { /* Russian roulette on long specular chains (glass) */
+            float q = appm__maxc(W);
+            if (q < 1.0f) {
+                if (appm__rng_float(&rng) >= q) break;
+                W = appm__scale(W, 1.0f / q);
+            }
+        }
+        appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
+        skip = sf.tri;
+    }
+    if (appm__finite3(ld)) {
+        appm__add3(r->pix[pi].ld, ld);
+        vp->ld_lum = appm__lum(ld);
+    } else {
+        r->dropped[worker]++;
+        vp->ld_lum = 0.0f;
+    }
+}
+
+static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    uint32_t x;
+    for (x = 0; x < r->w; ++x) appm__eye_pixel(r, x, row, worker);
+}
+
+/* ==== 8. PHOTON PASS ======================================================
+ *
+ * M photon paths per pass, in chunks of APPM__CHUNK paths.  Path i of pass j
+ * draws from its own random stream (seed, j, i), so its photons are the same
+ * whatever thread traces it.  Chunk c is traced by task c % T into region
+ * c % T of the store; the grid build then reads the chunks in order c = 0, 1,
+ * ..., which makes the photon order, and every sum over photons, independent
+ * of the thread count.
+ *
+ * A photon is stored at every diffuse hit it reaches after p >= 2 segments
+ * (p >= 1 with --direct photons: then the direct light comes from photons),
+ * as long as p + 1 <= D leaves room for one eye segment.  Russian roulette
+ * keeps the expected weight: continue with probability q = min(1, max(gamma')
+ * / max(gamma)) and divide by q.  A region that fills up marks its task failed;
+ * the store then grows (on the calling thread, outside the loop) and the pass
+ * is traced again - the photons do not change, only where they are kept.
+ */
+static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
+                              appm__v3 gamma, unsigned segs)
+{
+    appm__photon *p;
+    appm__v3 n = appm__dot(wi, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
+    float a, b;
+    if (r->task_used[task] >= r->cap) return 0;
+    p = &r->ph[(size_t)task * r->cap + r->task_used[task]++];
+    p->x = sf->p.x;
+    p->y = sf->p.y;
+    p->z = sf->p.z;
+    p->power[0] = gamma.x;
+    p->power[1] = gamma.y;
+    p->power[2] = gamma.z;
+    appm__oct_encode(wi, &a, &b);
+    p->wi[0] = (int16_t)appm__quant(a, 32767.0f);
+    p->wi[1] = (int16_t)appm__quant(b, 32767.0f);
+    appm__oct_encode(n, &a, &b);
+    p->n[0] = (int8_t)appm__quant(a, 127.0f);
+    p->n[1] = (int8_t)appm__quant(b, 127.0f);
+    p->segs = (uint8_t)(segs > 255 ? 255 : segs);
+    p->pad = 0;
+    return 1;
+}
+
+/* Traces photon path `index`; returns 0 if the task's region is full. */
+static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker)
+{
+    const appm_scene *s = r->scene;
+    appm__rng rng;
+    appm__photon_start ps;
+    appm__ray ray;
+    appm__v3 gamma;
+    uint32_t skip;
+    unsigned segs = 0;
+    unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
+    appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_PHOTON, index);
+    if (!appm__emit(s, &rng, &ps)) return 1;
+    ray = ps.ray;
+    gamma = ps.gamma;
+    skip = ps.skip;
+    while (++segs + 1 <= r->max_depth) {
+        appm__hit h;
+        appm__surf sf;
+        const appm__material *m;
+        appm__v3 wi, g2;
+        appm__bsdf_sample bs;
+        float q;
+        if (!appm__intersect(s, &ray, skip, &h)) break;
+        appm__surface(s, &h, &sf);
+        m = &s->mat[sf.mat];
+        wi = appm__neg(ray.d);
+        if (m->kind == APPM__MAT_DIFFUSE && segs >= first) {
+            if (!appm__finite3(gamma)) {
+                r->dropped[worker]++;
+                break;
+            }
+            if (!appm__store_photon(r, task, &sf, wi, gamma, segs)) return 0;
+        }
+        if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
+        if (!appm__bsdf_sample_dir(m, &sf, wi, appm__rng_float(&rng), appm__rng_float(&rng),
+                                   appm__rng_float(&rng), APPM__IMPORTANCE, &bs))
+            break;
+        g2 = appm__mul(gamma, bs.weight);
+        q = appm__maxc(gamma) > 0.0f ? appm__maxc(g2) / appm__maxc(gamma) : 0.0f;
+        if (q < 1.0f) {
+            if (!(appm__rng_float(&rng) < q)) break;
+            g2 = appm__scale(g2, 1.0f / q);
+        }
+        gamma = g2;
+        appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
+        skip = sf.tri;
+    }
+    return 1;
+}
+
+static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    uint32_t c;
+    r->task_used[task] = 0;
+    r->task_failed[task] = 0;
+    for (c = task; c < r->nchunks; c += r->tasks) {
+        uint64_t i0 = (uint64_t)c * APPM__CHUNK, i1 = i0 + APPM__CHUNK, i;
+        if (i1 > r->M) i1 = r->M;
+        r->chunk[c].start = r->task_used[task];
+        for (i = i0; i < i1; ++i) {
+            if (!appm__photon_path(r, task, i, worker)) {
+                r->task_failed[task] = 1;
+                return;
+            }
+        }
+        r->chunk[c].count = r->task_used[task] - r->chunk[c].start;
+    }
+}
+
+static appm_status appm__photon_pass(appm_renderer *r)
+{
+    for (;;) {
+        uint32_t t;
+        int failed = 0;
+        size_t ncap;
+        appm__photon *nph;
+        appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
+        for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
+        if (!failed) return APPM_OK;
+        /* grow every region by half and trace again (rare: the first pass, or a
+         * pass that stores more photons than any before it) */
+        ncap = r->cap + r->cap / 2 + 4096;
+        if (ncap > (size_t)0xFFFFFFF0u / r->tasks)
+            return appm__fail(&r->diag, APPM_ERR_NOMEM, NULL, 0,
+                              "more than 4e9 photons stored in one pass: use fewer photons per pass");
+        nph = (appm__photon *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *nph);
+        if (!nph) return APPM_ERR_NOMEM;
+        appm__free(&r->mem, r->ph);
+        r->ph = nph;
+        r->cap = ncap;
+    }
+}
+
+/* ==== 9. HASH-GRID PHOTON MAP =============================================
+ *
+ * A uniform grid of cubic cells of size c, hashed into 2^k buckets (k chosen
+ * so there are at least as many buckets as photons).  Built every pass by a
+ * counting sort: (1) hash every photon, count per bucket; (2) prefix sums give
+ * each bucket's start; (3) each photon's destination, assigned in chunk order;
+ * (4) the photons are permuted in place by following cycles.  After the build,
+ * photons[cell[b] .. cell[b+1]) are exactly those of bucket b, in chunk order.
+ *
+ * A query for radius R visits every cell overlapping the box [x-R, x+R], so R
+ * may be larger than c (adaptive radii vary per pixel).  Distinct cells can
+ * share a bucket; a bucket is read once per query: small queries deduplicate
+ * their buckets, large ones accept a photon only in the cell it belongs to.
+ * The cell size is the median gather radius of the pass: results never depend
+ * on it, only speed does.
+ *
+ * Cell coordinates are clamped in float before the conversion to int32 (NaN
+ * and huge values would be undefined behaviour), and hashed as uint32 (signed
+ * overflow in the classic "x * 73856093" would be undefined behaviour too).
+ */
+static uint32_t appm__grid_hash(int32_t x, int32_t y, int32_t z, uint32_t bits)
+{
+    uint32_t h = ((uint32_t)x * 73856093u) ^ ((uint32_t)y * 19349663u) ^ ((uint32_t)z * 83492791u);
+    h ^= h >> 15; /* mix the high bits down: the mask keeps only the low ones */
+    h *= 0x2C1B3C6Du;
+    h ^= h >> 12;
+    return h & ((1u << bits) - 1u);
+}
+
+static int32_t appm__grid_coord(float p, float lo, float inv_cell)
+{
+    float c = floorf((p - lo) * inv_cell);
+    if (!(c > -1.0e9f)) c = -1.0e9f; /* also catches NaN */
+    if (c > 1.0e9f) c = 1.0e9f;
+    return (int32_t)c;
+}
+
+static uint32_t appm__photon_bucket(const appm_renderer *r, const appm__photon *p)
+{
+    return appm__grid_hash(appm__grid_coord(p->x, r->grid_lo.x, r->inv_cell),
+                           appm__grid_coord(p->y, r->grid_lo.y, r->inv_cell),
+                           appm__grid_coord(p->z, r->grid_lo.z, r->inv_cell), r->table_bits);
+}
+
+/* k-th smallest of a[0..n) (quickselect, reorders a). */
+static float appm__select(float *a, size_t n, size_t k)
+{
+    size_t lo = 0, hi = n - 1;
+    while (lo < hi) {
+        float pivot = a[lo + (hi - lo) / 2];
+        size_t i = lo, j = hi;
+        while (i <= j) {
+            while (a[i] < pivot) i++;
+            while (a[j] > pivot) j--;
+            if (i <= j) {
+                float t = a[i];
+                a[i] = a[j];
+                a[j] = t;
+                i++;
+                if (j == 0) break;
+                j--;
+            }
+        }
+        if (k <= j) hi = j;
+        else if (k >= i) lo = i;
+        else break;
+    }
+    return a[k];
+}
+
+/* Builds the grid over the photons of this pass.  `cell_size` > 0. */
+static appm_status appm__grid_build(appm_renderer *r, float cell_size)
+{
+    size_t total = 0, i, k;
+    uint32_t c, bits = 10, nb;
+    appm__bbox bb;
+    for (c = 0; c < r->nchunks; ++c) total += r->chunk[c].count;
+    while (bits < 30 && ((size_t)1 << bits) < total) bits++;
+    nb = 1u << bits;
+    if (bits != r->table_bits) {
+        uint32_t *cell = (uint32_t *)appm__alloc(&r->mem, (size_t)nb + 1, sizeof *cell);
+        if (!cell) return APPM_ERR_NOMEM;
+        appm__free(&r->mem, r->cell);
+        r->cell = cell;
+        r->table_bits = bits;
+    }
+    if (total > r->dest_cap) {
+        size_t ncap = total + total / 4;
+        uint32_t *d = (uint32_t *)appm__alloc(&r->mem, ncap, sizeof *d);
+        if (!d) return APPM_ERR_NOMEM;
+        appm__free(&r->mem, r->dest);
+        r->dest = d;
+        r->dest_cap = ncap;
+    }
+    /* compact the regions so chunk c follows chunk c-1 (chunks of one region are
+     * already in order; regions are moved down one after another) */
+    {
+        size_t out = 0;
+        uint32_t t;
+        appm__chunk_rec *cr = r->chunk;
+        for (t = 0; t < r->tasks; ++t) {
+            size_t base = (size_t)t * r->cap;
+            for (c = t; c < r->nchunks; c += r->tasks) {
+                if (cr[c].count && base + cr[c].start != out)
+                    memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
+                cr[c].start = (uint32_t)out; /* now: offset in the compacted array */
+                out += cr[c].count;
+            }
+        }
+    }
+    r->nph = total;
+    appm__bbox_empty(&bb);
+    for (i = 0; i < total; ++i) appm__bbox_grow(&bb, appm__v(r->ph[i].x, r->ph[i].y, r->ph[i].z));
+    r->grid_lo = total ? bb.lo : appm__v(0, 0, 0);
+    r->cell_size = cell_size;
+    r->inv_cell = 1.0f / cell_size;
+    memset(r->cell, 0, ((size_t)nb + 1) * sizeof *r->cell);
+    /* (1) counts, with each photon's bucket kept in dest[] for step (3) */
+    for (i = 0; i < total; ++i) {
+        uint32_t b = appm__photon_bucket(r, &r->ph[i]);
+        r->dest[i] = b;
+        r->cell[b + 1]++;
+    }
+    /* (2) prefix sums: cell[b] = first slot of bucket b */
+    for (k = 0; k < nb; ++k) r->cell[k + 1] += r->cell[k];
+    /* (3) destinations, assigned walking the chunks in global order c = 0, 1, ...
+     * (the compacted array holds them region by region), with cell[] as running
+     * cursors; then cell[] is restored */
+    for (c = 0; c < r->nchunks; ++c)
+        for (i = r->chunk[c].start; i < (size_t)r->chunk[c].start + r->chunk[c].count; ++i)
+            r->dest[i] = r->cell[r->dest[i]]++;
+    for (k = nb; k > 0; --k) r->cell[k] = r->cell[k - 1];
+    r->cell[0] = 0;
+    /* (4) permute in place: each swap puts one photon in its final slot */
+    for (i = 0; i < total; ++i) {
+        while (r->dest[i] != i) {
+            uint32_t j = r->dest[i], tj;
+            appm__photon tp = r->ph[j];
+            r->ph[j] = r->ph[i];
+            r->ph[i] = tp;
+            tj = r->dest[j];
+            r->dest[j] = j;
+            r->dest[i] = tj;
+        }
+    }
+    return APPM_OK;
+}
+
+/* ==== 10. ESTIMATORS ======================================================
+ *
+ * Pixel-centric gathering: each pixel reads the photons near its visible point
+ * x and writes only its own state, so no atomics are needed.  A photon i at y_i
+ * contributes Psi_i = W f gamma_i (no cosine: the photon's flux already holds
+ * the projected-area factor) if it lies on the same surface (normals within
+ * 60 degrees, arriving on the eye's side) and if e + p_i <= D.
+ *
+ * Kernels (2-D, on the tangent plane; u = |x - y| / r):
+ *   uniform  K = 1/pi                 mu2 = 1/4   R(K) = 1/pi      (ppm, sppm)
+ *   biweight K = (3/pi) (1 - u^2)^2   mu2 = 1/8   R(K) = 9/(5 pi)  (appm)
+ * with k_r(d) = K(|d|/r) / r^2, mu2 the per-axis second moment, R(K) = int K^2.
+ * The biweight is smooth (C1), which the finite-difference Laplacian needs.
+ *
+ * ppm  (Knaus-Zwicker 2011): one global radius, r_j^2 = r_1^2 prod_{k<j}
+ *      (k + alpha) / (k + 1); the pixel is the plain mean over passes of
+ *      Ihat_j = (1/M) sum_i k_{r_j}(x_j - y_i) Psi_ji.
+ * sppm (Hachisuka-Jensen 2009): per pixel N, R, tau; after a pass that found m
+ *      photons with flux Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)),
+ *      tau' = (tau + Phi) R'^2 / R^2; L = tau / (j M pi R^2).
+ * appm (Kaplanyan-Dachsbacher 2013): per pixel and pass, the radius that
+ *      minimises the estimated MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
+ *         r^6 = c_f R(K) S / (M j mu2^2 dI^2),   c_f = 2/3,
+ *      where S is the running mean of s_j = (1/M) sum_i k_r lum(Psi_i)^2 (a
+ *      second moment) and dI the running mean of the per-vertex Laplacian,
+ *      estimated from the same photons by a 5-point finite difference of kernel
+ *      estimates with bandwidth h (section 10.2).  c_f = 2/3 is the constant
+ *      that is optimal when every pass is averaged with weight 1/j and r_j
+ *      shrinks as j^(-1/6) (the plug-in constant would be 2; see the design
+ *      notes).  Safeguards: KZ radius r_1 j^(-1/6) while warming up or while
+ *      S, dI are unknown; the change per pass limited to [1/2, 2]; r clamped to
+ *      [0.1, 4] r_1 j^(-1/6), so the clamps shrink at the optimal rate.
+ */
+#define APPM__MU2 0.125                          /* biweight, per axis */
+#define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
+#define APPM__CF (2.0 / 3.0)
+#define APPM__WARMUP 4                           /* passes on the KZ schedule */
+#define APPM__KMIN 16.0                          /* photons before adapting */
+#define APPM__RLO 0.1
+#define APPM__RHI 4.0
+#define APPM__KAPPA 1.0                          /* h = kappa r_1 j^(-1/8) */
+#define APPM__NORMAL_COS 0.5f
+
+typedef struct appm__gather {
+    appm__v3 x, n, t, b; /* visible point, normal, tangent frame */
+    appm__v3 wf;         /* W f */
+    float R;             /* kernel radius */
+    float h;             /* appm: Laplacian bandwidth (0: none) */
+    unsigned max_p;      /* longest photon path that still counts */
+    int biweight;
+    double e[3];         /* sum of K-weighted gamma (scaled at the end) */
+    double s;            /* sum of K lum(Psi)^2 */
+    double dl;           /* sum of D_h lum(Psi) */
+    uint64_t count;      /* photons inside R */
+} appm__gather;
+
+static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
+{
+    float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
+    float d2 = dx * dx + dy * dy + dz * dz;
+    appm__v3 pn;
+    double q;
+    if (!(d2 < Rg2) || p->segs > g->max_p) return;
+    pn = appm__oct_decode((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f));
+    if (appm__dot(pn, g->n) < APPM__NORMAL_COS) return;
+    q = 0.2126 * g->wf.x * p->power[0] + 0.7152 * g->wf.y * p->power[1] +
+        0.0722 * g->wf.z * p->power[2];
+    if (d2 < R2) {
+        double k = 1.0;
+        if (g->biweight) {
+            double u = 1.0 - (double)d2 / R2;
+            k = u * u;
+            g->s += k * q * q;
+        }
+        g->e[0] += k * p->power[0];
+        g->e[1] += k * p->power[1];
+        g->e[2] += k * p->power[2];
+        g->count++;
+    }
+    if (g->h > 0.0f) {
+        /* 10.2  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
+         * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h. */
+        double ih = 1.0 / g->h, a = (double)d2 * ih * ih, sum = 0.0, v;
+        double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
+        double db = (dx * g->b.x + dy * g->b.y + dz * g->b.z) * ih;
+        double c[4];
+        int k;
+        c[0] = a + 1.0 + 2.0 * dt;
+        c[1] = a + 1.0 - 2.0 * dt;
+        c[2] = a + 1.0 + 2.0 * db;
+        c[3] = a + 1.0 - 2.0 * db;
+        for (k = 0; k < 4; ++k)
+            if (c[k] < 1.0) sum += (1.0 - c[k]) * (1.0 - c[k]);
+        if (a < 1.0) sum -= 4.0 * (1.0 - a) * (1.0 - a);
+        v = sum * q;
+        g->dl += v;
+    }
+}
+
+/* Visits every photon within max(R, 2h) of g->x (section 9's query). */
+static void appm__gather_query(const appm_renderer *r, appm__gather *g)
+{
+    float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h, R2 = g->R * g->R, Rg2 = Rg * Rg;
+    int32_t lo[3], hi[3], cx, cy, cz;
+    double ncells;
+    uint32_t seen[27];
+    int nseen = 0, check;
+    size_t i;
+    if (r->nph == 0) return;
+    lo[0] = appm__grid_coord(g->x.x - Rg, r->grid_lo.x, r->inv_cell);
+    lo[1] = appm__grid_coord(g->x.y - Rg, r->grid_lo.y, r->inv_cell);
+    lo[2] = appm__grid_coord(g->x.z - Rg, r->grid_lo.z, r->inv_cell);
+    hi[0] = appm__grid_coord(g->x.x + Rg, r->grid_lo.x, r->inv_cell);
+    hi[1] = appm__grid_coord(g->x.y + Rg, r->grid_lo.y, r->inv_cell);
+    hi[2] = appm__grid_coord(g->x.z + Rg, r->grid_lo.z, r->inv_cell);
+    ncells = ((double)hi[0] - lo[0] + 1) * ((double)hi[1] - lo[1] + 1) * ((double)hi[2] - lo[2] + 1);
+    if (ncells > (double)r->nph || ncells > (double)(1u << r->table_bits)) {
+        /* a query larger than the grid itself: a plain scan is cheaper */
+        for (i = 0; i < r->nph; ++i) appm__gather_photon(g, &r->ph[i], R2, Rg2);
+        return;
+    }
+    check = ncells > 27.0;
+    for (cz = lo[2]; cz <= hi[2]; ++cz)
+        for (cy = lo[1]; cy <= hi[1]; ++cy)
+            for (cx = lo[0]; cx <= hi[0]; ++cx) {
+                uint32_t b = appm__grid_hash(cx, cy, cz, r->table_bits), end = r->cell[b + 1];
+                if (!check) {
+                    int k, dup = 0;
+                    for (k = 0; k < nseen; ++k) dup |= seen[k] == b;
+                    if (dup) continue;
+                    seen[nseen++] = b;
+                    for (i = r->cell[b]; i < end; ++i) appm__gather_photon(g, &r->ph[i], R2, Rg2);
+                } else {
+                    for (i = r->cell[b]; i < end; ++i) {
+                        const appm__photon *p = &r->ph[i];
+                        if (appm__grid_coord(p->x, r->grid_lo.x, r->inv_cell) != cx ||
+                            appm__grid_coord(p->y, r->grid_lo.y, r->inv_cell) != cy ||
+                            appm__grid_coord(p->z, r->grid_lo.z, r->inv_cell) != cz)
+                            continue;
+                        appm__gather_photon(g, p, R2, Rg2);
+                    }
+                }
+            }
+}
+
+/* ---- 10.1 The adaptive radius (section 4 of the design notes) -------------- */
+
+/* Radius for pass j from the pixel's statistics after j-1 passes.  Never NaN,
+ * 0 or inf: every path ends inside [RLO, RHI] r_1 j^(-1/6). */
+static double appm__appm_radius(double r1, uint64_t M, uint64_t j, const appm__pixel *p)
+{
+    double rk = r1 * pow((double)j, -1.0 / 6.0), rad = rk;
+    if (j > APPM__WARMUP && p->n >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
+        double den = (double)M * (double)j * APPM__MU2 * APPM__MU2 * p->dI * p->dI;
+        double r6 = APPM__CF * APPM__RK * p->S / den;
+        rad = (r6 > 0.0 && r6 < HUGE_VAL) ? pow(r6, 1.0 / 6.0) : APPM__RHI * rk;
+        if (p->r > 0.0) {
+            if (rad < 0.5 * p->r) rad = 0.5 * p->r;
+            if (rad > 2.0 * p->r) rad = 2.0 * p->r;
+        }
+    }
+    if (!(rad >= APPM__RLO * rk)) rad = APPM__RLO * rk; /* also catches NaN */
+    if (rad > APPM__RHI * rk) rad = APPM__RHI * rk;
+    return rad;
+}
+
+static double appm__h(const appm_renderer *r)
+{
+    return APPM__KAPPA * r->r1 * pow((double)r->pass, -1.0 / 8.0);
+}
+
+/* Welford update of the per-pass estimate's luminance (for the noise estimate). */
+static void appm__welford(appm__pixel *p, uint64_t j, double v)
+{
+    double d = v - p->wmean;
+    p->wmean += d / (double)j;
+    p->wm2 += d * (v - p->wmean);
+}
+
+static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    const double j = (double)r->pass, invM = 1.0 / (double)r->M;
+    const float h = r->method == APPM_METHOD_APPM ? (float)appm__h(r) : 0.0f;
+    uint32_t x;
+    for (x = 0; x < r->w; ++x) {
+        size_t pi = (size_t)row * r->w + x;
+        const appm__vp *vp = &r->vp[pi];
+        appm__pixel *p = &r->pix[pi];
+        appm__gather g;
+        double e[3] = {0, 0, 0}, s = 0.0, dl = 0.0;
+        int c;
+        memset(&g, 0, sizeof g);
+        if (vp->segs > 0 && vp->segs < r->max_depth) {
+            g.x = vp->x;
+            g.n = vp->n;
+            appm__basis(vp->n, &g.t, &g.b);
+            g.wf = vp->wf;
+            g.max_p = r->max_depth - vp->segs;
+            g.biweight = r->method == APPM_METHOD_APPM;
+            g.R = r->method == APPM_METHOD_PPM ? (float)sqrt(r->ppm_r2) : (float)p->r;
+            g.h = h;
+            appm__gather_query(r, &g);
+        }
+        if (r->method == APPM_METHOD_SPPM) {
+            if (g.count > 0) {
+                double R = p->r, n_new = p->n + r->alpha * (double)g.count;
+                double R_new = R * sqrt(n_new / (p->n + (double)g.count)), ratio = (R_new * R_new) / (R * R);
+                double phi[3];
+                phi[0] = g.wf.x * g.e[0];
+                phi[1] = g.wf.y * g.e[1];
+                phi[2] = g.wf.z * g.e[2];
+                if (phi[0] - phi[0] == 0.0 && phi[1] - phi[1] == 0.0 && phi[2] - phi[2] == 0.0) {
+                    for (c = 0; c < 3; ++c) p->acc[c] = (p->acc[c] + phi[c]) * ratio;
+                    p->n = n_new;
+                    p->r = R_new;
+                } else {
+                    r->dropped[worker]++;
+                }
+            }
+            continue;
+        }
+        {
+            double R = g.R, norm = g.biweight ? 3.0 / (APPM__PI * R * R) : 1.0 / (APPM__PI * R * R);
+            if (g.count > 0) {
+                e[0] = g.wf.x * g.e[0] * norm * invM;
+                e[1] = g.wf.y * g.e[1] * norm * invM;
+                e[2] = g.wf.z * g.e[2] * norm * invM;
+                s = g.s * norm * invM;
+            }
+            if (h > 0.0f) dl = g.dl * (3.0 / APPM__PI) / ((double)h * h * h * h) * invM;
+        }
+        if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && s - s == 0.0 &&
+              dl - dl == 0.0)) {
+            r->dropped[worker]++;
+            e[0] = e[1] = e[2] = s = dl = 0.0;
+        }
+        for (c = 0; c < 3; ++c) p->acc[c] += (e[c] - p->acc[c]) / j;
+        if (r->method == APPM_METHOD_APPM) {
+            p->S += (s - p->S) / j;
+            p->dI += (dl - p->dI) / j;
+            p->n += (double)g.count;
+            p->r2sum += p->r * p->r;
+        }
+        appm__welford(p, r->pass, (double)vp->ld_lum + appm__lumd(e));
+    }
+}
+
+/* ==== 11. PATH-TRACING REFERENCE ==========================================
+ *
+ * An unbiased unidirectional path tracer for reference images: at every
+ * diffuse vertex one shadow ray to a light chosen by power and one cosine-
+ * sampled continuation, combined by multiple importance sampling (power
+ * heuristic, Veach 1997) for area and environment lights; point and spot
+ * lights are reached by shadow rays only.  After a specular bounce, emission
+ * found by the continuation counts fully (no shadow ray could have found it).
+ * Caustics from point lights are therefore missing by construction - that is
+ * what photons are for.  Russian roulette from the fourth segment on.
+ */
+static float appm__mis(float a, float b)
+{
+    float a2 = a * a, b2 = b * b;
+    return a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f;
+}
+
+static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
+{
+    const appm_scene *s = r->scene;
+    const size_t pi = (size_t)py * r->w + px;
+    appm__rng rng;
+    appm__ray ray;
+    appm__v3 W = appm__v(1, 1, 1), L = appm__v(0, 0, 0), prev_ns = appm__v(0, 0, 1);
+    float prev_pdf = 0.0f;
+    int prev_specular = 1;
+    uint32_t skip = UINT32_MAX;
+    unsigned segs = 0;
+    appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_EYE, pi);
+    appm__camera_ray(r, px, py, &rng, &ray);
+    for (;;) {
+        appm__hit h;
+        appm__surf sf;
+        const appm__material *m;
+        appm__v3 wo;
+        appm__bsdf_sample bs;
+        if (++segs > r->max_depth) break;
+        if (!appm__intersect(s, &ray, skip, &h)) {
+            if (s->env >= 0) {
+                float w = 1.0f;
+                if (!prev_specular) {
+                    float c = appm__dot(ray.d, prev_ns);
+                    w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
+                }
+                L = appm__add(L, appm__scale(appm__mul(W, s->light[s->env].value), w));
+            }
+            break;
+        }
+        appm__surface(s, &h, &sf);
+        m = &s->mat[sf.mat];
+        wo = appm__neg(ray.d);
+        if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) {
+            float w = prev_specular ? 1.0f : appm__mis(prev_pdf, appm__area_light_pdf(s, sf.tri, ray.d, h.t));
+            L = appm__add(L, appm__scale(appm__mul(W, m->ke), w));
+        }
+        if (m->kind == APPM__MAT_DIFFUSE && segs + 1 <= r->max_depth) {
+            float side = appm__dot(wo, sf.ng) >= 0.0f ? 1.0f : -1.0f, c;
+            appm__v3 ns = appm__scale(sf.ns, side), ng = appm__scale(sf.ng, side);
+            float u0 = appm__rng_float(&rng), u1 = appm__rng_float(&rng), u2 = appm__rng_float(&rng);
+            appm__light_sample ls;
+            if (appm__sample_light(s, &sf, ns, u0, u1, u2, &ls)) {
+                c = appm__dot(ls.wi, ns);
+                if (c > 0.0f && appm__dot(ls.wi, ng) > 0.0f &&
+                    !appm__occluded(s, &ls.shadow, sf.tri, ls.skip)) {
+                    float w = ls.pdf > 0.0f ? appm__mis(ls.pdf, c * (float)APPM__INV_PI) : 1.0f;
+                    L = appm__add(L, appm__scale(appm__mul(appm__mul(W, m->color), ls.li),
+                                                 c * (float)APPM__INV_PI * w));
+                }
+            }
+            prev_ns = ns;
+        }
+        if (!appm__bsdf_sample_dir(m, &sf, wo, appm__rng_float(&rng), appm__rng_float(&rng),
+                                   appm__rng_float(&rng), APPM__RADIANCE, &bs))
+            break;
+        W = appm__mul(W, bs.weight);
+        prev_pdf = bs.pdf;
+        prev_specular = bs.specular;
+        if (segs >= 3) {
+            float q = appm__maxc(W);
+            q = q > 0.95f ? 0.95f : q;
+            if (!(appm__rng_float(&rng) < q)) break;
+            W = appm__scale(W, 1.0f / q);
+        }
+        appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
+        skip = sf.tri;
+    }
+    if (appm__finite3(L)) {
+        appm__add3(r->pix[pi].ld, L);
+        appm__welford(&r->pix[pi], r->pass, (double)appm__lum(L));
+    } else {
+        r->dropped[worker]++;
+        appm__welford(&r->pix[pi], r->pass, 0.0);
+    }
+}
+
+static void appm__pt_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    uint32_t x;
+    for (x = 0; x < r->w; ++x) appm__pt_pixel(r, x, row, worker);
+}
+
+/* ==== 12. API GLUE ========================================================
+ *
+ * Scene assembly (loader arrays -> an immutable scene with its BVH and light
+ * table) and the renderer life cycle: create validates every option and
+ * allocates all per-pixel state; each pass runs eye pass -> radii -> photon
+ * pass -> grid -> gather; the image and the diagnostic maps are derived from
+ * the per-pixel state on request.
+ */
+APPM_API void appm_config_init(appm_config *cfg)
+{
+    if (!cfg) return;
+    memset(cfg, 0, sizeof *cfg);
+    cfg->method = APPM_METHOD_APPM;
+    cfg->direct = APPM_DIRECT_NEE;
+    cfg->alpha = 2.0 / 3.0;
+    cfg->max_depth = 32;
+}
+
+static void appm__loader_free(appm__loader *L)
+{
+    appm__array_free(L->mem, &L->pos);
+    appm__array_free(L->mem, &L->vn);
+    appm__array_free(L->mem, &L->nrm);
+    appm__array_free(L->mem, &L->tri);
+    appm__array_free(L->mem, &L->info);
+    appm__array_free(L->mem, &L->mat);
+    appm__array_free(L->mem, &L->names);
+    appm__array_free(L->mem, &L->face);
+    appm__array_free(L->mem, &L->lights);
+}
+
+/* Copies a loader array into an exact-size block owned by the scene. */
+static void *appm__take(appm__mem *m, appm__array *a, int *ok)
+{
+    void *p;
+    if (a->count == 0) return NULL;
+    p = appm__alloc(m, a->count, a->elem);
+    if (!p) {
+        *ok = 0;
+        return NULL;
+    }
+    memcpy(p, a->data, a->count * a->elem);
+    return p;
+}
+
+static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
+{
+    appm__free(m, s->tri);
+    appm__free(m, s->info);
+    appm__free(m, s->normals);
+    appm__free(m, s->mat);
+    appm__free(m, s->light);
+    appm__free(m, s->light_cdf);
+    appm__free(m, s->node);
+}
+
+static double appm__mean3(const double *v) { return (v[0] + v[1] + v[2]) / 3.0; }
+
+/* Builds the light table: one area light per emissive triangle (after the BVH
+ * has fixed triangle order), then the point, spot and environment lights. */
+static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char *name)
+{
+    uint32_t i, n = 0, k = 0, extra = (uint32_t)L->lights.count;
+    double total = 0.0;
+    for (i = 0; i < s->ntri; ++i) n += s->mat[s->info[i].mat].emissive;
+    if (n + extra == 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
+                          "the scene has no light (no material with Ke > 0, no light or environment)");
+    s->light = (appm__light *)appm__alloc(&s->mem, (size_t)n + extra, sizeof *s->light);
+    s->light_cdf = (double *)appm__alloc(&s->mem, (size_t)n + extra + 1, sizeof *s->light_cdf);
+    if (!s->light || !s->light_cdf) return APPM_ERR_NOMEM;
+    s->env = -1;
+    for (i = 0; i < s->ntri; ++i) {
+        const appm__material *m = &s->mat[s->info[i].mat];
+        appm__light *l;
+        double a = (double)s->info[i].area;
+        if (!m->emissive) continue;
+        l = &s->light[k];
+        l->kind = APPM__LIGHT_AREA;
+        l->tri = i;
+        l->value = m->ke;
+        l->power[0] = APPM__PI * a * m->ke.x; /* Phi = pi A Le for a Lambertian emitter */
+        l->power[1] = APPM__PI * a * m->ke.y;
+        l->power[2] = APPM__PI * a * m->ke.z;
+        s->info[i].light = (int32_t)k++;
+    }
+    for (i = 0; i < extra; ++i) {
+        appm__light *l = &s->light[k];
+        *l = ((appm__light *)L->lights.data)[i];
+        if (l->kind == APPM__LIGHT_POINT) {
+            l->power[0] = 4.0 * APPM__PI * l->value.x;
+            l->power[1] = 4.0 * APPM__PI * l->value.y;
+            l->power[2] = 4.0 * APPM__PI * l->value.z;
+        } else if (l->kind == APPM__LIGHT_SPOT) {
+            /* 2 pi I [ (1 - cos_inner) + (cos_inner - cos_cone) / 5 ]: the d^4 ramp
+             * integrates to a fifth of its width in cos(theta) */
+            double f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
+            l->power[0] = f * l->value.x;
+            l->power[1] = f * l->value.y;
+            l->power[2] = f * l->value.z;
+        } else { /* environment: L through the disk of the bounding sphere from all directions */
+            double f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
+            if (s->env >= 0)
+                return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
+            s->env = (int)k;
+            l->power[0] = f * l->value.x;
+            l->power[1] = f * l->value.y;
+            l->power[2] = f * l->value.z;
+        }
+        k++;
+    }
+    s->nlight = k;
+    for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
+    if (!(total > 0.0) || !(total < HUGE_VAL))
+        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
+    s->light_cdf[0] = 0.0;
+    for (i = 0; i < k; ++i) {
+        s->light[i].pick = appm__mean3(s->light[i].power) / total;
+        s->light_cdf[i + 1] = s->light_cdf[i] + s->light[i].pick;
+    }
+    s->light_cdf[k] = 1.0;
+    return APPM_OK;
+}
+
+/* Loader arrays -> scene: exact-size copies, bounds, BVH, lights, camera. */
+static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char *name)
+{
+    int ok = 1;
+    uint32_t i;
+    appm__bbox bb;
+    appm_status st;
+    if (L->tri.count == 0 && L->lights.count == 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the scene has no triangles");
+    s->ntri = (uint32_t)L->tri.count;
+    s->nnormals = (uint32_t)L->nrm.count;
+    s->nmat = (uint32_t)L->mat.count;
+    s->tri = (appm__tri *)appm__take(&s->mem, &L->tri, &ok);
+    s->info = (appm__tri_info *)appm__take(&s->mem, &L->info, &ok);
+    s->normals = (appm__v3 *)appm__take(&s->mem, &L->nrm, &ok);
+    s->mat = (appm__material *)appm__take(&s->mem, &L->mat, &ok);
+    if (!ok) return APPM_ERR_NOMEM;
+    s->dropped = L->dropped;
+    appm__bbox_empty(&bb);
+    for (i = 0; i < s->ntri; ++i) {
+        appm__bbox_grow(&bb, s->tri[i].p0);
+        appm__bbox_grow(&bb, s->tri[i].p1);
+        appm__bbox_grow(&bb, s->tri[i].p2);
+    }
+    if (s->ntri == 0) bb.lo = bb.hi = appm__v(0, 0, 0);
+    s->bmin = bb.lo;
+    s->bmax = bb.hi;
+    s->center = appm__scale(appm__add(bb.lo, bb.hi), 0.5f);
+    s->radius = 0.5f * appm__length(appm__sub(bb.hi, bb.lo));
+    if ((st = appm__bvh_build(s, L->diag)) != APPM_OK) return st;
+    if ((st = appm__scene_lights(s, L, name)) != APPM_OK) return st;
+    if (!L->have_camera) { /* frame the bounding sphere, looking along -z */
+        float rad = s->radius > 0.0f ? s->radius : 1.0f;
+        float dist = rad / (float)sin(0.5 * 40.0 * APPM__PI / 180.0) * 1.05f;
+        appm__v3 eye = appm__add(s->center, appm__v(0, 0, dist));
+        L->file = name;
+        if ((st = appm__camera_set(L, 0, eye, s->center, appm__v(0, 1, 0), 40.0)) != APPM_OK) return st;
+    }
+    s->cam = L->cam;
+    s->width = L->width ? L->width : 512;
+    s->height = L->height ? L->height : 512;
+    return APPM_OK;
+}
+
+static void appm__loader_init(appm__loader *L, appm__mem *m, const appm_config *cfg, appm_diag *diag)
+{
+    memset(L, 0, sizeof *L);
+    L->mem = m;
+    L->diag = diag;
+    if (cfg) {
+        L->log = cfg->log;
+        L->log_user = cfg->log_user;
+    }
+    appm__array_init(&L->pos, sizeof(appm__v3));
+    appm__array_init(&L->vn, sizeof(appm__v3));
+    appm__array_init(&L->nrm, sizeof(appm__v3));
+    appm__array_init(&L->tri, sizeof(appm__tri));
+    appm__array_init(&L->info, sizeof(appm__tri_info));
+    appm__array_init(&L->mat, sizeof(appm__material));
+    appm__array_init(&L->names, 1);
+    appm__array_init(&L->face, 2 * sizeof(int64_t));
+    appm__array_init(&L->lights, sizeof(appm__light));
+}
+
+/* Common path of the two public loaders.  `obj` non-NULL: an in-memory OBJ. */
+static appm_status appm__scene_load(const char *path, const char *obj, size_t obj_len,
+                                    const char *mtl, size_t mtl_len, const appm_config *cfg,
+                                    appm_scene **out, appm_diag *diag)
+{
+    appm__mem m;
+    appm__loader L;
+    appm_scene *s;
+    appm_status st;
+    appm__material *def;
+    appm_diag local;
+    if (!diag) diag = &local;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no output pointer");
+    *out = NULL;
+    if (!path) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene path");
+    appm__mem_init(&m, cfg);
+    m.diag = diag;
+    s = (appm_scene *)appm__alloc(&m, 1, sizeof *s);
+    if (!s) return APPM_ERR_NOMEM;
+    appm__loader_init(&L, &m, cfg, diag);
+    L.file = path;
+    L.mem_mtl = mtl;
+    L.mem_mtl_len = mtl ? mtl_len : 0;
+    if (mtl) L.mem_mtl = mtl;
+    appm__copy_str(s->name, sizeof s->name, path);
+    def = (appm__material *)appm__array_push(&m, &L.mat); /* material 0: default diffuse */
+    st = APPM_ERR_NOMEM;
+    if (def && appm__array_push(&m, &L.names)) {
+        def->kind = APPM__MAT_DIFFUSE;
+        def->color = appm__v(0.8f, 0.8f, 0.8f);
+        def->ior = 1.5f;
+        if (obj) {
+            st = appm__obj_parse(&L, obj, obj_len, path);
+        } else if (appm__ends_with(path, ".obj")) {
+            L.file = NULL;
+            st = appm__obj_load(&L, path, 0);
+        } else {
+            char *buf;
+            size_t len;
+            st = appm__read_file(&m, path, &buf, &len, diag);
+            if (st == APPM_OK) {
+                st = appm__scene_parse(&L, buf, len, path);
+                appm__free(&m, buf);
+            }
+        }
+        if (st == APPM_OK) {
+            s->mem = m; /* from here on the scene's own counter tracks its blocks */
+            st = appm__scene_finish(s, &L, path);
+            m = s->mem;
+        }
+    }
+    if (st == APPM_ERR_NOMEM) appm__fail(diag, APPM_ERR_NOMEM, path, 0, "out of memory loading the scene");
+    appm__loader_free(&L);
+    if (st != APPM_OK) {
+        appm__scene_free_parts(&m, s);
+        appm__free(&m, s);
+        return st;
+    }
+    m.diag = NULL;
+    s->mem = m;
+    *out = s;
+    return APPM_OK;
+}
+
+APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
+                                     appm_diag *diag)
+{
+    return appm__scene_load(path, NULL, 0, NULL, 0, cfg, out, diag);
+}
+
+APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len, const char *mtl,
+                                                size_t mtl_len, const char *name,
+                                                const appm_config *cfg, appm_scene **out,
+                                                appm_diag *diag)
+{
+    if (!obj) {
+        appm__diag_clear(diag);
+        if (out) *out = NULL;
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, "no OBJ text");
+    }
+    return appm__scene_load(name ? name : "(memory)", obj, obj_len, mtl, mtl_len, cfg, out, diag);
+}
+
+APPM_API void appm_scene_destroy(appm_scene *scene)
+{
+    appm__mem m;
+    if (!scene) return;
+    m = scene->mem;
+    appm__scene_free_parts(&m, scene);
+    appm__free(&m, scene);
+}
+
+APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
+{
+    uint32_t i;
+    if (!info) return;
+    memset(info, 0, sizeof *info);
+    if (!s) return;
+    info->triangles = s->ntri;
+    info->dropped_triangles = s->dropped;
+    for (i = 1; i < s->nmat; ++i) { /* material 0 is the implicit default */
+        const appm__material *m = &s->mat[i];
+        info->materials_diffuse += m->kind == APPM__MAT_DIFFUSE;
+        info->materials_mirror += m->kind == APPM__MAT_MIRROR;
+        info->materials_dielectric += m->kind == APPM__MAT_DIELECTRIC;
+        info->materials_emissive += m->emissive;
+    }
+    for (i = 0; i < s->nlight; ++i) {
+        const appm__light *l = &s->light[i];
+        double *p = l->kind == APPM__LIGHT_AREA    ? info->power_area
+                    : l->kind == APPM__LIGHT_POINT ? info->power_point
+                    : l->kind == APPM__LIGHT_SPOT  ? info->power_spot
+                                                   : info->power_environment;
+        info->lights_area += l->kind == APPM__LIGHT_AREA;
+        info->lights_point += l->kind == APPM__LIGHT_POINT;
+        info->lights_spot += l->kind == APPM__LIGHT_SPOT;
+        info->lights_environment += l->kind == APPM__LIGHT_ENV;
+        p[0] += l->power[0];
+        p[1] += l->power[1];
+        p[2] += l->power[2];
+    }
+    info->bbox_min[0] = s->bmin.x;
+    info->bbox_min[1] = s->bmin.y;
+    info->bbox_min[2] = s->bmin.z;
+    info->bbox_max[0] = s->bmax.x;
+    info->bbox_max[1] = s->bmax.y;
+    info->bbox_max[2] = s->bmax.z;
+    info->bvh_nodes = s->nnode;
+    info->bvh_depth = s->depth;
+    info->width = s->width;
+    info->height = s->height;
+    info->memory_bytes = s->mem.live;
+    info->peak_bytes = s->mem.peak;
+}
+
+/* ---- 12.1 Renderer ----------------------------------------------------------- */
+
+static void appm__renderer_free_parts(appm_renderer *r)
+{
+    int k;
+    appm__free(&r->mem, r->vp);
+    appm__free(&r->mem, r->pix);
+    appm__free(&r->mem, r->image);
+    for (k = 0; k < APPM_AUX_COUNT; ++k) appm__free(&r->mem, r->aux[k]);
+    appm__free(&r->mem, r->ph);
+    appm__free(&r->mem, r->chunk);
+    appm__free(&r->mem, r->task_used);
+    appm__free(&r->mem, r->task_failed);
+    appm__free(&r->mem, r->dest);
+    appm__free(&r->mem, r->cell);
+}
+
+APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
+                                          appm_renderer **out, appm_diag *diag)
+{
+    appm__mem m;
+    appm_renderer *r;
+    appm_config c;
+    size_t npix;
+    int k;
+    appm_diag local;
+    if (!diag) diag = &local;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
+    *out = NULL;
+    if (!scene) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene");
+    if (cfg) c = *cfg;
+    else memset(&c, 0, sizeof c);
+    if (c.width == 0) c.width = scene->width;
+    if (c.height == 0) c.height = scene->height;
+    if (c.width > 32768 || c.height > 32768)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "image size %ux%u is above 32768",
+                          (unsigned)c.width, (unsigned)c.height);
+    if ((int)c.method < 0 || c.method > APPM_METHOD_PT)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown method %d", (int)c.method);
+    if ((int)c.direct < 0 || c.direct > APPM_DIRECT_PHOTONS)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown direct-light mode");
+    if (c.alpha == 0.0) c.alpha = 2.0 / 3.0;
+    if (!(c.alpha > 0.0 && c.alpha <= 1.0))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "alpha %g is not in (0, 1]", c.alpha);
+    if (!(c.radius >= 0.0) || !(c.radius < HUGE_VAL))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "radius %g is not a positive number", c.radius);
+    if (c.photons == 0) c.photons = (uint64_t)c.width * c.height;
+    if (c.photons > ((uint64_t)1 << 32))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0,
+                          "%.0f photons per pass is above the limit of 2^32", (double)c.photons);
+    if (c.max_depth == 0) c.max_depth = 32;
+    if (c.max_depth > 254)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "max depth %u is above 254", c.max_depth);
+    if (c.threads == 0) c.threads = appm_cpu_count();
+    if (c.threads > APPM__MAX_THREADS) c.threads = APPM__MAX_THREADS;
+#if APPM_THREADS == 0
+    if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
+    c.threads = 1;
+#endif
+    appm__mem_init(&m, &c);
+    m.diag = diag;
+    r = (appm_renderer *)appm__alloc(&m, 1, sizeof *r);
+    if (!r) return APPM_ERR_NOMEM;
+    r->mem = m;
+    r->mem.diag = diag;
+    r->scene = scene;
+    r->method = c.method;
+    r->direct = c.direct;
+    r->w = c.width;
+    r->h = c.height;
+    r->M = c.photons;
+    r->r1 = c.radius;
+    r->r1_auto = c.radius == 0.0;
+    r->alpha = c.alpha;
+    r->threads = c.threads;
+    r->max_depth = c.max_depth;
+    r->seed = c.seed;
+    r->pixel_angle = 2.0f * scene->cam.tan_half / (float)r->h;
+    r->tasks = r->threads;
+    r->nchunks = (uint32_t)((r->M + APPM__CHUNK - 1) / APPM__CHUNK);
+    npix = (size_t)r->w * r->h;
+    r->vp = (appm__vp *)appm__alloc(&r->mem, npix, sizeof *r->vp);
+    r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
+    r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
+    for (k = 0; k < APPM_AUX_COUNT; ++k) r->aux[k] = (float *)appm__alloc(&r->mem, npix, sizeof(float));
+    if (r->method != APPM_METHOD_PT) {
+        r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks, sizeof *r->chunk);
+        r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
+        r->task_failed = (int *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_failed);
+        /* first guess at the store: 1.5 photons per path; it grows if needed */
+        r->cap = (size_t)((double)r->M * 1.5 / r->tasks) + 4096;
+        r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
+    }
+    if (!r->vp || !r->pix || !r->image || !r->aux[APPM_AUX_COUNT - 1] || !r->aux[0] ||
+        !r->aux[1] || !r->aux[2] ||
+        (r->method != APPM_METHOD_PT && (!r->chunk || !r->task_used || !r->task_failed || !r->ph))) {
+        appm__mem fm;
+        appm__renderer_free_parts(r);
+        fm = r->mem;
+        appm__free(&fm, r);
+        return APPM_ERR_NOMEM;
+    }
+    r->stats.threads = r->threads;
+    r->stats.est_relerr = -1.0;
+    r->mem.diag = &r->diag;
+    *out = r;
+    return APPM_OK;
+}
+
+APPM_API void appm_renderer_destroy(appm_renderer *r)
+{
+    appm__mem m;
+    if (!r) return;
+    appm__renderer_free_parts(r);
+    m = r->mem;
+    appm__free(&m, r);
+}
+
+APPM_API const char *appm_renderer_last_error(const appm_renderer *r)
+{
+    return r ? r->last_error : "";
+}
+
+static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    uint32_t x;
+    (void)worker;
+    for (x = 0; x < r->w; ++x) {
+        appm__pixel *p = &r->pix[(size_t)row * r->w + x];
+        p->r = appm__appm_radius(r->r1, r->M, r->pass, p);
+    }
+}
+
+/* The default initial radius r_1 (pass 1): twice the median width of a pixel
+ * at the visible points.  A radius tied to the pixel footprint keeps the
+ * kernel's blur at a few pixels whatever the scene's units and however far the
+ * camera is, which is what a viewer judges; photon density does not enter, so
+ * the ppm/sppm user tunes --radius for a given budget, while appm adapts it.
+ * Falls back to 1/1000 of the scene's diagonal when no pixel sees a surface. */
+static double appm__default_radius(appm_renderer *r)
+{
+    size_t n = 0, i, npix = (size_t)r->w * r->h;
+    float *tmp = r->aux[0];
+    double rad = 0.0;
+    for (i = 0; i < npix; ++i)
+        if (r->vp[i].segs > 0 && r->vp[i].footprint > 0.0f) tmp[n++] = r->vp[i].footprint;
+    if (n > 0) rad = 2.0 * appm__select(tmp, n, n / 2);
+    if (!(rad > 0.0) || !(rad < HUGE_VAL)) rad = 2e-3 * (double)r->scene->radius;
+    if (!(rad > 0.0) || !(rad < HUGE_VAL)) rad = 1e-3;
+    return rad;
+}
+
+/* Median of the gather radii of the pixels that have a visible point. */
+static float appm__median_gather_radius(appm_renderer *r, double h)
+{
+    size_t n = 0, i, npix = (size_t)r->w * r->h;
+    float *tmp = r->aux[0];
+    for (i = 0; i < npix; ++i) {
+        double g;
+        if (r->vp[i].segs == 0) continue;
+        g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2) : r->pix[i].r;
+        if (2.0 * h > g) g = 2.0 * h;
+        tmp[n++] = (float)g;
+    }
+    if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
+    return appm__select(tmp, n, n / 2);
+}
+
+static void appm__estimate_error(appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    double j = (double)r->pass, sum = 0.0;
+    if (r->pass < 2 || (r->method != APPM_METHOD_APPM && r->method != APPM_METHOD_PT)) {
+        r->stats.est_relerr = -1.0;
+        return;
+    }
+    for (i = 0; i < npix; ++i) {
+        const appm__pixel *p = &r->pix[i];
+        double var = p->wm2 / ((j - 1.0) * j), bias = 0.0, I;
+        if (r->method == APPM_METHOD_APPM) {
+            bias = 0.5 * APPM__MU2 * p->dI * (p->r2sum / j);
+            I = appm__lumd(p->ld) / j + appm__lumd(p->acc);
+        } else {
+            I = appm__lumd(p->ld) / j;
+        }
+        sum += (bias * bias + var) / (I * I + 0.01);
+    }
+    r->stats.est_relerr = sqrt(sum / (double)npix);
+}
+
+APPM_API appm_status appm_renderer_pass(appm_renderer *r)
+{
+    double t0, t1, t2, t3, t4;
+    appm_status st;
+    unsigned k;
+    if (!r) return APPM_ERR_INVALID_ARG;
+    appm__diag_clear(&r->diag);
+    t0 = appm__seconds();
+    r->pass++;
+    r->aux_valid = 0;
+    if (r->method == APPM_METHOD_PT) {
+        appm__parallel_for(r->threads, r->h, appm__pt_task, r);
+        t1 = t2 = t3 = appm__seconds();
+    } else {
+        float cell;
+        appm__parallel_for(r->threads, r->h, appm__eye_task, r);
+        if (r->pass == 1) {
+            size_t i, npix = (size_t)r->w * r->h;
+            if (r->r1_auto) r->r1 = appm__default_radius(r);
+            r->ppm_r2 = r->r1 * r->r1;
+            if (r->method == APPM_METHOD_SPPM)
+                for (i = 0; i < npix; ++i) r->pix[i].r = r->r1;
+        }
+        if (r->method == APPM_METHOD_APPM) appm__parallel_for(r->threads, r->h, appm__radius_task, r);
+        cell = appm__median_gather_radius(r, r->method == APPM_METHOD_APPM ? appm__h(r) : 0.0);
+        t1 = appm__seconds();
+        st = appm__photon_pass(r);
+        t2 = appm__seconds();
+        if (st == APPM_OK) st = appm__grid_build(r, cell > 0.0f ? cell : 1.0f);
+        if (st != APPM_OK) {
+            r->pass--;
+            if (st == APPM_ERR_NOMEM && r->diag.status == APPM_OK)
+                appm__fail(&r->diag, st, NULL, 0, "out of memory in the photon pass");
+            appm__copy_str(r->last_error, sizeof r->last_error, r->diag.message);
+            return st;
+        }
+        t3 = appm__seconds();
+        appm__parallel_for(r->threads, r->h, appm__gather_task, r);
+        if (r->method == APPM_METHOD_PPM) {
+            r->stats.initial_radius = r->r1;
+            r->ppm_r2 *= ((double)r->pass + r->alpha) / ((double)r->pass + 1.0);
+        }
+        r->stats.photons_emitted += r->M;
+        r->stats.photons_stored = r->nph;
+    }
+    t4 = appm__seconds();
+    r->stats.passes = r->pass;
+    r->stats.eye_paths += (uint64_t)r->w * r->h;
+    r->stats.initial_radius = r->r1;
+    r->stats.seconds += t4 - t0;
+    r->stats.seconds_eye += t1 - t0;
+    r->stats.seconds_photons += t2 - t1;
+    r->stats.seconds_grid += t3 - t2;
+    r->stats.seconds_gather += t4 - t3;
+    r->stats.dropped_samples = 0;
+    for (k = 0; k < APPM__MAX_THREADS; ++k) r->stats.dropped_samples += r->dropped[k];
+    r->stats.memory_bytes = r->mem.live;
+    r->stats.peak_bytes = r->mem.peak;
+    appm__estimate_error(r);
+    return APPM_OK;
+}
+
+APPM_API void appm_renderer_image(appm_renderer *r, appm_image *out)
+{
+    size_t i, npix;
+    double j;
+    if (!out) return;
+    out->width = out->height = 0;
+    out->rgb = NULL;
+    if (!r) return;
+    npix = (size_t)r->w * r->h;
+    j = r->pass ? (double)r->pass : 1.0;
+    for (i = 0; i < npix; ++i) {
+        const appm__pixel *p = &r->pix[i];
+        int c;
+        for (c = 0; c < 3; ++c) {
+            double v = p->ld[c] / j;
+            if (r->method == APPM_METHOD_SPPM) {
+                if (p->r > 0.0) v += p->acc[c] / (j * (double)r->M * APPM__PI * p->r * p->r);
+            } else if (r->method != APPM_METHOD_PT) {
+                v += p->acc[c];
+            }
+            r->image[3 * i + c] = (float)v;
+        }
+    }
+    out->width = r->w;
+    out->height = r->h;
+    out->rgb = r->image;
+}
+
+APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out)
+{
+    if (!out) return;
+    memset(out, 0, sizeof *out);
+    if (r) *out = r->stats;
+}
+
+APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
+{
+    size_t i, npix;
+    double j;
+    float *a;
+    if (!r || (int)which < 0 || which >= APPM_AUX_COUNT || r->pass == 0) return NULL;
+    if (which == APPM_AUX_LAPLACIAN && r->method != APPM_METHOD_APPM) return NULL;
+    if (which == APPM_AUX_RADIUS && r->method == APPM_METHOD_PT) return NULL;
+    if ((which == APPM_AUX_VARIANCE || which == APPM_AUX_ERROR) && r->method == APPM_METHOD_SPPM) return NULL;
+    if (which == APPM_AUX_ERROR && r->method == APPM_METHOD_PPM) return NULL;
+    npix = (size_t)r->w * r->h;
+    j = (double)r->pass;
+    a = r->aux[which];
+    for (i = 0; i < npix; ++i) {
+        const appm__pixel *p = &r->pix[i];
+        double var = r->pass > 1 ? p->wm2 / ((j - 1.0) * j) : 0.0, v;
+        switch (which) {
+        case APPM_AUX_RADIUS:
+            v = r->method == APPM_METHOD_PPM
+                    ? sqrt(r->ppm_r2 * ((j + 1.0) / (j + r->alpha))) /* the radius of the last pass */
+                    : p->r;
+            break;
+        case APPM_AUX_VARIANCE: v = var; break;
+        case APPM_AUX_LAPLACIAN: v = p->dI; break;
+        default:
+            v = 1.645 * sqrt(var);
+            if (r->method == APPM_METHOD_APPM) v += fabs(0.5 * APPM__MU2 * p->dI * (p->r2sum / j));
+            break;
+        }
+        a[i] = (float)v;
+    }
+    return a;
+}
+
+/* ==== LICENSE =============================================================
+ *
+ * MIT License.  Copyright (c) 2026 the appm authors.
+ *
+ * Permission is hereby granted, free of charge, to any person obtaining a copy
+ * of this software and associated documentation files (the "Software"), to deal
+ * in the Software without restriction, including without limitation the rights
+ * to use, copy, modify, merge, publish, distribute, sublicense, and/or sell
+ * copies of the Software, and to permit persons to whom the Software is
+ * furnished to do so, subject to the following conditions:
+ *
+ * The above copyright notice and this permission notice shall be included in
+ * all copies or substantial portions of the Software.
+ *
+ * THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR
+ * IMPLIED, INCLUDING BUT NOT LIMITED TO THE WARRANTIES OF MERCHANTABILITY,
+ * FITNESS FOR A PARTICULAR PURPOSE AND NONINFRINGEMENT. IN NO EVENT SHALL THE
+ * AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM, DAMAGES OR OTHER
+ * LIABILITY, WHETHER IN AN ACTION OF CONTRACT, TORT OR OTHERWISE, ARISING FROM,
+ * OUT OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER DEALINGS IN THE
+ * SOFTWARE.
+ */

@@ -1,0 +1,331 @@
+/* appm.h - Adaptive Progressive Photon Mapping.  Public API and manual.
+ *
+ * ABOUT
+ *     appm renders physically based images of triangle scenes (Wavefront OBJ/MTL)
+ *     by progressive photon mapping.  Each pass traces one eye path per pixel and a
+ *     batch of photon paths, and joins them with a kernel of radius r.  A large r
+ *     blurs (bias), a small r is noisy (variance), and the best r differs from
+ *     pixel to pixel.  The default method, APPM (Kaplanyan & Dachsbacher 2013),
+ *     estimates each pixel's variance and Laplacian from the photons themselves and
+ *     picks, per pixel and pass, the radius that minimises the estimated error.
+ *     The classic baselines (PPM with the Knaus-Zwicker global radius schedule,
+ *     stochastic PPM) and an unbiased path tracer (for references) are included.
+ *
+ *     Two files, C99, no dependencies beyond libc and libm (threads optional).
+ *
+ * QUICK START
+ *     #include "appm.h"
+ *
+ *     appm_config cfg = {0};            // zero means default, everywhere
+ *     appm_scene *scene;  appm_renderer *r;  appm_diag diag;  appm_image img;
+ *     int pass;
+ *     if (appm_scene_load("scenes/cornell-box.scene", &cfg, &scene, &diag)) {
+ *         fprintf(stderr, "%s:%u: %s\n", diag.file, diag.line, diag.message);
+ *         return 1;
+ *     }
+ *     cfg.width = cfg.height = 256;     // override the scene's image size
+ *     if (appm_renderer_create(scene, &cfg, &r, &diag) == APPM_OK) {
+ *         for (pass = 0; pass < 16; ++pass) appm_renderer_pass(r);
+ *         appm_renderer_image(r, &img);  // borrowed view, linear RGB
+ *         appm_image_write("out.png", &img, 1.0, &diag);
+ *         appm_renderer_destroy(r);
+ *     }
+ *     appm_scene_destroy(scene);
+ *
+ *     examples/embed.c is this program, complete.
+ *
+ * BUILDING
+ *     cc -std=c99 -O2 -c appm.c -pthread          (POSIX threads, the default on Unix)
+ *     cc -std=c99 -O2 -DAPPM_THREADS=0 -c appm.c  (no threads: embedded, WASM)
+ *     x86_64-w64-mingw32-gcc -std=c99 -O2 -c appm.c   (Win32 threads, the default on Windows)
+ *     Link with -lm.  APPM_THREADS: 0 none, 1 pthreads, 2 Win32.
+ *     Never build with -ffast-math: the renderer relies on NaN checks and on the
+ *     order of floating-point sums (an #error says so).
+ *     Unity build: #define APPM_API static, then #include "appm.c".
+ *
+ * CONVENTIONS
+ *     Units are scene units; right-handed coordinates; angles in degrees at the
+ *     interface (scene files, config), radians inside.  Colours are linear RGB
+ *     radiance.  Image row 0 is the top row; pixel (x, y) of an appm_image is at
+ *     rgb[3 * (y * width + x)].  PFM files store rows bottom to top, as the format
+ *     demands; the readers and writers here flip for you.
+ *
+ *     Ownership: whatever appm creates, an appm_*_destroy() (or appm_image_free)
+ *     frees; whatever you pass in stays yours; a pointer appm returns is borrowed
+ *     until the next call that changes the same object.
+ *
+ *     Threads: a scene is immutable after loading and may be shared by any number
+ *     of renderers in any threads.  A renderer is used by one thread at a time; it
+ *     starts and joins its own worker threads inside each call.  The library has
+ *     no global or thread-local state.
+ *
+ *     Errors: every fallible call returns an appm_status; APPM_OK is 0.  Calls that
+ *     take an appm_diag * (may be NULL) fill it with the file, line and message of
+ *     the first error.  The library never prints, exits or aborts; warnings go to
+ *     the optional log callback, once per kind and file.
+ *
+ *     Memory: every allocation goes through cfg.allocator (malloc/free when both
+ *     hooks are NULL).  Rendering allocates at renderer creation and, rarely, when
+ *     a pass stores more photons than any pass before it; memory does not grow
+ *     from pass to pass after that.
+ *
+ *     Determinism: the image depends only on the scene, the config, the seed and
+ *     the number of passes - never on the thread count or on scheduling.
+ *
+ * ALGORITHM IN ONE SCREEN (method APPM, one pass j = 1, 2, ...)
+ *     1. eye pass: per pixel, one jittered camera path through mirrors and glass to
+ *        its first diffuse vertex x with weight W; direct light at x by next-event
+ *        estimation (shadow rays).
+ *     2. radius: r = [c R(K) S / (M j mu2^2 dI^2)]^(1/6) from the pixel's running
+ *        second moment S and Laplacian dI, clamped to [0.1, 4] r1 j^(-1/6).
+ *     3. photon pass: M photon paths from the lights (chosen by power), stored at
+ *        diffuse hits, binned into a hash grid.
+ *     4. gather: per pixel, I += (1/j) ((1/M) sum_i k_r(x - y_i) W f gamma_i - I);
+ *        S and dI are updated from the same photons (dI by a 5-point finite
+ *        difference of kernel estimates with bandwidth h ~ j^(-1/8)).
+ *     The pixel value is mean(direct) + I.
+ *
+ * REFERENCES
+ *     A. Kaplanyan, C. Dachsbacher. Adaptive Progressive Photon Mapping. ACM TOG
+ *         32(2), 2013.
+ *     C. Knaus, M. Zwicker. Progressive Photon Mapping: A Probabilistic Approach.
+ *         ACM TOG 30(3), 2011.
+ *     T. Hachisuka, S. Ogaki, H. W. Jensen. Progressive Photon Mapping. SIGGRAPH
+ *         Asia 2008.   T. Hachisuka, H. W. Jensen. Stochastic Progressive Photon
+ *         Mapping. SIGGRAPH Asia 2009.
+ *
+ * LICENSE
+ *     MIT; the full text is at the end of appm.c.
+ */
+#ifndef APPM_H_INCLUDED
+#define APPM_H_INCLUDED
+
+#include <stddef.h> /* size_t */
+#include <stdint.h> /* uint32_t, uint64_t */
+
+#define APPM_VERSION_MAJOR 0
+#define APPM_VERSION_MINOR 1
+#define APPM_VERSION_PATCH 0
+#define APPM_VERSION "0.1.0"
+
+#ifndef APPM_API
+#if defined(_WIN32) && defined(APPM_BUILD_DLL)
+#define APPM_API __declspec(dllexport)
+#elif defined(_WIN32) && defined(APPM_USE_DLL)
+#define APPM_API __declspec(dllimport)
+#else
+#define APPM_API extern
+#endif
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- Status and diagnostics ------------------------------------------------ */
+
+typedef enum appm_status {
+    APPM_OK = 0,
+    APPM_ERR_NOMEM,       /* an allocation failed; nothing was leaked            */
+    APPM_ERR_IO,          /* a file could not be opened, read or written         */
+    APPM_ERR_PARSE,       /* malformed scene, OBJ, MTL or image: see appm_diag    */
+    APPM_ERR_INVALID_ARG, /* NULL pointer, absurd option, NaN in input           */
+    APPM_ERR_UNSUPPORTED, /* e.g. more threads asked for than the build has       */
+    APPM_ERR_CANCELLED,   /* reserved for callbacks that ask to stop             */
+    APPM_STATUS_COUNT
+} appm_status;
+
+/* Static English text for `s`; never NULL, never to be freed. */
+APPM_API const char *appm_status_string(appm_status s);
+
+/* "0.1.0": the version of the implementation that was compiled (APPM_VERSION is
+ * the version of the header). */
+APPM_API const char *appm_version(void);
+
+/* Detail of the first error of a call.  `file` is the input file at fault (empty
+ * when none), `line` its 1-based line (0 when not about a line). */
+typedef struct appm_diag {
+    appm_status status;
+    unsigned line;
+    char file[256];
+    char message[256];
+} appm_diag;
+
+/* ---- Hooks ----------------------------------------------------------------- */
+
+/* Both NULL: malloc/free.  Both set: every byte appm uses comes from `alloc`;
+ * `free` gets the size that was asked for (for arena and pool allocators).
+ * The renderer calls the hooks only from the thread that called appm. */
+typedef struct appm_allocator {
+    void *(*alloc)(void *user, size_t size);
+    void (*free)(void *user, void *ptr, size_t size);
+    void *user;
+} appm_allocator;
+
+/* Warnings (ignored MTL statements, clamped albedos, dropped triangles, ...).
+ * `file` may be "" and `line` 0.  Each kind of warning is sent once per file. */
+typedef void (*appm_log_fn)(void *user, const char *file, unsigned line, const char *message);
+
+/* ---- Configuration --------------------------------------------------------- */
+
+typedef enum appm_method {
+    APPM_METHOD_APPM = 0, /* adaptive bandwidth, per pixel and pass (default)       */
+    APPM_METHOD_PPM,      /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */
+    APPM_METHOD_SPPM,     /* per-pixel N, tau, R statistics (Hachisuka-Jensen)       */
+    APPM_METHOD_PT        /* unbiased path tracer with NEE + MIS, for references    */
+} appm_method;
+
+typedef enum appm_direct {
+    APPM_DIRECT_NEE = 0,  /* direct light at the visible point by shadow rays      */
+    APPM_DIRECT_PHOTONS   /* first-bounce photons are stored and gathered instead   */
+} appm_direct;
+
+/* Every field: 0 (or NULL) means "default".  `appm_config cfg = {0};` works. */
+typedef struct appm_config {
+    appm_allocator allocator;
+    appm_log_fn log;          /* NULL: warnings are dropped                          */
+    void *log_user;
+
+    appm_method method;       /* APPM_METHOD_APPM                                    */
+    appm_direct direct;       /* APPM_DIRECT_NEE                                     */
+    uint32_t width, height;   /* the scene's `image` size (512 x 512)                */
+    uint64_t photons;         /* photon paths emitted per pass: width * height       */
+    double radius;            /* initial radius r1, scene units: from the scene      */
+    double alpha;             /* ppm/sppm shrinkage in (0,1]: 2/3 (1 = fixed radius)  */
+    unsigned threads;         /* worker threads: all cores                           */
+    uint64_t seed;            /* 0 is a valid seed and the default                   */
+    unsigned max_depth;       /* longest counted path, in segments: 32               */
+} appm_config;
+
+/* The defaults spelled out (every field set to the value 0 stands for, where that
+ * value does not depend on the scene). */
+APPM_API void appm_config_init(appm_config *cfg);
+
+/* ---- Scenes ---------------------------------------------------------------- */
+
+typedef struct appm_scene appm_scene;       /* opaque, immutable once loaded */
+typedef struct appm_renderer appm_renderer; /* opaque */
+
+/* Loads a `.scene` file or a bare `.obj` (see the scene format in README.md).
+ * Paths inside are relative to the file's folder.  Only cfg->allocator, cfg->log
+ * and cfg->log_user are used; cfg may be NULL. */
+APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
+                                     appm_diag *diag);
+
+/* Loads an OBJ held in memory, with an optional MTL text (mtl may be NULL; any
+ * `mtllib` line then refers to it).  Neither buffer needs a terminating NUL.  The
+ * camera frames the model as for a bare `.obj`.  `name` is used in messages. */
+APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len, const char *mtl,
+                                                size_t mtl_len, const char *name,
+                                                const appm_config *cfg, appm_scene **out,
+                                                appm_diag *diag);
+
+APPM_API void appm_scene_destroy(appm_scene *scene);
+
+typedef struct appm_scene_info {
+    uint64_t triangles;       /* after fan triangulation, degenerate ones dropped */
+    uint64_t dropped_triangles;
+    uint32_t materials_diffuse, materials_mirror, materials_dielectric;
+    uint32_t materials_emissive;    /* materials with Ke > 0 (counted among the above too) */
+    uint32_t lights_area;           /* emissive triangles                                */
+    uint32_t lights_point, lights_spot, lights_environment;
+    double power_area[3];           /* emitted power (W) per kind, RGB                   */
+    double power_point[3], power_spot[3], power_environment[3];
+    double bbox_min[3], bbox_max[3];
+    uint64_t bvh_nodes;
+    uint32_t bvh_depth;
+    uint32_t width, height;         /* the scene's image size                            */
+    uint64_t memory_bytes;          /* bytes the scene holds                            */
+    uint64_t peak_bytes;            /* the most that loading held at once               */
+} appm_scene_info;
+
+APPM_API void appm_scene_get_info(const appm_scene *scene, appm_scene_info *info);
+
+/* ---- Images ---------------------------------------------------------------- */
+
+typedef struct appm_image {
+    uint32_t width, height;
+    float *rgb;               /* width * height * 3 floats, row 0 at the top */
+} appm_image;
+
+/* Writes by extension: `.pfm` (linear float RGB, bit exact), `.ppm` (P6) or `.png`
+ * (8-bit sRGB after multiplying by `exposure`; 0 means 1).  The file appears
+ * under its name only once it is complete (written to a temporary, then renamed). */
+APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
+                                      appm_diag *diag);
+
+/* Reads a PFM (either byte order, colour or grey).  The pixels come from
+ * cfg->allocator (cfg may be NULL); free them with appm_image_free(). */
+APPM_API appm_status appm_image_read_pfm(const char *path, const appm_config *cfg,
+                                         appm_image *out, appm_diag *diag);
+APPM_API void appm_image_free(const appm_config *cfg, appm_image *img);
+
+/* Error metrics of `a` against the reference `b` (same size): the `compare` line
+ * of the command line.  relmse divides each squared error by b^2 + 0.01. */
+typedef struct appm_compare_result {
+    double rmse, relmse, mae, mean_a, mean_b;
+} appm_compare_result;
+APPM_API appm_status appm_image_compare(const appm_image *a, const appm_image *b,
+                                        appm_compare_result *out);
+
+/* ---- Rendering ------------------------------------------------------------- */
+
+/* Prepares a progressive render of `scene` (which must outlive the renderer).
+ * Allocates everything a pass needs except the photon store, which is sized by
+ * the first pass.  Options are validated here: alpha outside (0,1], a size
+ * of 0 or above 32768, a negative or non-finite radius give APPM_ERR_INVALID_ARG. */
+APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
+                                          appm_renderer **out, appm_diag *diag);
+
+/* Runs one pass: eye pass, photon pass, photon map, gather, radius update. */
+APPM_API appm_status appm_renderer_pass(appm_renderer *r);
+
+/* The current estimate (linear RGB), as a view borrowed until the next pass. */
+APPM_API void appm_renderer_image(appm_renderer *r, appm_image *out);
+
+typedef struct appm_stats {
+    uint64_t passes;
+    uint64_t photons_emitted;       /* photon paths, all passes                        */
+    uint64_t photons_stored;        /* photons stored in the last pass                  */
+    uint64_t eye_paths;             /* all passes                                       */
+    double initial_radius;          /* r1, scene units                                  */
+    double seconds;                 /* wall time inside appm_renderer_pass              */
+    double seconds_eye, seconds_photons, seconds_grid, seconds_gather; /* per phase     */
+    uint64_t memory_bytes;          /* held by the renderer now                         */
+    uint64_t peak_bytes;            /* the most the renderer held at once               */
+    uint64_t dropped_samples;       /* NaN/inf contributions discarded (never in image)  */
+    double est_relerr;              /* appm: estimated image relative error (< 0: none)  */
+    unsigned threads;
+} appm_stats;
+
+APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
+
+/* Diagnostic images of the adaptive method (a teacher's pictures), width*height
+ * floats each, borrowed until the next pass.  Returns NULL when the method keeps
+ * no such map (e.g. laplacian for ppm) or before the first pass.
+ *   RADIUS     the radius each pixel will gather with next (scene units)
+ *   VARIANCE   the estimated variance of the pixel (luminance)
+ *   LAPLACIAN  the estimated pixel Laplacian dI (luminance per area^2)
+ *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)        */
+typedef enum appm_aux {
+    APPM_AUX_RADIUS = 0,
+    APPM_AUX_VARIANCE,
+    APPM_AUX_LAPLACIAN,
+    APPM_AUX_ERROR,
+    APPM_AUX_COUNT
+} appm_aux;
+APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which);
+
+/* The message of the last failed call on `r` ("" if none). */
+APPM_API const char *appm_renderer_last_error(const appm_renderer *r);
+
+APPM_API void appm_renderer_destroy(appm_renderer *r);
+
+/* Number of processors the built-in thread backend would use (1 without threads). */
+APPM_API unsigned appm_cpu_count(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* APPM_H_INCLUDED */

@@ -1,0 +1,614 @@
+/* main.c - the `appm` command line.  Uses only the public API of appm.h.
+ *
+ *   appm render SCENE [options]    progressive render, writes an image
+ *   appm compare A.pfm B.pfm       error of A against the reference B
+ *   appm info SCENE                what the scene holds, memory it will need
+ *
+ * Exit codes: 0 success, 1 bad usage, 2 bad input file, 3 out of memory or
+ * another runtime failure.  Errors go to stderr as "appm: FILE:LINE: message".
+ */
+#if !defined(_WIN32) && !defined(_POSIX_C_SOURCE)
+#define _POSIX_C_SOURCE 200809L
+#endif
+#if defined(_WIN32) && !defined(_CRT_SECURE_NO_WARNINGS)
+#define _CRT_SECURE_NO_WARNINGS
+#endif
+
+#include "appm.h"
+
+#include <math.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#if defined(_WIN32)
+#include <io.h>
+#define appm_isatty(fd) _isatty(fd)
+#elif defined(__unix__) || defined(__APPLE__)
+#include <unistd.h>
+#define appm_isatty(fd) isatty(fd)
+#else
+#define appm_isatty(fd) 0
+#endif
+
+enum { EXIT_OK = 0, EXIT_USAGE = 1, EXIT_INPUT = 2, EXIT_RUNTIME = 3 };
+
+static volatile sig_atomic_t g_interrupted = 0;
+
+static void on_sigint(int sig)
+{
+    (void)sig;
+    g_interrupted = 1;
+}
+
+static double now_seconds(void)
+{
+#if defined(CLOCK_MONOTONIC) && !defined(_WIN32)
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#else
+    return (double)time(NULL);
+#endif
+}
+
+static int usage_error(const char *fmt, ...)
+{
+    va_list ap;
+    fprintf(stderr, "appm: ");
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, "\n(see 'appm --help')\n");
+    return EXIT_USAGE;
+}
+
+/* Reports a library failure and maps it to an exit code. */
+static int lib_error(appm_status s, const appm_diag *d, const char *fallback_file)
+{
+    const char *file = d && d->file[0] ? d->file : fallback_file;
+    const char *msg = d && d->message[0] ? d->message : appm_status_string(s);
+    if (file && d && d->line) fprintf(stderr, "appm: %s:%u: %s\n", file, d->line, msg);
+    else if (file) fprintf(stderr, "appm: %s: %s\n", file, msg);
+    else fprintf(stderr, "appm: %s\n", msg);
+    if (s == APPM_ERR_PARSE || s == APPM_ERR_IO) return EXIT_INPUT;
+    if (s == APPM_ERR_INVALID_ARG) return EXIT_USAGE;
+    return EXIT_RUNTIME;
+}
+
+static void on_warning(void *user, const char *file, unsigned line, const char *message)
+{
+    int quiet = *(const int *)user;
+    if (quiet) return;
+    if (file && file[0] && line) fprintf(stderr, "appm: warning: %s:%u: %s\n", file, line, message);
+    else if (file && file[0]) fprintf(stderr, "appm: warning: %s: %s\n", file, message);
+    else fprintf(stderr, "appm: warning: %s\n", message);
+}
+
+static const char *const HELP =
+    "appm - adaptive progressive photon mapping\n"
+    "\n"
+    "usage:\n"
+    "  appm render SCENE [options]   progressive render of a .scene or .obj, writes an image\n"
+    "  appm compare A.pfm B.pfm      error of A against the reference B\n"
+    "  appm info SCENE               what the scene contains, memory it will need\n"
+    "  appm --help | appm render --help | appm --version\n";
+
+static const char *const RENDER_HELP =
+    "usage: appm render SCENE [options]\n"
+    "\n"
+    "  -o, --output FILE     image to write: .pfm (linear float), .ppm or .png (8-bit sRGB)\n"
+    "                        [SCENENAME.png in the current folder]\n"
+    "  --method M            appm (adaptive radius, default) | ppm (global radius schedule,\n"
+    "                        Knaus-Zwicker) | sppm (per-pixel statistics, Hachisuka-Jensen)\n"
+    "                        | pt (unbiased path tracer, for references)\n"
+    "  --time SECONDS        stop after this wall time (the pass in flight finishes)\n"
+    "  --passes N            stop after N passes (with neither: 60 s)\n"
+    "  --until-error E       stop when the estimated relative error falls below E (appm, pt)\n"
+    "  --photons N           photon paths emitted per pass [width * height]\n"
+    "  --radius R            initial radius in scene units [2 pixel widths at the visible points]\n"
+    "  --alpha A             radius shrinkage for ppm/sppm, 0 < A <= 1 (1: fixed radius) [2/3]\n"
+    "  --threads N           worker threads [all cores]\n"
+    "  --seed N              random seed; same seed + passes = same image for any thread count [0]\n"
+    "  --size WxH            override the scene's image size\n"
+    "  --max-depth N         longest light path counted, in segments from light to camera [32]\n"
+    "  --direct MODE         nee (shadow rays, default) | photons (first-bounce photons)\n"
+    "  --exposure X          multiply before the sRGB conversion of .png/.ppm [1]\n"
+    "  --reference REF.pfm   compare with this image after every pass\n"
+    "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
+    "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
+    "  -q, --quiet           no progress output and no warnings\n";
+
+/* ---- Strict number parsing ---------------------------------------------- */
+
+static int parse_double(const char *s, double *out)
+{
+    char *end;
+    double v;
+    if (!s || !*s) return 0;
+    v = strtod(s, &end);
+    if (*end || v != v || v == HUGE_VAL || v == -HUGE_VAL) return 0;
+    *out = v;
+    return 1;
+}
+
+static int parse_u64(const char *s, unsigned long long *out)
+{
+    unsigned long long v = 0;
+    const char *p = s;
+    if (!s || !*s) return 0;
+    /* also accept 1e6-style counts, which are common for photon numbers */
+    for (; *p; ++p) {
+        if (*p < '0' || *p > '9') {
+            double d;
+            if (!parse_double(s, &d) || d < 0 || d > 1.8e19 || d != floor(d)) return 0;
+            *out = (unsigned long long)d;
+            return 1;
+        }
+        if (v > (18446744073709551615ull - 9) / 10) return 0;
+        v = v * 10 + (unsigned long long)(*p - '0');
+    }
+    *out = v;
+    return 1;
+}
+
+/* ---- False colour for the diagnostic maps ---------------------------------
+ * Viridis (van der Walt & Smith 2015) for magnitudes: perceptually uniform and
+ * monotonic in lightness, so it reads in greyscale print too.  A blue-white-red
+ * diverging map (Moreland's "cool to warm") for the signed Laplacian.  Control
+ * points are sRGB; the PNG writer applies the sRGB curve to linear values, so
+ * each colour is linearised first. */
+static const float VIRIDIS[9][3] = {
+    {0.267f, 0.005f, 0.329f}, {0.283f, 0.141f, 0.458f}, {0.254f, 0.265f, 0.530f},
+    {0.207f, 0.372f, 0.553f}, {0.164f, 0.471f, 0.558f}, {0.128f, 0.567f, 0.551f},
+    {0.135f, 0.659f, 0.518f}, {0.267f, 0.749f, 0.441f}, {0.993f, 0.906f, 0.144f}};
+static const float COOLWARM[5][3] = {{0.230f, 0.299f, 0.754f}, {0.552f, 0.690f, 0.996f},
+                                     {0.865f, 0.865f, 0.865f}, {0.958f, 0.604f, 0.482f},
+                                     {0.706f, 0.016f, 0.150f}};
+
+static float srgb_to_linear(float c)
+{
+    return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
+}
+
+static void colour_map(const float (*map)[3], int n, float t, float *rgb)
+{
+    float x;
+    int i, k;
+    if (!(t > 0.0f)) t = 0.0f;
+    if (t > 1.0f) t = 1.0f;
+    x = t * (float)(n - 1);
+    i = (int)x;
+    if (i >= n - 1) i = n - 2;
+    x -= (float)i;
+    for (k = 0; k < 3; ++k) rgb[k] = srgb_to_linear(map[i][k] * (1.0f - x) + map[i + 1][k] * x);
+}
+
+/* Writes one diagnostic map as grey PFM and false-colour PNG.  `mode`: 0 linear
+ * from 0 to the 99th percentile, 1 logarithmic over 4 decades below it, 2
+ * signed (symmetric around 0, to the 99th percentile of |v|). */
+static int write_aux(const char *prefix, const char *name, const float *v, uint32_t w, uint32_t h,
+                     int mode)
+{
+    size_t n = (size_t)w * h, i, m = 0;
+    float *rgb = (float *)malloc(n * 3 * sizeof(float)), *tmp = (float *)malloc(n * sizeof(float));
+    char path[4096];
+    appm_image img;
+    appm_diag d;
+    float hi = 0.0f;
+    int ok = 1;
+    if (!rgb || !tmp) {
+        free(rgb);
+        free(tmp);
+        fprintf(stderr, "appm: out of memory writing %s map\n", name);
+        return 0;
+    }
+    for (i = 0; i < n; ++i) {
+        rgb[3 * i] = rgb[3 * i + 1] = rgb[3 * i + 2] = v[i];
+        if (v[i] == v[i]) tmp[m++] = mode == 2 ? fabsf(v[i]) : v[i];
+    }
+    img.width = w;
+    img.height = h;
+    img.rgb = rgb;
+    snprintf(path, sizeof path, "%s-%s.pfm", prefix, name);
+    if (appm_image_write(path, &img, 1.0, &d) != APPM_OK) {
+        fprintf(stderr, "appm: %s: %s\n", path, d.message);
+        ok = 0;
+    }
+    if (m > 0) { /* 99th percentile by a partial sort would be nicer; a histogram pass is enough */
+        size_t k;
+        float mx = 0.0f;
+        for (k = 0; k < m; ++k) mx = tmp[k] > mx ? tmp[k] : mx;
+        if (mx > 0.0f) {
+            size_t bins[1024] = {0}, acc = 0;
+            for (k = 0; k < m; ++k) {
+                size_t b = (size_t)(tmp[k] / mx * 1023.0f);
+                bins[b > 1023 ? 1023 : b]++;
+            }
+            for (k = 0; k < 1024; ++k) {
+                acc += bins[k];
+                if (acc >= m - m / 100) break;
+            }
+            hi = mx * (float)(k + 1) / 1024.0f;
+        }
+    }
+    for (i = 0; i < n; ++i) {
+        float t, x = v[i];
+        if (!(hi > 0.0f) || x != x) t = 0.0f;
+        else if (mode == 0) t = x / hi;
+        else if (mode == 1) t = x > 0.0f ? 1.0f + log10f(x / hi) / 4.0f : 0.0f;
+        else t = 0.5f + 0.5f * x / hi;
+        if (mode == 2) colour_map(COOLWARM, 5, t, rgb + 3 * i);
+        else colour_map(VIRIDIS, 9, t, rgb + 3 * i);
+    }
+    snprintf(path, sizeof path, "%s-%s.png", prefix, name);
+    if (appm_image_write(path, &img, 1.0, &d) != APPM_OK) {
+        fprintf(stderr, "appm: %s: %s\n", path, d.message);
+        ok = 0;
+    }
+    free(rgb);
+    free(tmp);
+    return ok;
+}
+
+/* ---- appm render ----------------------------------------------------------- */
+
+typedef struct render_opts {
+    const char *scene, *output, *reference, *log, *aux;
+    appm_config cfg;
+    double time_limit, until_error, exposure;
+    unsigned long long passes;
+    int quiet, have_time, have_passes, have_until;
+} render_opts;
+
+static int parse_render(int argc, char **argv, render_opts *o)
+{
+    int i;
+    memset(o, 0, sizeof *o);
+    appm_config_init(&o->cfg);
+    o->exposure = 1.0;
+    for (i = 2; i < argc; ++i) {
+        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        double d;
+        unsigned long long u;
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            fputs(RENDER_HELP, stdout);
+            exit(EXIT_OK);
+        }
+        if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
+            o->quiet = 1;
+            continue;
+        }
+        if (a[0] != '-' || a[1] == 0) {
+            if (o->scene) return usage_error("more than one scene given ('%s')", a);
+            o->scene = a;
+            continue;
+        }
+        if (!v) return usage_error("option %s needs a value", a);
+        i++;
+        if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) o->output = v;
+        else if (strcmp(a, "--reference") == 0) o->reference = v;
+        else if (strcmp(a, "--log") == 0) o->log = v;
+        else if (strcmp(a, "--aux") == 0) o->aux = v;
+        else if (strcmp(a, "--method") == 0) {
+            if (strcmp(v, "appm") == 0) o->cfg.method = APPM_METHOD_APPM;
+            else if (strcmp(v, "ppm") == 0) o->cfg.method = APPM_METHOD_PPM;
+            else if (strcmp(v, "sppm") == 0) o->cfg.method = APPM_METHOD_SPPM;
+            else if (strcmp(v, "pt") == 0) o->cfg.method = APPM_METHOD_PT;
+            else return usage_error("unknown method '%s' (appm, ppm, sppm or pt)", v);
+        } else if (strcmp(a, "--direct") == 0) {
+            if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
+            else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
+            else return usage_error("--direct must be nee or photons, not '%s'", v);
+        } else if (strcmp(a, "--time") == 0) {
+            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--time needs seconds > 0, not '%s'", v);
+            o->time_limit = d;
+            o->have_time = 1;
+        } else if (strcmp(a, "--until-error") == 0) {
+            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--until-error needs a number > 0, not '%s'", v);
+            o->until_error = d;
+            o->have_until = 1;
+        } else if (strcmp(a, "--exposure") == 0) {
+            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--exposure needs a number > 0, not '%s'", v);
+            o->exposure = d;
+        } else if (strcmp(a, "--passes") == 0) {
+            if (!parse_u64(v, &u) || u == 0) return usage_error("--passes needs an integer >= 1, not '%s'", v);
+            o->passes = u;
+            o->have_passes = 1;
+        } else if (strcmp(a, "--photons") == 0) {
+            if (!parse_u64(v, &u) || u == 0 || u > 4294967296ull)
+                return usage_error("--photons needs an integer in 1..2^32, not '%s'", v);
+            o->cfg.photons = u;
+        } else if (strcmp(a, "--radius") == 0) {
+            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--radius needs a length > 0, not '%s'", v);
+            o->cfg.radius = d;
+        } else if (strcmp(a, "--alpha") == 0) {
+            if (!parse_double(v, &d) || !(d > 0 && d <= 1))
+                return usage_error("--alpha must be in (0, 1], not '%s'", v);
+            o->cfg.alpha = d;
+        } else if (strcmp(a, "--threads") == 0) {
+            if (!parse_u64(v, &u) || u == 0 || u > 256) return usage_error("--threads needs 1..256, not '%s'", v);
+            o->cfg.threads = (unsigned)u;
+        } else if (strcmp(a, "--seed") == 0) {
+            if (!parse_u64(v, &u)) return usage_error("--seed needs a non-negative integer, not '%s'", v);
+            o->cfg.seed = u;
+        } else if (strcmp(a, "--max-depth") == 0) {
+            if (!parse_u64(v, &u) || u == 0 || u > 254) return usage_error("--max-depth needs 1..254, not '%s'", v);
+            o->cfg.max_depth = (unsigned)u;
+        } else if (strcmp(a, "--size") == 0) {
+            unsigned long w, h;
+            char x, extra;
+            if (sscanf(v, "%lu%c%lu%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') || w < 1 ||
+                h < 1 || w > 32768 || h > 32768)
+                return usage_error("--size needs WxH with 1 <= W, H <= 32768, not '%s'", v);
+            o->cfg.width = (uint32_t)w;
+            o->cfg.height = (uint32_t)h;
+        } else {
+            return usage_error("unknown option '%s'", a);
+        }
+    }
+    if (!o->scene) return usage_error("render needs a scene file");
+    return -1;
+}
+
+/* "dir/name.scene" -> "name.png" */
+static void default_output(const char *scene, char *out, size_t cap)
+{
+    const char *base = scene, *p, *dot = NULL;
+    size_t n;
+    for (p = scene; *p; ++p)
+        if (*p == '/' || *p == '\\') base = p + 1;
+    for (p = base; *p; ++p)
+        if (*p == '.') dot = p;
+    n = dot ? (size_t)(dot - base) : strlen(base);
+    if (n == 0) {
+        base = "render";
+        n = 6;
+    }
+    if (n + 5 > cap) n = cap - 5;
+    memcpy(out, base, n);
+    memcpy(out + n, ".png", 5);
+}
+
+static int cmd_render(int argc, char **argv)
+{
+    render_opts o;
+    appm_scene *scene = NULL;
+    appm_renderer *r = NULL;
+    appm_diag d;
+    appm_image ref = {0, 0, NULL}, img;
+    appm_stats st;
+    appm_compare_result cmp;
+    char outbuf[1024];
+    FILE *logf = NULL;
+    double t0;
+    int rc = parse_render(argc, argv, &o), progress, have_cmp = 0;
+    appm_status s;
+    if (rc >= 0) return rc;
+    rc = EXIT_OK;
+    o.cfg.log = on_warning;
+    o.cfg.log_user = &o.quiet;
+    if (!o.output) {
+        default_output(o.scene, outbuf, sizeof outbuf);
+        o.output = outbuf;
+    }
+    if (!o.have_time && !o.have_passes && !o.have_until) {
+        o.time_limit = 60.0;
+        o.have_time = 1;
+    }
+    if ((s = appm_scene_load(o.scene, &o.cfg, &scene, &d)) != APPM_OK) return lib_error(s, &d, o.scene);
+    if (o.reference && (s = appm_image_read_pfm(o.reference, NULL, &ref, &d)) != APPM_OK) {
+        appm_scene_destroy(scene);
+        return lib_error(s, &d, o.reference);
+    }
+    if ((s = appm_renderer_create(scene, &o.cfg, &r, &d)) != APPM_OK) {
+        rc = lib_error(s, &d, NULL);
+        goto done;
+    }
+    if (ref.rgb) {
+        appm_renderer_image(r, &img);
+        if (ref.width != img.width || ref.height != img.height) {
+            fprintf(stderr, "appm: %s: reference is %lux%lu, the render %lux%lu\n", o.reference,
+                    (unsigned long)ref.width, (unsigned long)ref.height, (unsigned long)img.width,
+                    (unsigned long)img.height);
+            rc = EXIT_INPUT;
+            goto done;
+        }
+    }
+    if (o.log) {
+        logf = fopen(o.log, "w");
+        if (!logf) {
+            fprintf(stderr, "appm: %s: cannot open the log for writing\n", o.log);
+            rc = EXIT_INPUT;
+            goto done;
+        }
+        fprintf(logf, "pass,seconds,photons,rmse,relmse,est_relerr\n");
+    }
+    progress = !o.quiet && appm_isatty(2);
+    signal(SIGINT, on_sigint);
+    t0 = now_seconds();
+    for (;;) {
+        double el;
+        if ((s = appm_renderer_pass(r)) != APPM_OK) {
+            fprintf(stderr, "appm: pass failed: %s\n", appm_renderer_last_error(r)[0]
+                                                           ? appm_renderer_last_error(r)
+                                                           : appm_status_string(s));
+            rc = EXIT_RUNTIME;
+            break;
+        }
+        appm_renderer_stats(r, &st);
+        el = now_seconds() - t0;
+        if (ref.rgb || logf) {
+            have_cmp = 0;
+            if (ref.rgb) {
+                appm_renderer_image(r, &img);
+                have_cmp = appm_image_compare(&img, &ref, &cmp) == APPM_OK;
+            }
+            if (logf) {
+                fprintf(logf, "%llu,%.6f,%llu,", (unsigned long long)st.passes, el,
+                        (unsigned long long)st.photons_emitted);
+                if (have_cmp) fprintf(logf, "%.9g,%.9g,", cmp.rmse, cmp.relmse);
+                else fprintf(logf, ",,");
+                if (st.est_relerr >= 0) fprintf(logf, "%.9g", st.est_relerr);
+                fprintf(logf, "\n");
+            }
+        }
+        if (progress) {
+            double remaining = o.have_time ? o.time_limit - el : -1.0;
+            if (o.have_passes) {
+                double by_pass = el / (double)st.passes * (double)(o.passes - st.passes);
+                if (remaining < 0 || by_pass < remaining) remaining = by_pass;
+            }
+            fprintf(stderr, "\rpass %llu  photons %.3g  elapsed %.1fs  remaining %.1fs   ",
+                    (unsigned long long)st.passes, (double)st.photons_emitted, el,
+                    remaining > 0 ? remaining : 0.0);
+            fflush(stderr);
+        }
+        if (g_interrupted) break;
+        if (o.have_passes && st.passes >= o.passes) break;
+        if (o.have_time && el >= o.time_limit) break;
+        if (o.have_until && st.est_relerr >= 0 && st.est_relerr < o.until_error) break;
+    }
+    if (progress) fprintf(stderr, "\n");
+    if (rc == 0 || st.passes > 0) {
+        appm_renderer_image(r, &img);
+        if ((s = appm_image_write(o.output, &img, o.exposure, &d)) != APPM_OK) {
+            rc = lib_error(s, &d, o.output);
+            if (rc == EXIT_INPUT) rc = EXIT_RUNTIME;
+            goto done;
+        }
+        if (o.aux) {
+            static const char *const names[APPM_AUX_COUNT] = {"radius", "variance", "laplacian", "error"};
+            static const int modes[APPM_AUX_COUNT] = {0, 1, 2, 1};
+            int k;
+            for (k = 0; k < APPM_AUX_COUNT; ++k) {
+                const float *a = appm_renderer_aux(r, (appm_aux)k);
+                if (a && !write_aux(o.aux, names[k], a, img.width, img.height, modes[k])) rc = EXIT_RUNTIME;
+            }
+        }
+    }
+    if (rc == 0) {
+        static const char *const mname[4] = {"appm", "ppm", "sppm", "pt"};
+        appm_renderer_stats(r, &st);
+        printf("passes=%llu photons=%llu seconds=%.2f radius=%.6g output=%s method=%s threads=%u "
+               "peak_bytes=%llu dropped=%llu",
+               (unsigned long long)st.passes, (unsigned long long)st.photons_emitted, st.seconds,
+               st.initial_radius, o.output, mname[o.cfg.method], st.threads,
+               (unsigned long long)st.peak_bytes, (unsigned long long)st.dropped_samples);
+        if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
+        if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
+        if (g_interrupted) printf(" interrupted=1");
+        printf("\n");
+    }
+done:
+    if (logf && fclose(logf) != 0 && rc == 0) {
+        fprintf(stderr, "appm: %s: write error\n", o.log);
+        rc = EXIT_RUNTIME;
+    }
+    appm_renderer_destroy(r);
+    appm_image_free(NULL, &ref);
+    appm_scene_destroy(scene);
+    return rc;
+}
+
+/* ---- appm compare / info --------------------------------------------------- */
+
+static int cmd_compare(int argc, char **argv)
+{
+    appm_image a, b;
+    appm_diag d;
+    appm_compare_result c;
+    appm_status s;
+    if (argc != 4) return usage_error("compare needs two PFM files");
+    if ((s = appm_image_read_pfm(argv[2], NULL, &a, &d)) != APPM_OK) {
+        lib_error(s, &d, argv[2]);
+        return EXIT_INPUT;
+    }
+    if ((s = appm_image_read_pfm(argv[3], NULL, &b, &d)) != APPM_OK) {
+        lib_error(s, &d, argv[3]);
+        appm_image_free(NULL, &a);
+        return EXIT_INPUT;
+    }
+    if (appm_image_compare(&a, &b, &c) != APPM_OK) {
+        fprintf(stderr, "appm: %s is %lux%lu but %s is %lux%lu\n", argv[2], (unsigned long)a.width,
+                (unsigned long)a.height, argv[3], (unsigned long)b.width, (unsigned long)b.height);
+        appm_image_free(NULL, &a);
+        appm_image_free(NULL, &b);
+        return EXIT_INPUT;
+    }
+    printf("rmse=%.6g relmse=%.6g mae=%.6g mean_a=%.6g mean_b=%.6g\n", c.rmse, c.relmse, c.mae,
+           c.mean_a, c.mean_b);
+    appm_image_free(NULL, &a);
+    appm_image_free(NULL, &b);
+    return EXIT_OK;
+}
+
+static int cmd_info(int argc, char **argv)
+{
+    appm_scene *scene;
+    appm_renderer *r;
+    appm_scene_info in;
+    appm_stats st;
+    appm_diag d;
+    appm_config cfg;
+    appm_status s;
+    int quiet = 0;
+    if (argc != 3) return usage_error("info needs one scene file");
+    appm_config_init(&cfg);
+    cfg.log = on_warning;
+    cfg.log_user = &quiet;
+    if ((s = appm_scene_load(argv[2], &cfg, &scene, &d)) != APPM_OK) return lib_error(s, &d, argv[2]);
+    appm_scene_get_info(scene, &in);
+    printf("scene       %s\n", argv[2]);
+    printf("triangles   %llu (%llu degenerate dropped)\n", (unsigned long long)in.triangles,
+           (unsigned long long)in.dropped_triangles);
+    printf("materials   %u diffuse, %u mirror, %u dielectric (%u emissive)\n", in.materials_diffuse,
+           in.materials_mirror, in.materials_dielectric, in.materials_emissive);
+    printf("lights      %u area, %u point, %u spot, %u environment\n", in.lights_area, in.lights_point,
+           in.lights_spot, in.lights_environment);
+    if (in.lights_area)
+        printf("  power area         %.4g %.4g %.4g W\n", in.power_area[0], in.power_area[1], in.power_area[2]);
+    if (in.lights_point)
+        printf("  power point        %.4g %.4g %.4g W\n", in.power_point[0], in.power_point[1], in.power_point[2]);
+    if (in.lights_spot)
+        printf("  power spot         %.4g %.4g %.4g W\n", in.power_spot[0], in.power_spot[1], in.power_spot[2]);
+    if (in.lights_environment)
+        printf("  power environment  %.4g %.4g %.4g W\n", in.power_environment[0],
+               in.power_environment[1], in.power_environment[2]);
+    printf("bounds      (%.5g, %.5g, %.5g) .. (%.5g, %.5g, %.5g)\n", in.bbox_min[0], in.bbox_min[1],
+           in.bbox_min[2], in.bbox_max[0], in.bbox_max[1], in.bbox_max[2]);
+    printf("bvh         %llu nodes, depth %u\n", (unsigned long long)in.bvh_nodes, in.bvh_depth);
+    printf("image       %ux%u\n", in.width, in.height);
+    printf("memory      scene %.1f KiB (peak while loading %.1f KiB)\n", (double)in.memory_bytes / 1024.0,
+           (double)in.peak_bytes / 1024.0);
+    cfg.threads = 1;
+    if (appm_renderer_create(scene, &cfg, &r, &d) == APPM_OK) {
+        appm_renderer_stats(r, &st);
+        printf("            renderer %.1f MiB at %ux%u with %llu photon paths per pass "
+               "(the photon store grows to fit in the first pass)\n",
+               (double)st.memory_bytes / (1024.0 * 1024.0), in.width, in.height,
+               (unsigned long long)in.width * in.height);
+        appm_renderer_destroy(r);
+    }
+    appm_scene_destroy(scene);
+    return EXIT_OK;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2 || strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
+        fputs(HELP, argc < 2 ? stderr : stdout);
+        return argc < 2 ? EXIT_USAGE : EXIT_OK;
+    }
+    if (strcmp(argv[1], "--version") == 0) {
+        printf("appm %s\n", appm_version());
+        return EXIT_OK;
+    }
+    if (strcmp(argv[1], "render") == 0) return cmd_render(argc, argv);
+    if (strcmp(argv[1], "compare") == 0) return cmd_compare(argc, argv);
+    if (strcmp(argv[1], "info") == 0) return cmd_info(argc, argv);
+    return usage_error("unknown command '%s'", argv[1]);
+}
