@@ -1,0 +1,60 @@
+# appm - build, test, portability, benchmarks.
+#   make              the command line tool ./appm
+#   make test         every test, normal build and ASan+UBSan build, plus the CLI
+#   make test-long    the slow statistical tests (more samples)
+#   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
+#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset
+#   make fuzz         libFuzzer runs of the readers (clang), bounded in time
+# Without make:  cc -std=c99 -O2 appm.c main.c -lm -pthread -o appm
+
+CC      ?= cc
+CFLAGS  ?= -O2
+WARN     = -std=c99 -Wall -Wextra -pedantic -Wshadow -Wvla
+LDLIBS   = -lm -pthread
+SAN      = -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+TESTSRC  = $(wildcard tests/t_*.c)
+TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
+STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
+DEPS     = appm.c appm.h tests/check.h
+
+.PHONY: all test test-long portability bench bench-quick fuzz clean
+
+all: appm
+
+appm: appm.c appm.h main.c
+	$(CC) $(WARN) $(CFLAGS) appm.c main.c -o $@ $(LDLIBS)
+
+build/%: tests/%.c $(DEPS)
+	@mkdir -p build
+	$(CC) $(WARN) $(CFLAGS) -g $< -o $@ $(LDLIBS)
+
+build/san/%: tests/%.c $(DEPS)
+	@mkdir -p build/san
+	$(CC) $(WARN) $(SAN) $< -o $@ $(LDLIBS)
+
+build/embed: examples/embed.c appm.c appm.h
+	@mkdir -p build
+	$(CC) $(WARN) $(CFLAGS) examples/embed.c appm.c -o $@ $(LDLIBS)
+
+test: appm build/embed $(TESTS) $(STESTS)
+	@mkdir -p tests/out
+	@sh tests/run.sh $(TESTS) $(addprefix APPM_TEST_QUICK=1 ,$(STESTS)) "sh tests/cli.sh ./appm build/embed"
+
+test-long: $(TESTS)
+	@mkdir -p tests/out
+	@APPM_TEST_LONG=1 sh tests/run.sh $(TESTS)
+
+portability:
+	sh tests/portability.sh
+
+bench: appm
+	sh bench/run.sh full
+
+bench-quick: appm
+	sh bench/run.sh quick
+
+fuzz:
+	sh tests/fuzz/run.sh
+
+clean:
+	rm -rf appm appm.exe build tests/out bench/report

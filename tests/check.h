@@ -1,0 +1,124 @@
+/* tests/check.h - the whole test framework: CHECK macros, a closing summary
+ * line, temporary files, and an allocator that fails on request.
+ *
+ * Every tests/t_*.c is its own program: it includes "../appm.c" (to reach the
+ * static internals) and this file, runs its checks and ends with
+ * `return check_finish();`, which prints "N passed, N failed".  tests/run.sh
+ * runs them all and adds the counts up.
+ *
+ * APPM_TEST_QUICK=1 in the environment (set for the sanitizer builds) asks
+ * slow tests to use fewer samples; tolerances must stay honest for both. */
+#ifndef APPM_TEST_CHECK_H
+#define APPM_TEST_CHECK_H
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int g_pass, g_fail;
+
+#define CHECK(cond)                                                                      \
+    do {                                                                                 \
+        if (cond) g_pass++;                                                              \
+        else {                                                                           \
+            g_fail++;                                                                    \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed\n", __FILE__, __LINE__, #cond);     \
+        }                                                                                \
+    } while (0)
+
+/* CHECK with a printf-style explanation printed on failure. */
+#define CHECK_MSG(cond, ...)                                                             \
+    do {                                                                                 \
+        if (cond) g_pass++;                                                              \
+        else {                                                                           \
+            g_fail++;                                                                    \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__, __LINE__, #cond);     \
+            fprintf(stderr, __VA_ARGS__);                                                \
+            fprintf(stderr, "\n");                                                       \
+        }                                                                                \
+    } while (0)
+
+/* |a - b| <= tol, printing both values on failure. */
+#define CHECK_NEAR(a, b, tol)                                                            \
+    do {                                                                                 \
+        double check_a_ = (double)(a), check_b_ = (double)(b), check_t_ = (double)(tol); \
+        if (fabs(check_a_ - check_b_) <= check_t_) g_pass++;                             \
+        else {                                                                           \
+            g_fail++;                                                                    \
+            fprintf(stderr, "%s:%d: %s = %.9g, expected %s = %.9g within %.3g\n",        \
+                    __FILE__, __LINE__, #a, check_a_, #b, check_b_, check_t_);           \
+        }                                                                                \
+    } while (0)
+
+static int check_finish(void)
+{
+    printf("%d passed, %d failed\n", g_pass, g_fail);
+    return g_fail != 0;
+}
+
+static int check_quick(void)
+{
+    const char *q = getenv("APPM_TEST_QUICK");
+    return q && q[0] == '1';
+}
+
+/* A scratch folder for the test's files: tests/out/<name>/ (created by run.sh
+ * and the Makefile).  check_path() returns a static buffer: copy if needed. */
+static const char *check_path(const char *group, const char *file)
+{
+    static char buf[2][1024];
+    static int k;
+    k ^= 1;
+    snprintf(buf[k], sizeof buf[k], "tests/out/%s-%s", group, file);
+    return buf[k];
+}
+
+static int check_write_file(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "wb");
+    size_t n = strlen(text);
+    int ok = f && fwrite(text, 1, n, f) == n;
+    if (f && fclose(f) != 0) ok = 0;
+    return ok;
+}
+
+/* An allocator that counts live bytes and fails allocation number `fail_at`
+ * (1-based; 0 = never), the SQLite memdebug_fail idea. */
+typedef struct check_alloc {
+    long count, fail_at;
+    long long live, peak;
+} check_alloc;
+
+static void *check_alloc_fn(void *user, size_t n)
+{
+    check_alloc *a = (check_alloc *)user;
+    void *p;
+    a->count++;
+    if (a->fail_at > 0 && a->count == a->fail_at) return NULL;
+    p = malloc(n);
+    if (p) {
+        a->live += (long long)n;
+        if (a->live > a->peak) a->peak = a->live;
+    }
+    return p;
+}
+
+static void check_free_fn(void *user, void *p, size_t n)
+{
+    check_alloc *a = (check_alloc *)user;
+    if (!p) return;
+    a->live -= (long long)n;
+    free(p);
+}
+
+static void check_use_alloc(appm_config *cfg, check_alloc *a, long fail_at)
+{
+    memset(a, 0, sizeof *a);
+    a->fail_at = fail_at;
+    cfg->allocator.alloc = check_alloc_fn;
+    cfg->allocator.free = check_free_fn;
+    cfg->allocator.user = a;
+}
+
+#endif
