@@ -2682,13 +2682,14 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 52 
     uint8_t pad[3];
 } appm__vp;
 
-typedef struct appm__pixel { /* per-pixel state kept across passes: 104 bytes */
+typedef struct appm__pixel { /* per-pixel state kept across passes: 112 bytes */
     double ld[3];   /* sum over passes of emission + direct light (pt: of the whole path) */
     double acc[3];  /* ppm, appm: running mean I of the photon term; sppm: tau */
     double n;       /* sppm: accumulated photon count N; appm: photons found so far */
     double r;       /* sppm, appm: radius of the next gather */
     double S;       /* appm: running mean of the kernel second moment s_j */
     double dI;      /* appm: running mean of the pixel Laplacian */
+    double dI_m2;   /* appm: Welford M2 of the per-pass Laplacians (their spread) */
     double r2sum;   /* appm: sum of r_j^2, for the bias estimate */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
 } appm__pixel;
@@ -3230,12 +3231,27 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
+#ifndef APPM__CF
 #define APPM__CF (2.0 / 3.0)
+#endif
+#ifndef APPM__WARMUP
 #define APPM__WARMUP 4                           /* passes on the KZ schedule */
+#endif
+#ifndef APPM__KMIN
 #define APPM__KMIN 16.0                          /* photons before adapting */
+#endif
+#ifndef APPM__RLO
 #define APPM__RLO 0.1
+#endif
+#ifndef APPM__RHI
 #define APPM__RHI 4.0
-#define APPM__KAPPA 1.0                          /* h = kappa r_1 j^(-1/8) */
+#endif
+#ifndef APPM__KAPPA
+#define APPM__KAPPA 1.0                          /* Laplacian bandwidth h = kappa r */
+#endif
+#ifndef APPM__DI_FLOOR
+#define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
+#endif
 #define APPM__NORMAL_COS 0.5f
 
 typedef struct appm__gather {
@@ -3340,7 +3356,49 @@ static void appm__gather_query(const appm_renderer *r, appm__gather *g)
             }
 }
 
+/* Turns the sums of a gather into this pass's estimates:
+ *   e  = (1/M) sum_i k_R(x - y_i) Psi_i          (the photon term of Ihat_j)
+ *   s  = (1/M) sum_i k_R(x - y_i) lum(Psi_i)^2   (the second moment s_j)
+ *   dl = (1/M) sum_i D_h(x - y_i) lum(Psi_i)     (the Laplacian estimate)
+ * with k_R = K(|d|/R)/R^2 and the kernel constants 1/pi (uniform) or 3/pi
+ * (biweight) applied here, once, instead of per photon. */
+static void appm__gather_finish(const appm__gather *g, double invM, double *e, double *s, double *dl)
+{
+    double R = g->R, norm = (g->biweight ? 3.0 : 1.0) / (APPM__PI * R * R);
+    e[0] = e[1] = e[2] = *s = *dl = 0.0;
+    if (g->count > 0) {
+        e[0] = g->wf.x * g->e[0] * norm * invM;
+        e[1] = g->wf.y * g->e[1] * norm * invM;
+        e[2] = g->wf.z * g->e[2] * norm * invM;
+        *s = g->s * norm * invM;
+    }
+    if (g->h > 0.0f) *dl = g->dl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
+}
+
 /* ---- 10.1 The adaptive radius (section 4 of the design notes) -------------- */
+
+/* The closed-form minimiser of MSE(r) = R(K) S / (M N r^2) + (mu2 r^2 dI / 2)^2
+ * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M N mu2^2 dI^2).  Takes dI^2; returns
+ * 0 when the formula has no finite positive answer (S or dI^2 zero, NaN, inf). */
+static double appm__r_opt(double S, double dI2, double MN, double cf)
+{
+    double den = MN * APPM__MU2 * APPM__MU2 * dI2, r6;
+    if (!(S > 0.0) || !(den > 0.0) || !(den < HUGE_VAL)) return 0.0;
+    r6 = cf * APPM__RK * S / den;
+    return (r6 > 0.0 && r6 < HUGE_VAL) ? pow(r6, 1.0 / 6.0) : 0.0;
+}
+
+/* dI^2 for the radius formula.  The square of a noisy mean overestimates the
+ * square of its expectation: E[dI^2] = dI_true^2 + Var(dI).  So the variance of
+ * the running mean (its Welford M2 / (n (n - 1)) after n passes) is taken off,
+ * keeping at least APPM__DI_FLOOR of dI^2: where the Laplacian is mostly noise,
+ * the radius grows (less noise, more bias) instead of collapsing. */
+static double appm__di2(const appm__pixel *p, uint64_t n)
+{
+    double d2 = p->dI * p->dI, c = d2;
+    if (n >= 2) c -= p->dI_m2 / ((double)n * (double)(n - 1));
+    return c > APPM__DI_FLOOR * d2 ? c : APPM__DI_FLOOR * d2;
+}
 
 /* Radius for pass j from the pixel's statistics after j-1 passes.  Never NaN,
  * 0 or inf: every path ends inside [RLO, RHI] r_1 j^(-1/6). */
@@ -3348,9 +3406,8 @@ static double appm__appm_radius(double r1, uint64_t M, uint64_t j, const appm__p
 {
     double rk = r1 * pow((double)j, -1.0 / 6.0), rad = rk;
     if (j > APPM__WARMUP && p->n >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
-        double den = (double)M * (double)j * APPM__MU2 * APPM__MU2 * p->dI * p->dI;
-        double r6 = APPM__CF * APPM__RK * p->S / den;
-        rad = (r6 > 0.0 && r6 < HUGE_VAL) ? pow(r6, 1.0 / 6.0) : APPM__RHI * rk;
+        rad = appm__r_opt(p->S, appm__di2(p, j - 1), (double)M * (double)j, APPM__CF);
+        if (rad == 0.0) rad = APPM__RHI * rk; /* dI^2 so small the formula overflows: flat */
         if (p->r > 0.0) {
             if (rad < 0.5 * p->r) rad = 0.5 * p->r;
             if (rad > 2.0 * p->r) rad = 2.0 * p->r;
@@ -3361,11 +3418,6 @@ static double appm__appm_radius(double r1, uint64_t M, uint64_t j, const appm__p
     return rad;
 }
 
-static double appm__h(const appm_renderer *r)
-{
-    return APPM__KAPPA * r->r1 * pow((double)r->pass, -1.0 / 8.0);
-}
-
 /* Welford update of the per-pass estimate's luminance (for the noise estimate). */
 static void appm__welford(appm__pixel *p, uint64_t j, double v)
 {
@@ -3374,11 +3426,30 @@ static void appm__welford(appm__pixel *p, uint64_t j, double v)
     p->wm2 += d * (v - p->wmean);
 }
 
+/* The recursive (Yamato) means of ppm and appm after pass j:
+ *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j     and likewise S_j and dI_j,
+ * plus the bookkeeping of the error estimate (sum of r_j^2, Welford). */
+static void appm__pixel_update(appm__pixel *p, uint64_t pass, int adaptive, const double *e,
+                               double s, double dl, uint64_t count, double ld_lum)
+{
+    double j = (double)pass;
+    int c;
+    for (c = 0; c < 3; ++c) p->acc[c] += (e[c] - p->acc[c]) / j;
+    if (adaptive) {
+        double d = dl - p->dI;
+        p->S += (s - p->S) / j;
+        p->dI += d / j;
+        p->dI_m2 += d * (dl - p->dI);
+        p->n += (double)count;
+        p->r2sum += p->r * p->r;
+    }
+    appm__welford(p, pass, ld_lum + appm__lumd(e));
+}
+
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
-    const double j = (double)r->pass, invM = 1.0 / (double)r->M;
-    const float h = r->method == APPM_METHOD_APPM ? (float)appm__h(r) : 0.0f;
+    const double invM = 1.0 / (double)r->M;
     uint32_t x;
     for (x = 0; x < r->w; ++x) {
         size_t pi = (size_t)row * r->w + x;
@@ -3396,7 +3467,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.max_p = r->max_depth - vp->segs;
             g.biweight = r->method == APPM_METHOD_APPM;
             g.R = r->method == APPM_METHOD_PPM ? (float)sqrt(r->ppm_r2) : (float)p->r;
-            g.h = h;
+            g.h = r->method == APPM_METHOD_APPM ? (float)(APPM__KAPPA * p->r) : 0.0f;
             appm__gather_query(r, &g);
         }
         if (r->method == APPM_METHOD_SPPM) {
@@ -3417,29 +3488,14 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             }
             continue;
         }
-        {
-            double R = g.R, norm = g.biweight ? 3.0 / (APPM__PI * R * R) : 1.0 / (APPM__PI * R * R);
-            if (g.count > 0) {
-                e[0] = g.wf.x * g.e[0] * norm * invM;
-                e[1] = g.wf.y * g.e[1] * norm * invM;
-                e[2] = g.wf.z * g.e[2] * norm * invM;
-                s = g.s * norm * invM;
-            }
-            if (h > 0.0f) dl = g.dl * (3.0 / APPM__PI) / ((double)h * h * h * h) * invM;
-        }
+        appm__gather_finish(&g, invM, e, &s, &dl);
         if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && s - s == 0.0 &&
               dl - dl == 0.0)) {
             r->dropped[worker]++;
             e[0] = e[1] = e[2] = s = dl = 0.0;
         }
-        for (c = 0; c < 3; ++c) p->acc[c] += (e[c] - p->acc[c]) / j;
-        if (r->method == APPM_METHOD_APPM) {
-            p->S += (s - p->S) / j;
-            p->dI += (dl - p->dI) / j;
-            p->n += (double)g.count;
-            p->r2sum += p->r * p->r;
-        }
-        appm__welford(p, r->pass, (double)vp->ld_lum + appm__lumd(e));
+        appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl, g.count,
+                           (double)vp->ld_lum);
     }
 }
 
@@ -4024,7 +4080,7 @@ static double appm__default_radius(appm_renderer *r)
 }
 
 /* Median of the gather radii of the pixels that have a visible point. */
-static float appm__median_gather_radius(appm_renderer *r, double h)
+static float appm__median_gather_radius(appm_renderer *r)
 {
     size_t n = 0, i, npix = (size_t)r->w * r->h;
     float *tmp = r->aux[0];
@@ -4032,7 +4088,7 @@ static float appm__median_gather_radius(appm_renderer *r, double h)
         double g;
         if (r->vp[i].segs == 0) continue;
         g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2) : r->pix[i].r;
-        if (2.0 * h > g) g = 2.0 * h;
+        if (r->method == APPM_METHOD_APPM && 2.0 * APPM__KAPPA > 1.0) g *= 2.0 * APPM__KAPPA;
         tmp[n++] = (float)g;
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
@@ -4085,7 +4141,7 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
                 for (i = 0; i < npix; ++i) r->pix[i].r = r->r1;
         }
         if (r->method == APPM_METHOD_APPM) appm__parallel_for(r->threads, r->h, appm__radius_task, r);
-        cell = appm__median_gather_radius(r, r->method == APPM_METHOD_APPM ? appm__h(r) : 0.0);
+        cell = appm__median_gather_radius(r);
         t1 = appm__seconds();
         st = appm__photon_pass(r);
         t2 = appm__seconds();

@@ -51,13 +51,13 @@ static int g_pass, g_fail;
         }                                                                                \
     } while (0)
 
-static int check_finish(void)
+static inline int check_finish(void)
 {
     printf("%d passed, %d failed\n", g_pass, g_fail);
     return g_fail != 0;
 }
 
-static int check_quick(void)
+static inline int check_quick(void)
 {
     const char *q = getenv("APPM_TEST_QUICK");
     return q && q[0] == '1';
@@ -65,7 +65,7 @@ static int check_quick(void)
 
 /* A scratch folder for the test's files: tests/out/<name>/ (created by run.sh
  * and the Makefile).  check_path() returns a static buffer: copy if needed. */
-static const char *check_path(const char *group, const char *file)
+static inline const char *check_path(const char *group, const char *file)
 {
     static char buf[2][1024];
     static int k;
@@ -74,7 +74,7 @@ static const char *check_path(const char *group, const char *file)
     return buf[k];
 }
 
-static int check_write_file(const char *path, const char *text)
+static inline int check_write_file(const char *path, const char *text)
 {
     FILE *f = fopen(path, "wb");
     size_t n = strlen(text);
@@ -90,7 +90,7 @@ typedef struct check_alloc {
     long long live, peak;
 } check_alloc;
 
-static void *check_alloc_fn(void *user, size_t n)
+static inline void *check_alloc_fn(void *user, size_t n)
 {
     check_alloc *a = (check_alloc *)user;
     void *p;
@@ -104,7 +104,7 @@ static void *check_alloc_fn(void *user, size_t n)
     return p;
 }
 
-static void check_free_fn(void *user, void *p, size_t n)
+static inline void check_free_fn(void *user, void *p, size_t n)
 {
     check_alloc *a = (check_alloc *)user;
     if (!p) return;
@@ -112,7 +112,7 @@ static void check_free_fn(void *user, void *p, size_t n)
     free(p);
 }
 
-static void check_use_alloc(appm_config *cfg, check_alloc *a, long fail_at)
+static inline void check_use_alloc(appm_config *cfg, check_alloc *a, long fail_at)
 {
     memset(a, 0, sizeof *a);
     a->fail_at = fail_at;

@@ -1,0 +1,283 @@
+/* tests/t_appm.c - the adaptive bandwidth selector on synthetic photons, no scene.
+ *
+ * The toy of the design notes (algorithm.md 4.9): photons uniform on the square
+ * [-1,1]^2 of the plane z = 0 (density rho = 1/4 per emitted path) carrying
+ * Psi = (1 + 50 |y|^2) U, U uniform on (0, 2).  At x = 0 the gathered quantity
+ * is L(x) = rho E[Psi | x] = (1 + 50 |x|^2) / 4, so
+ *      L(0) = 0.25,   Delta L = (1/4) 50 (2 + 2) = 50,   S = rho E[Psi^2] = 1/3.
+ * Every test drives the renderer's own functions: appm__gather_photon (the
+ * per-photon kernel and finite-difference sums), appm__gather_finish (the
+ * normalisation), appm__r_opt / appm__appm_radius (the selector) and
+ * appm__pixel_update (the recursive means).
+ */
+#include "../appm.c"
+#include "check.h"
+
+#define TOY_L0 0.25
+#define TOY_LAPLACIAN 50.0
+#define TOY_S (1.0 / 3.0)
+
+/* One photon of the toy; oct-encoded normal +z is (0, 0). */
+static appm__photon toy_photon(appm__rng *rng, int flat)
+{
+    appm__photon p;
+    float x = 2.0f * appm__rng_float(rng) - 1.0f, y = 2.0f * appm__rng_float(rng) - 1.0f;
+    float u = 2.0f * appm__rng_float(rng);
+    float psi = flat ? 1.0f : (1.0f + 50.0f * (x * x + y * y)) * u;
+    memset(&p, 0, sizeof p);
+    p.x = x;
+    p.y = y;
+    p.z = 0.0f;
+    p.power[0] = p.power[1] = p.power[2] = psi;
+    p.segs = 1;
+    return p;
+}
+
+static void toy_gather_init(appm__gather *g, float R, float h, int biweight)
+{
+    memset(g, 0, sizeof *g);
+    g->x = appm__v(0, 0, 0);
+    g->n = appm__v(0, 0, 1);
+    appm__basis(g->n, &g->t, &g->b);
+    g->wf = appm__v(1, 1, 1);
+    g->R = R;
+    g->h = h;
+    g->max_p = 255;
+    g->biweight = biweight;
+}
+
+/* One pass of M photons gathered at x = 0; returns e (grey), s and dl. */
+static void toy_pass(appm__rng *rng, unsigned M, float R, float h, int biweight, int flat,
+                     double *e, double *s, double *dl, uint64_t *count)
+{
+    appm__gather g;
+    double ev[3];
+    float Rg = R > 2.0f * h ? R : 2.0f * h;
+    unsigned i;
+    toy_gather_init(&g, R, h, biweight);
+    for (i = 0; i < M; ++i) {
+        appm__photon p = toy_photon(rng, flat);
+        appm__gather_photon(&g, &p, R * R, Rg * Rg);
+    }
+    appm__gather_finish(&g, 1.0 / M, ev, s, dl);
+    *e = ev[1];
+    if (count) *count = g.count;
+}
+
+/* Kernel normalisation: on a flat field (Psi = 1) both kernels must return
+ * rho = 1/4, whatever the radius (int K = 1 over the disk). */
+static void test_kernel_normalisation(void)
+{
+    int biweight, t, T = check_quick() ? 200 : 1000;
+    for (biweight = 0; biweight < 2; ++biweight) {
+        double sum = 0, sum2 = 0, mean, se, s, dl;
+        appm__rng rng;
+        appm__rng_seed(&rng, 11, 0, APPM__DOMAIN_TEST, (uint64_t)biweight);
+        for (t = 0; t < T; ++t) {
+            double e;
+            toy_pass(&rng, 4000, 0.2f, 0.0f, biweight, 1, &e, &s, &dl, NULL);
+            sum += e;
+            sum2 += e * e;
+        }
+        mean = sum / T;
+        se = sqrt((sum2 / T - mean * mean) / (T - 1));
+        CHECK_MSG(fabs(mean - TOY_L0) < 4.0 * se + 1e-12,
+                  "%s kernel: mean %.5f vs %.5f (se %.5f)", biweight ? "biweight" : "uniform", mean,
+                  TOY_L0, se);
+    }
+}
+
+/* The finite-difference Laplacian of kernel estimates is exact in expectation
+ * for a quadratic field: mean over trials within 2% of Delta L = 50. */
+static void test_laplacian_mean(void)
+{
+    int t, T = 3000;
+    double sum = 0, sum2 = 0, mean, se;
+    appm__rng rng;
+    appm__rng_seed(&rng, 12, 0, APPM__DOMAIN_TEST, 0);
+    for (t = 0; t < T; ++t) {
+        double e, s, dl;
+        toy_pass(&rng, 10000, 0.05f, 0.1f, 1, 0, &e, &s, &dl, NULL);
+        sum += dl;
+        sum2 += dl * dl;
+    }
+    mean = sum / T;
+    se = sqrt((sum2 / T - mean * mean) / (T - 1));
+    CHECK_MSG(fabs(mean - TOY_LAPLACIAN) < 0.02 * TOY_LAPLACIAN,
+              "Laplacian mean %.3f vs %.1f (se %.3f)", mean, TOY_LAPLACIAN, se);
+    /* and its spread is that of the 5-point FD (variance ~ R_D S / (M h^6),
+     * R_D = 8.41 for the biweight): a wrong kernel constant shows up here */
+    {
+        double sd = sqrt(sum2 / T - mean * mean), predicted = sqrt(8.41 * TOY_S / (10000 * 1e-6));
+        CHECK_MSG(sd > 0.7 * predicted && sd < 1.4 * predicted, "Laplacian sd %.2f vs predicted %.2f", sd,
+                  predicted);
+    }
+    /* the second moment estimate s_j averages to S = 1/3 (up to O(r^2) smoothing) */
+}
+
+/* The radius formula against the empirical MSE minimum.  For one pass with a
+ * static radius the plug-in constant c_f = 2 applies:
+ *   r^6 = 2 R(K) S / (M mu2^2 dL^2)   ->  r = 0.0996 for M = 1e4.
+ * The empirical MSE(r) of the biweight estimate over many trials (common random
+ * numbers across radii) must have its minimum within 15% of that. */
+static void test_optimal_radius(void)
+{
+    enum { NR = 17 };
+    double radii[NR], mse[NR], r_pred, r_emp;
+    int i, t, T = check_quick() ? 1500 : 4000, best = 0;
+    appm__rng rng;
+    unsigned M = 10000;
+    for (i = 0; i < NR; ++i) {
+        radii[i] = 0.05 * pow(4.0, (double)i / (NR - 1)); /* 0.05 .. 0.2 */
+        mse[i] = 0.0;
+    }
+    appm__rng_seed(&rng, 13, 0, APPM__DOMAIN_TEST, 0);
+    for (t = 0; t < T; ++t) {
+        appm__gather g[NR];
+        unsigned k;
+        for (i = 0; i < NR; ++i) toy_gather_init(&g[i], (float)radii[i], 0.0f, 1);
+        for (k = 0; k < M; ++k) {
+            appm__photon p = toy_photon(&rng, 0);
+            if (p.x * p.x + p.y * p.y >= 0.04f) continue; /* outside every radius */
+            for (i = 0; i < NR; ++i) {
+                float R2 = (float)(radii[i] * radii[i]);
+                appm__gather_photon(&g[i], &p, R2, R2);
+            }
+        }
+        for (i = 0; i < NR; ++i) {
+            double e[3], s, dl;
+            appm__gather_finish(&g[i], 1.0 / M, e, &s, &dl);
+            mse[i] += (e[1] - TOY_L0) * (e[1] - TOY_L0) / T;
+        }
+    }
+    for (i = 1; i < NR; ++i)
+        if (mse[i] < mse[best]) best = i;
+    if (best == 0) best = 1;
+    if (best == NR - 1) best = NR - 2;
+    { /* vertex of the parabola through the three points around the minimum, in log r */
+        double x0 = log(radii[best - 1]), x1 = log(radii[best]), x2 = log(radii[best + 1]);
+        double y0 = mse[best - 1], y1 = mse[best], y2 = mse[best + 1];
+        double d = (x0 - x1) * (x0 - x2) * (x1 - x2);
+        double A = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d;
+        double B = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d;
+        r_emp = A > 0 ? exp(-B / (2 * A)) : radii[best];
+    }
+    r_pred = appm__r_opt(TOY_S, TOY_LAPLACIAN * TOY_LAPLACIAN, (double)M, 2.0);
+    CHECK_NEAR(r_pred, 0.0996, 0.0005);
+    CHECK_MSG(fabs(r_emp / r_pred - 1.0) < 0.15, "empirical MSE minimum at r = %.4f, formula %.4f",
+              r_emp, r_pred);
+}
+
+/* The selector returns a finite radius inside its clamps for every kind of
+ * degenerate statistics: no photons, one photon, flat fields, huge and tiny
+ * values, NaN and infinities. */
+static void test_selector_guards(void)
+{
+    static const double vals[] = {0.0, 1e-300, 1e-30, 1.0, 1e30, 1e300, HUGE_VAL, -1.0, -1e300};
+    const double r1 = 0.01;
+    size_t a, b;
+    uint64_t j;
+    int bad = 0;
+    for (j = 1; j <= 1000; j *= 10)
+        for (a = 0; a < sizeof vals / sizeof vals[0]; ++a)
+            for (b = 0; b < sizeof vals / sizeof vals[0]; ++b) {
+                appm__pixel p;
+                double n_values[3] = {0.0, 1.0, 1e9}, rk = r1 * pow((double)j, -1.0 / 6.0);
+                int k;
+                for (k = 0; k < 3; ++k) {
+                    double r;
+                    memset(&p, 0, sizeof p);
+                    p.S = vals[a];
+                    p.dI = vals[b];
+                    p.n = n_values[k];
+                    p.r = k == 2 ? 0.02 : 0.0;
+                    r = appm__appm_radius(r1, 1000, j + 5, &p);
+                    rk = r1 * pow((double)(j + 5), -1.0 / 6.0);
+                    if (!(r > 0.0) || !(r < HUGE_VAL) || r < APPM__RLO * rk * (1 - 1e-12) ||
+                        r > APPM__RHI * rk * (1 + 1e-12))
+                        bad++;
+                }
+            }
+    CHECK_MSG(bad == 0, "%d degenerate inputs gave a radius outside the clamps", bad);
+    {
+        appm__pixel p;
+        memset(&p, 0, sizeof p);
+        p.S = 1.0;
+        p.dI = (double)NAN;
+        p.n = 100;
+        CHECK(appm__appm_radius(r1, 1000, 10, &p) == r1 * pow(10.0, -1.0 / 6.0));
+        CHECK(appm__r_opt(0.0, 50.0, 1e4, 2.0) == 0.0);
+        CHECK(appm__r_opt(1.0, 0.0, 1e4, 2.0) == 0.0);
+        CHECK(appm__r_opt(1.0, (double)NAN, 1e4, 2.0) == 0.0);
+    }
+    /* flat lighting (dI -> 0) must give the largest radius, a strong curvature
+     * a small one: the direction of the adaptation */
+    {
+        appm__pixel p;
+        double rk = r1 * pow(10.0, -1.0 / 6.0);
+        memset(&p, 0, sizeof p);
+        p.S = 1.0;
+        p.n = 100;
+        p.dI = 1e-12;
+        CHECK_NEAR(appm__appm_radius(r1, 1000, 10, &p), APPM__RHI * rk, 1e-15);
+        p.dI = 1e12;
+        CHECK_NEAR(appm__appm_radius(r1, 1000, 10, &p), APPM__RLO * rk, 1e-15);
+    }
+}
+
+/* The full progressive loop on the toy (M = 1000 photons a pass): APPM must be
+ * insensitive to its initial radius (final RMSEs for r1 = 0.03, 0.1, 0.3 within
+ * a factor 1.3 of each other) and better than Knaus-Zwicker PPM with a badly
+ * chosen radius (0.03 or 0.3), as the design notes' simulation found. */
+static double toy_progressive(double r1, int adaptive, int passes, int runs, uint64_t seed)
+{
+    double se = 0.0;
+    int run;
+    for (run = 0; run < runs; ++run) {
+        appm__pixel p;
+        appm__rng rng;
+        int j;
+        memset(&p, 0, sizeof p);
+        appm__rng_seed(&rng, seed, (uint64_t)run, APPM__DOMAIN_TEST, 7);
+        for (j = 1; j <= passes; ++j) {
+            double e[3], s, dl, ev;
+            uint64_t count;
+            float h;
+            p.r = adaptive ? appm__appm_radius(r1, 1000, (uint64_t)j, &p)
+                           : r1 * pow((double)j, -1.0 / 6.0); /* KZ with alpha = 2/3 */
+            h = adaptive ? (float)(APPM__KAPPA * p.r) : 0.0f;
+            toy_pass(&rng, 1000, (float)p.r, h, adaptive, 0, &ev, &s, &dl, &count);
+            e[0] = e[1] = e[2] = ev;
+            appm__pixel_update(&p, (uint64_t)j, adaptive, e, s, dl, count, 0.0);
+        }
+        se += (p.acc[1] - TOY_L0) * (p.acc[1] - TOY_L0);
+    }
+    return sqrt(se / runs);
+}
+
+static void test_progressive_toy(void)
+{
+    int passes = check_quick() ? 200 : 500, runs = check_quick() ? 24 : 48;
+    double a1 = toy_progressive(0.03, 1, passes, runs, 21);
+    double a2 = toy_progressive(0.1, 1, passes, runs, 21);
+    double a3 = toy_progressive(0.3, 1, passes, runs, 21);
+    double p1 = toy_progressive(0.03, 0, passes, runs, 21);
+    double p3 = toy_progressive(0.3, 0, passes, runs, 21);
+    double amax = a1 > a2 ? (a1 > a3 ? a1 : a3) : (a2 > a3 ? a2 : a3);
+    double amin = a1 < a2 ? (a1 < a3 ? a1 : a3) : (a2 < a3 ? a2 : a3);
+    printf("toy RMSE after %d passes: appm r1=0.03/0.1/0.3: %.4f %.4f %.4f; kz: %.4f (0.03) %.4f (0.3)\n",
+           passes, a1, a2, a3, p1, p3);
+    CHECK_MSG(amax < 1.3 * amin, "appm not insensitive to r1: %.4f .. %.4f", amin, amax);
+    CHECK_MSG(a1 < p1 && a3 < p3, "appm (%.4f, %.4f) not better than badly tuned KZ (%.4f, %.4f)", a1,
+              a3, p1, p3);
+}
+
+int main(void)
+{
+    test_kernel_normalisation();
+    test_laplacian_mean();
+    test_optimal_radius();
+    test_selector_guards();
+    test_progressive_toy();
+    return check_finish();
+}
