@@ -2682,14 +2682,15 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 52 
     uint8_t pad[3];
 } appm__vp;
 
-typedef struct appm__pixel { /* per-pixel state kept across passes: 112 bytes */
+typedef struct appm__pixel { /* per-pixel state kept across passes: 120 bytes */
     double ld[3];   /* sum over passes of emission + direct light (pt: of the whole path) */
     double acc[3];  /* ppm, appm: running mean I of the photon term; sppm: tau */
     double n;       /* sppm: accumulated photon count N; appm: photons found so far */
     double r;       /* sppm, appm: radius of the next gather */
     double S;       /* appm: running mean of the kernel second moment s_j */
-    double dI;      /* appm: running mean of the pixel Laplacian */
-    double dI_m2;   /* appm: Welford M2 of the per-pass Laplacians (their spread) */
+    double dI;      /* appm: weighted running mean of the per-pass pixel Laplacians */
+    double dI_w;    /* appm: sum of their weights (h_j / r_1)^6 */
+    double dI_m2;   /* appm: weighted Welford M2 of the per-pass Laplacians (their spread) */
     double r2sum;   /* appm: sum of r_j^2, for the bias estimate */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
 } appm__pixel;
@@ -2707,6 +2708,9 @@ typedef struct appm__chunk_rec { /* where one chunk of photon paths left its pho
     uint32_t start, count;
 } appm__chunk_rec;
 
+#ifndef APPM__CELL_SCALE
+#define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius */
+#endif
 #define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
 
 struct appm_renderer {
@@ -2767,17 +2771,6 @@ static void appm__oct_encode(appm__v3 v, float *a, float *b)
     }
     *a = x;
     *b = y;
-}
-
-static appm__v3 appm__oct_decode(float x, float y)
-{
-    float z = 1.0f - fabsf(x) - fabsf(y);
-    if (z < 0.0f) {
-        float ox = x, oy = y;
-        x = (1.0f - fabsf(oy)) * (ox >= 0.0f ? 1.0f : -1.0f);
-        y = (1.0f - fabsf(ox)) * (oy >= 0.0f ? 1.0f : -1.0f);
-    }
-    return appm__normalize(appm__v(x, y, z));
 }
 
 /* Rounds a value in [-1, 1] to a signed integer of the given scale, clamping
@@ -3226,8 +3219,11 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
  *      that is optimal when every pass is averaged with weight 1/j and r_j
  *      shrinks as j^(-1/6) (the plug-in constant would be 2; see the design
  *      notes).  Safeguards: KZ radius r_1 j^(-1/6) while warming up or while
- *      S, dI are unknown; the change per pass limited to [1/2, 2]; r clamped to
- *      [0.1, 4] r_1 j^(-1/6), so the clamps shrink at the optimal rate.
+ *      S, dI are unknown (fewer than 8 photons seen); the change per pass
+ *      limited to [1/2, 2]; r clamped to [0.1, 4] r_1 j^(-1/6), so the clamps
+ *      shrink at the optimal rate.  The Laplacian bandwidth follows the pixel:
+ *      h = 2 r, estimated on every 8th pass and averaged with weights h^6
+ *      (section 10.2); dI^2 is corrected for the noise of its estimate.
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
@@ -3238,7 +3234,7 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
 #define APPM__WARMUP 4                           /* passes on the KZ schedule */
 #endif
 #ifndef APPM__KMIN
-#define APPM__KMIN 16.0                          /* photons before adapting */
+#define APPM__KMIN 8.0                           /* photons before adapting */
 #endif
 #ifndef APPM__RLO
 #define APPM__RLO 0.1
@@ -3247,7 +3243,10 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
 #define APPM__RHI 4.0
 #endif
 #ifndef APPM__KAPPA
-#define APPM__KAPPA 1.0                          /* Laplacian bandwidth h = kappa r */
+#define APPM__KAPPA 2.0                          /* Laplacian bandwidth h = kappa r */
+#endif
+#ifndef APPM__LAP_EVERY
+#define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
 #endif
 #ifndef APPM__DI_FLOOR
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
@@ -3274,8 +3273,19 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
     appm__v3 pn;
     double q;
     if (!(d2 < Rg2) || p->segs > g->max_p) return;
-    pn = appm__oct_decode((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f));
-    if (appm__dot(pn, g->n) < APPM__NORMAL_COS) return;
+    { /* same surface: angle(n_photon, n) < 60 deg.  The octahedral decode without
+       * its normalisation: cos >= c  <=>  dot > 0 and dot^2 >= c^2 |v|^2 */
+        float ox = (float)p->n[0] * (1.0f / 127.0f), oy = (float)p->n[1] * (1.0f / 127.0f);
+        float oz = 1.0f - fabsf(ox) - fabsf(oy), dn;
+        if (oz < 0.0f) {
+            float tx = ox;
+            ox = (1.0f - fabsf(oy)) * (tx >= 0.0f ? 1.0f : -1.0f);
+            oy = (1.0f - fabsf(tx)) * (oy >= 0.0f ? 1.0f : -1.0f);
+        }
+        pn = appm__v(ox, oy, oz);
+        dn = appm__dot(pn, g->n);
+        if (!(dn > 0.0f) || dn * dn < APPM__NORMAL_COS * APPM__NORMAL_COS * appm__dot(pn, pn)) return;
+    }
     q = 0.2126 * g->wf.x * p->power[0] + 0.7152 * g->wf.y * p->power[1] +
         0.0722 * g->wf.z * p->power[2];
     if (d2 < R2) {
@@ -3356,6 +3366,27 @@ static void appm__gather_query(const appm_renderer *r, appm__gather *g)
             }
 }
 
+/* Whether pass j estimates the Laplacian.  Its gather reaches 2h = 2 kappa r,
+ * kappa^2 times the area of the radiance kernel, so it is the expensive part of
+ * a pass.  For a fixed cost f h^2 (f: the fraction of passes that estimate it),
+ * the variance of the running mean dI goes as 1 / (f h^6) = 1 / (cost h^4):
+ * a wide bandwidth on a few passes beats a narrow one on every pass.  The price
+ * is smoothing bias in dI, of which r only feels the cube root.  Every pass of
+ * the warm-up estimates it, then every APPM__LAP_EVERY-th.  Returns how many
+ * passes up to and including j estimate it when it is one of them, else 0. */
+static uint64_t appm__lap_pass(uint64_t j)
+{
+    if (j <= APPM__WARMUP) return j;
+    if ((j - APPM__WARMUP) % APPM__LAP_EVERY != 0) return 0;
+    return APPM__WARMUP + (j - APPM__WARMUP) / APPM__LAP_EVERY;
+}
+
+/* Laplacian passes among the first j. */
+static uint64_t appm__lap_count(uint64_t j)
+{
+    return j <= APPM__WARMUP ? j : APPM__WARMUP + (j - APPM__WARMUP) / APPM__LAP_EVERY;
+}
+
 /* Turns the sums of a gather into this pass's estimates:
  *   e  = (1/M) sum_i k_R(x - y_i) Psi_i          (the photon term of Ihat_j)
  *   s  = (1/M) sum_i k_R(x - y_i) lum(Psi_i)^2   (the second moment s_j)
@@ -3390,13 +3421,14 @@ static double appm__r_opt(double S, double dI2, double MN, double cf)
 
 /* dI^2 for the radius formula.  The square of a noisy mean overestimates the
  * square of its expectation: E[dI^2] = dI_true^2 + Var(dI).  So the variance of
- * the running mean (its Welford M2 / (n (n - 1)) after n passes) is taken off,
- * keeping at least APPM__DI_FLOOR of dI^2: where the Laplacian is mostly noise,
- * the radius grows (less noise, more bias) instead of collapsing. */
+ * the weighted mean is taken off, keeping at least APPM__DI_FLOOR of dI^2: where
+ * the Laplacian is mostly noise, the radius grows (less noise, more bias)
+ * instead of collapsing.  With per-pass variances c / w_j, the weighted Welford
+ * sum M2 estimates (n - 1) c, and the mean's variance is c / sum(w). */
 static double appm__di2(const appm__pixel *p, uint64_t n)
 {
     double d2 = p->dI * p->dI, c = d2;
-    if (n >= 2) c -= p->dI_m2 / ((double)n * (double)(n - 1));
+    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
     return c > APPM__DI_FLOOR * d2 ? c : APPM__DI_FLOOR * d2;
 }
 
@@ -3406,7 +3438,7 @@ static double appm__appm_radius(double r1, uint64_t M, uint64_t j, const appm__p
 {
     double rk = r1 * pow((double)j, -1.0 / 6.0), rad = rk;
     if (j > APPM__WARMUP && p->n >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
-        rad = appm__r_opt(p->S, appm__di2(p, j - 1), (double)M * (double)j, APPM__CF);
+        rad = appm__r_opt(p->S, appm__di2(p, appm__lap_count(j - 1)), (double)M * (double)j, APPM__CF);
         if (rad == 0.0) rad = APPM__RHI * rk; /* dI^2 so small the formula overflows: flat */
         if (p->r > 0.0) {
             if (rad < 0.5 * p->r) rad = 0.5 * p->r;
@@ -3427,19 +3459,27 @@ static void appm__welford(appm__pixel *p, uint64_t j, double v)
 }
 
 /* The recursive (Yamato) means of ppm and appm after pass j:
- *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j     and likewise S_j and dI_j,
+ *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j     and likewise S_j; dI is the
+ *   weighted mean over the passes that estimate the Laplacian (weight
+ *   dl_weight, 0 on the others),
  * plus the bookkeeping of the error estimate (sum of r_j^2, Welford). */
 static void appm__pixel_update(appm__pixel *p, uint64_t pass, int adaptive, const double *e,
-                               double s, double dl, uint64_t count, double ld_lum)
+                               double s, double dl, double dl_weight, uint64_t count, double ld_lum)
 {
     double j = (double)pass;
     int c;
     for (c = 0; c < 3; ++c) p->acc[c] += (e[c] - p->acc[c]) / j;
     if (adaptive) {
-        double d = dl - p->dI;
         p->S += (s - p->S) / j;
-        p->dI += d / j;
-        p->dI_m2 += d * (dl - p->dI);
+        if (dl_weight > 0.0) {
+            /* inverse-variance weighted mean (West 1979): a Laplacian from bandwidth
+             * h has variance ~ 1/h^6, so early passes with a small radius would
+             * otherwise drown the later, better estimates */
+            double d = dl - p->dI;
+            p->dI_w += dl_weight;
+            p->dI += d * (dl_weight / p->dI_w);
+            p->dI_m2 += dl_weight * d * (dl - p->dI);
+        }
         p->n += (double)count;
         p->r2sum += p->r * p->r;
     }
@@ -3467,7 +3507,8 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.max_p = r->max_depth - vp->segs;
             g.biweight = r->method == APPM_METHOD_APPM;
             g.R = r->method == APPM_METHOD_PPM ? (float)sqrt(r->ppm_r2) : (float)p->r;
-            g.h = r->method == APPM_METHOD_APPM ? (float)(APPM__KAPPA * p->r) : 0.0f;
+            g.h = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass) ? (float)(APPM__KAPPA * p->r)
+                                                                             : 0.0f;
             appm__gather_query(r, &g);
         }
         if (r->method == APPM_METHOD_SPPM) {
@@ -3494,8 +3535,11 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             r->dropped[worker]++;
             e[0] = e[1] = e[2] = s = dl = 0.0;
         }
-        appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl, g.count,
-                           (double)vp->ld_lum);
+        {
+            double hr = g.h / r->r1;
+            appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl,
+                               g.h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g.count, (double)vp->ld_lum);
+        }
     }
 }
 
@@ -4088,11 +4132,12 @@ static float appm__median_gather_radius(appm_renderer *r)
         double g;
         if (r->vp[i].segs == 0) continue;
         g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2) : r->pix[i].r;
-        if (r->method == APPM_METHOD_APPM && 2.0 * APPM__KAPPA > 1.0) g *= 2.0 * APPM__KAPPA;
+        if (r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass) && 2.0 * APPM__KAPPA > 1.0)
+            g *= 2.0 * APPM__KAPPA;
         tmp[n++] = (float)g;
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
-    return appm__select(tmp, n, n / 2);
+    return APPM__CELL_SCALE * appm__select(tmp, n, n / 2);
 }
 
 static void appm__estimate_error(appm_renderer *r)

@@ -498,6 +498,9 @@ static int cmd_render(int argc, char **argv)
                (unsigned long long)st.passes, (unsigned long long)st.photons_emitted, st.seconds,
                st.initial_radius, o.output, mname[o.cfg.method], st.threads,
                (unsigned long long)st.peak_bytes, (unsigned long long)st.dropped_samples);
+        printf(" eye_s=%.3f photon_s=%.3f grid_s=%.3f gather_s=%.3f photons_stored=%llu",
+               st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
+               (unsigned long long)st.photons_stored);
         if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
         if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
         if (g_interrupted) printf(" interrupted=1");

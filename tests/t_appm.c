@@ -245,10 +245,11 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
             float h;
             p.r = adaptive ? appm__appm_radius(r1, 1000, (uint64_t)j, &p)
                            : r1 * pow((double)j, -1.0 / 6.0); /* KZ with alpha = 2/3 */
-            h = adaptive ? (float)(APPM__KAPPA * p.r) : 0.0f;
+            h = adaptive && appm__lap_pass((uint64_t)j) ? (float)(APPM__KAPPA * p.r) : 0.0f;
             toy_pass(&rng, 1000, (float)p.r, h, adaptive, 0, &ev, &s, &dl, &count);
             e[0] = e[1] = e[2] = ev;
-            appm__pixel_update(&p, (uint64_t)j, adaptive, e, s, dl, count, 0.0);
+            appm__pixel_update(&p, (uint64_t)j, adaptive, e, s, dl, h > 0.0f ? pow(h / r1, 6.0) : 0.0,
+                               count, 0.0);
         }
         se += (p.acc[1] - TOY_L0) * (p.acc[1] - TOY_L0);
     }
