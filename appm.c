@@ -63,7 +63,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
+
+#ifndef S_ISREG
+#define S_ISREG(m) (((m) & S_IFMT) == S_IFREG)
+#endif
 
 #ifndef APPM_THREADS
 #if defined(_WIN32)
@@ -153,6 +158,16 @@ static int appm__rename_replace(const char *from, const char *to)
 #else
     return rename(from, to);
 #endif
+}
+
+/* Whether `path` exists and is not a regular file (a device such as /dev/full
+ * or /dev/stdout, a FIFO): such a destination is written in place, since
+ * renaming a temporary over it would replace the device node. */
+static int appm__is_special_file(const char *path)
+{
+    struct stat st;
+    if (stat(path, &st) != 0) return 0;
+    return !S_ISREG(st.st_mode);
 }
 
 typedef void (*appm__task_fn)(void *arg, uint32_t task, unsigned worker);
@@ -545,7 +560,8 @@ static inline float appm__rng_float(appm__rng *r)
  * PNG writer stores the pixels in uncompressed deflate blocks: no zlib, yet a
  * valid file (CRC-32 per chunk, Adler-32 over the zlib stream).  Every writer
  * writes "<name>.tmp" and renames it, so a failed write never leaves a
- * half-written file under the final name.
+ * half-written file under the final name (a destination that exists and is not
+ * a regular file - /dev/stdout, a FIFO - is written in place).
  */
 static int appm__host_little_endian(void)
 {
@@ -774,6 +790,7 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
 {
     enum { PFM, PPM, PNG } kind;
     char tmp[4096];
+    int special;
     appm__out o;
     appm__diag_clear(diag);
     if (!path || !img || !img->rgb || img->width == 0 || img->height == 0 ||
@@ -790,8 +807,9 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
                           "unknown image format (use .pfm, .ppm or .png)");
     if (strlen(path) + 5 > sizeof tmp)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "path too long");
+    special = appm__is_special_file(path);
     sprintf(tmp, "%s.tmp", path);
-    o.f = fopen(tmp, "wb");
+    o.f = fopen(special ? path : tmp, "wb");
     o.ok = o.f != NULL;
     o.crc = 0;
     if (o.ok) {
@@ -799,8 +817,10 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
         else if (kind == PPM) appm__write_ppm_body(&o, img, (float)exposure);
         else appm__write_png_body(&o, img, (float)exposure);
         if (fclose(o.f) != 0) o.ok = 0;
-        if (o.ok && appm__rename_replace(tmp, path) != 0) o.ok = 0;
-        if (!o.ok) remove(tmp);
+        if (!special) {
+            if (o.ok && appm__rename_replace(tmp, path) != 0) o.ok = 0;
+            if (!o.ok) remove(tmp);
+        }
     }
     if (!o.ok) return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot write the image");
     return APPM_OK;
@@ -1044,7 +1064,7 @@ typedef struct appm__loader {
     appm_log_fn log;
     void *log_user;
     const char *file;       /* file being read, for messages */
-    uint32_t warned;        /* warning kinds already sent for `file` */
+    uint64_t warned;        /* warning kinds already sent for `file` (one bit each) */
     appm__array pos;        /* appm__v3: the current OBJ's `v` */
     appm__array vn;         /* appm__v3: the current OBJ's `vn` */
     appm__array nrm;        /* appm__v3: shading normals, three per smooth triangle */
@@ -1065,8 +1085,7 @@ typedef struct appm__loader {
 } appm__loader;
 
 enum {
-    APPM__W_IGNORED = 1u << 0, /* reserved: the per-statement ignores use bits 8.. */
-    APPM__W_CLAMPED = 1u << 1,
+    APPM__W_CLAMPED = 1u << 1, /* bits 8 and up: one per ignored statement kind */
     APPM__W_DEGENERATE = 1u << 2,
     APPM__W_NO_MTL = 1u << 3,
     APPM__W_UNKNOWN_MAT = 1u << 4,
@@ -1075,7 +1094,7 @@ enum {
     APPM__W_BEFORE_NEWMTL = 1u << 7
 };
 
-static void appm__warn(appm__loader *L, uint32_t kind, unsigned line, const char *fmt, ...)
+static void appm__warn(appm__loader *L, uint64_t kind, unsigned line, const char *fmt, ...)
 {
     char msg[256];
     va_list ap;
@@ -1234,6 +1253,16 @@ static appm_status appm__numbers(appm__loader *L, const char **s, const char *e,
     return APPM_OK;
 }
 
+/* A statement whose values are complete must end there. */
+static appm_status appm__line_end(appm__loader *L, const char **s, const char *e, unsigned line,
+                                  const char *what)
+{
+    const char *ts, *te;
+    if (!appm__token(s, e, &ts, &te)) return APPM_OK;
+    return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "%s: unexpected '%.*s' after the values",
+                      what, (int)(te - ts > 30 ? 30 : te - ts), ts);
+}
+
 /* The rest of the line with surrounding blanks trimmed (file names may hold spaces). */
 static int appm__rest(const char *s, const char *e, const char **rs, const char **re)
 {
@@ -1283,7 +1312,7 @@ static void appm__mtl_finish(appm__loader *L, appm__material *m, int illum, int 
         m->kind = APPM__MAT_DIFFUSE;
         m->color = kd;
         if (have_ks && (ks.x > 0 || ks.y > 0 || ks.z > 0))
-            appm__warn(L, 1u << 8, line, "glossy Ks is not modelled (material '%s' is diffuse)",
+            appm__warn(L, (uint64_t)1 << 8, line, "glossy Ks is not modelled (material '%s' is diffuse)",
                        appm__mat_name(L, m));
     }
     kdc[0] = &m->color.x;
@@ -1375,17 +1404,17 @@ static appm_status appm__mtl_parse(appm__loader *L, const char *buf, size_t len)
                                   "illum must be an integer 0..10");
             illum = (int)v[0];
         } else if (te - ts > 4 && memcmp(ts, "map_", 4) == 0) {
-            appm__warn(L, 1u << 9, it.line, "texture maps are not modelled: '%.*s' ignored",
+            appm__warn(L, (uint64_t)1 << 9, it.line, "texture maps are not modelled: '%.*s' ignored",
                        (int)(te - ts > 30 ? 30 : te - ts), ts);
         } else {
             size_t k, n = sizeof ignored / sizeof ignored[0];
             for (k = 0; k < n; ++k)
                 if (appm__token_is(ts, te, ignored[k])) break;
             if (k < n)
-                appm__warn(L, 1u << (10 + k), it.line, "MTL statement '%s' is not modelled, ignored",
+                appm__warn(L, (uint64_t)1 << (10 + k), it.line, "MTL statement '%s' is not modelled, ignored",
                            ignored[k]);
             else
-                appm__warn(L, 1u << 30, it.line, "unknown MTL statement '%.*s' ignored",
+                appm__warn(L, (uint64_t)1 << 63, it.line, "unknown MTL statement '%.*s' ignored",
                            (int)(te - ts > 30 ? 30 : te - ts), ts);
         }
     }
@@ -1401,7 +1430,7 @@ static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const c
     size_t len;
     appm_status st;
     const char *saved_file = L->file;
-    uint32_t saved_warned = L->warned;
+    uint64_t saved_warned = L->warned;
     appm_diag quiet;
     if (L->mem_mtl) { /* in-memory scene: every mtllib means the given MTL text */
         L->file = "(mtl)";
@@ -1624,7 +1653,7 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
                                   "'%.*s' is not an OBJ statement", (int)(te - ts > 30 ? 30 : te - ts), ts);
             for (k = 0; k < n; ++k)
                 if (appm__token_is(ts, te, ignored[k])) break;
-            appm__warn(L, k < n ? 1u << (8 + k % 20) : 1u << 30, it.line,
+            appm__warn(L, k < n ? (uint64_t)1 << (8 + k) : (uint64_t)1 << 63, it.line,
                        "OBJ statement '%.*s' is not modelled, ignored",
                        (int)(te - ts > 30 ? 30 : te - ts), ts);
         }
@@ -1638,7 +1667,7 @@ static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned li
     size_t len;
     appm_status st;
     const char *saved_file = L->file;
-    uint32_t saved_warned = L->warned;
+    uint64_t saved_warned = L->warned;
     appm_diag quiet;
     appm__diag_clear(&quiet);
     L->mem->diag = &quiet;
@@ -1768,7 +1797,9 @@ static appm_status appm__scene_parse(appm__loader *L, const char *buf, size_t le
             L->cam.focus = (float)kv[1].v[0];
         } else if (appm__token_is(ts, te, "image")) {
             double v[2];
-            if ((st = appm__numbers(L, &s, e, it.line, "image", v, 2)) != APPM_OK) return st;
+            if ((st = appm__numbers(L, &s, e, it.line, "image", v, 2)) != APPM_OK ||
+                (st = appm__line_end(L, &s, e, it.line, "image")) != APPM_OK)
+                return st;
             if (v[0] < 1 || v[1] < 1 || v[0] > 32768 || v[1] > 32768 || v[0] != floor(v[0]) ||
                 v[1] != floor(v[1]))
                 return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
@@ -1786,7 +1817,9 @@ static appm_status appm__scene_parse(appm__loader *L, const char *buf, size_t le
             l->line = it.line;
             if (env) {
                 double v[3];
-                if ((st = appm__numbers(L, &s, e, it.line, "environment", v, 3)) != APPM_OK) return st;
+                if ((st = appm__numbers(L, &s, e, it.line, "environment", v, 3)) != APPM_OK ||
+                    (st = appm__line_end(L, &s, e, it.line, "environment")) != APPM_OK)
+                    return st;
                 if (v[0] < 0 || v[1] < 0 || v[2] < 0)
                     return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "environment: negative radiance");
                 l->kind = APPM__LIGHT_ENV;
@@ -1920,7 +1953,7 @@ static void appm__ray_setup(appm__ray *r)
     r->sx = appm__comp(r->d, r->kx) / dz;
     r->sy = appm__comp(r->d, r->ky) / dz;
     r->sz = 1.0f / dz;
-    r->inv = appm__v(1.0f / r->d.x, 1.0f / r->d.y, 1.0f / r->d.z);
+    r->inv = appm__v(1.0f / r->d.x, 1.0f / r->d.y, 1.0f / r->d.z); /* +-inf for 0 and -0 */
 }
 
 /* Woop-Benthin-Wald watertight test; on a hit in (tmin, tmax) fills h. */
@@ -1944,41 +1977,61 @@ static int appm__tri_hit(const appm__ray *r, const appm__tri *tr, appm__hit *h)
     T = U * (r->sz * Akz) + V * (r->sz * Bkz) + W * (r->sz * Ckz);
     t = T / det;
     if (!(t > r->tmin && t < r->tmax)) return 0;
+    {
+        /* t must exceed the bound on its own rounding error (after pbrt-v3,
+         * 3.9.6): translating vertices much larger than the hit point can
+         * otherwise give a small positive t for a ray that leaves the triangle.
+         * Unlike pbrt, the shear error of x and y is bounded with the world-unit
+         * z extent times |S_x|, |S_y| <= 1, so the bound stays tight for rays
+         * whose direction is not of unit length (shadow rays). */
+        const float g = FLT_EPSILON * 0.5f;
+        const float g2 = 2 * g / (1 - 2 * g), g3 = 3 * g / (1 - 3 * g), g5 = 5 * g / (1 - 5 * g);
+        float mzw = fmaxf(fabsf(Akz), fmaxf(fabsf(Bkz), fabsf(Ckz))), mz = fabsf(r->sz) * mzw;
+        float mx = fmaxf(fabsf(Ax), fmaxf(fabsf(Bx), fabsf(Cx)));
+        float my = fmaxf(fabsf(Ay), fmaxf(fabsf(By), fabsf(Cy)));
+        float dz = g3 * mz, dx = g5 * (mx + fabsf(r->sx) * mzw), dy = g5 * (my + fabsf(r->sy) * mzw);
+        float de = 2 * (g2 * mx * my + dy * mx + dx * my);
+        float me = fmaxf(fabsf(U), fmaxf(fabsf(V), fabsf(W)));
+        float dt = 3 * (g3 * me * mz + de * mz + dz * me) / fabsf(det);
+        if (!(t > dt)) return 0;
+    }
     h->t = t;
     h->b1 = V / det;
     h->b2 = W / det;
     return 1;
 }
 
-/* Slab test.  Written so that a NaN from 0 * inf (a ray lying in a slab plane)
- * keeps the interval open instead of rejecting: false hits are harmless, false
- * misses are holes.  The far distance is widened by 1 + 2 gamma(3) (pbrt). */
+/* One axis of the slab test: narrows [*t0, *t1] to where the ray is between
+ * the planes lo and hi, and keeps in *m the largest finite |distance| to a
+ * plane.  A direction component of 0 (or -0) makes inv infinite: a ray strictly
+ * inside the slab gets (-inf, inf), one outside an empty interval, and one lying
+ * exactly in a bounding plane gets 0 * inf = NaN, which is taken as "no
+ * constraint" - the ray stays on the closed slab for all t. */
+static inline void appm__slab(float lo, float hi, float o, float inv, float *t0, float *t1, float *m)
+{
+    float a = (lo - o) * inv, b = (hi - o) * inv;
+    float n = a < b ? a : b, f = a < b ? b : a;
+    if (!(n <= f)) return; /* NaN: in a bounding plane */
+    if (n > *t0) *t0 = n;
+    if (f < *t1) *t1 = f;
+    if (fabsf(n) > *m && fabsf(n) <= FLT_MAX) *m = fabsf(n);
+    if (fabsf(f) > *m && fabsf(f) <= FLT_MAX) *m = fabsf(f);
+}
+
+/* Slab test of a node against (tmin, tmax), with slack.  A triangle's t from
+ * the watertight test carries a rounding error that grows with the distance to
+ * its vertices, not with t (the vertices are translated to the ray origin), so
+ * the interval gets a slack of 64 epsilon times the farthest plane distance: a
+ * triangle hit just below tmax, or lying on a face of its box, is never lost.
+ * A false hit costs a node visit; a false miss would be a hole. */
 static int appm__box_hit(const appm__ray *r, const appm__node *n, float tmax, float *tnear)
 {
-    float t0 = r->tmin, t1 = tmax, a, b, lo, hi;
-    a = (n->bmin[0] - r->o.x) * r->inv.x;
-    b = (n->bmax[0] - r->o.x) * r->inv.x;
-    lo = a < b ? a : b;
-    hi = a < b ? b : a;
-    hi *= 1.0f + 2.0f * 3.0f * (FLT_EPSILON * 0.5f);
-    if (lo > t0) t0 = lo;
-    if (hi < t1) t1 = hi;
-    a = (n->bmin[1] - r->o.y) * r->inv.y;
-    b = (n->bmax[1] - r->o.y) * r->inv.y;
-    lo = a < b ? a : b;
-    hi = a < b ? b : a;
-    hi *= 1.0f + 2.0f * 3.0f * (FLT_EPSILON * 0.5f);
-    if (lo > t0) t0 = lo;
-    if (hi < t1) t1 = hi;
-    a = (n->bmin[2] - r->o.z) * r->inv.z;
-    b = (n->bmax[2] - r->o.z) * r->inv.z;
-    lo = a < b ? a : b;
-    hi = a < b ? b : a;
-    hi *= 1.0f + 2.0f * 3.0f * (FLT_EPSILON * 0.5f);
-    if (lo > t0) t0 = lo;
-    if (hi < t1) t1 = hi;
+    float t0 = r->tmin, t1 = tmax, m = 0.0f;
+    appm__slab(n->bmin[0], n->bmax[0], r->o.x, r->inv.x, &t0, &t1, &m);
+    appm__slab(n->bmin[1], n->bmax[1], r->o.y, r->inv.y, &t0, &t1, &m);
+    appm__slab(n->bmin[2], n->bmax[2], r->o.z, r->inv.z, &t0, &t1, &m);
     *tnear = t0;
-    return t0 <= t1;
+    return t0 <= t1 + 64.0f * FLT_EPSILON * m;
 }
 
 /* Closest hit in (tmin, tmax), ignoring triangle `skip` (the one a secondary ray
@@ -2741,10 +2794,10 @@ struct appm_renderer {
     appm__chunk_rec *chunk;
     uint32_t *task_used;
     int *task_failed;
-    uint32_t *dest;      /* scratch of the counting sort */
-    size_t dest_cap;
+    uint32_t *dest;      /* scratch of the counting sort: one per slot of the store */
     /* hash grid */
     uint32_t *cell;      /* table_size + 1 bucket starts */
+    size_t cell_cap;     /* entries allocated (the largest table so far) */
     uint32_t table_bits;
     float cell_size, inv_cell;
     appm__v3 grid_lo;
@@ -3024,6 +3077,7 @@ static appm_status appm__photon_pass(appm_renderer *r)
         int failed = 0;
         size_t ncap;
         appm__photon *nph;
+        uint32_t *ndest;
         appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
         for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
         if (!failed) return APPM_OK;
@@ -3034,9 +3088,15 @@ static appm_status appm__photon_pass(appm_renderer *r)
             return appm__fail(&r->diag, APPM_ERR_NOMEM, NULL, 0,
                               "more than 4e9 photons stored in one pass: use fewer photons per pass");
         nph = (appm__photon *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *nph);
-        if (!nph) return APPM_ERR_NOMEM;
+        ndest = nph ? (uint32_t *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *ndest) : NULL;
+        if (!ndest) {
+            appm__free(&r->mem, nph);
+            return APPM_ERR_NOMEM;
+        }
         appm__free(&r->mem, r->ph);
+        appm__free(&r->mem, r->dest);
         r->ph = nph;
+        r->dest = ndest;
         r->cap = ncap;
     }
 }
@@ -3120,21 +3180,14 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
     for (c = 0; c < r->nchunks; ++c) total += r->chunk[c].count;
     while (bits < 30 && ((size_t)1 << bits) < total) bits++;
     nb = 1u << bits;
-    if (bits != r->table_bits) {
+    if ((size_t)nb + 1 > r->cell_cap) { /* the table only grows: memory stays flat */
         uint32_t *cell = (uint32_t *)appm__alloc(&r->mem, (size_t)nb + 1, sizeof *cell);
         if (!cell) return APPM_ERR_NOMEM;
         appm__free(&r->mem, r->cell);
         r->cell = cell;
-        r->table_bits = bits;
+        r->cell_cap = (size_t)nb + 1;
     }
-    if (total > r->dest_cap) {
-        size_t ncap = total + total / 4;
-        uint32_t *d = (uint32_t *)appm__alloc(&r->mem, ncap, sizeof *d);
-        if (!d) return APPM_ERR_NOMEM;
-        appm__free(&r->mem, r->dest);
-        r->dest = d;
-        r->dest_cap = ncap;
-    }
+    r->table_bits = bits;
     /* compact the regions so chunk c follows chunk c-1 (chunks of one region are
      * already in order; regions are moved down one after another) */
     {
@@ -4062,10 +4115,11 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         /* first guess at the store: 1.5 photons per path; it grows if needed */
         r->cap = (size_t)((double)r->M * 1.5 / r->tasks) + 4096;
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
+        if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }
     if (!r->vp || !r->pix || !r->image || !r->aux[APPM_AUX_COUNT - 1] || !r->aux[0] ||
         !r->aux[1] || !r->aux[2] ||
-        (r->method != APPM_METHOD_PT && (!r->chunk || !r->task_used || !r->task_failed || !r->ph))) {
+        (r->method != APPM_METHOD_PT && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
         fm = r->mem;
