@@ -531,12 +531,12 @@ static uint32_t appm__rng_u32(appm__rng *r)
     return (xorshifted >> rot) | (xorshifted << ((32u - rot) & 31u));
 }
 
-enum { APPM__DOMAIN_EYE = 1, APPM__DOMAIN_PHOTON = 2, APPM__DOMAIN_TEST = 3 };
+enum { APPM__DOMAIN_EYE = 1, APPM__DOMAIN_PHOTON = 2, APPM__DOMAIN_TEST = 3, APPM__DOMAIN_PIXEL = 4 };
 
 static void appm__rng_seed(appm__rng *r, uint64_t seed, uint64_t pass, uint64_t domain,
                            uint64_t index)
 {
-    uint64_t k = appm__mix64(seed ^ appm__mix64(pass * 4 + domain) ^ appm__mix64(~index));
+    uint64_t k = appm__mix64(seed ^ appm__mix64(pass * 8 + domain) ^ appm__mix64(~index));
     r->state = 0;
     r->inc = (appm__mix64(k ^ 0xDA942042E4DD58B5ull) << 1) | 1u;
     appm__rng_u32(r);
@@ -2774,7 +2774,8 @@ struct appm_renderer {
     appm_direct direct;
     uint32_t w, h;
     uint64_t M;          /* photon paths per pass */
-    double r1;           /* initial radius */
+    double r1;           /* initial radius (the user's, or r_auto) */
+    double r_auto;       /* the scene's automatic radius (section 12): appm's scale */
     int r1_auto;
     double alpha;
     double ppm_r2;       /* ppm: r_j^2 of the current pass */
@@ -2837,18 +2838,49 @@ static int appm__quant(float v, float scale)
 
 /* ---- 7.2 Camera rays ---------------------------------------------------------- */
 
+/* Where in the pixel (and on the lens) pass j samples: the R2 sequence of
+ * Roberts (2018), x_j = frac(s + j g) with g = (1/phi2, 1/phi2^2), phi2 the
+ * plastic number - or R4 with the lens, so that the lens and pixel coordinates
+ * are not correlated.  Each pixel rotates the sequence by its own random offset
+ * s (Cranley-Patterson), so pixels stay independent while the passes of one
+ * pixel stratify its area: a pixel cut by the edge of a bright light converges
+ * like 1/N instead of 1/sqrt(N), for every method alike. */
+static void appm__pixel_sample(uint64_t pass, appm__rng *rng, int lens, float *u)
+{
+    static const double g2[2] = {0.75487766624669276, 0.56984029099805327};
+    static const double g4[4] = {0.85667488385450558, 0.73389185662113744, 0.62870406338765426,
+                                 0.53859292022813244};
+    const double *g = lens ? g4 : g2;
+    int k, n = lens ? 4 : 2;
+    for (k = 0; k < n; ++k) {
+        double x = (double)appm__rng_float(rng) + (double)(pass % 16777216u) * g[k];
+        x -= floor(x);
+        u[k] = (float)x < 1.0f ? (float)x : 0.99999994f;
+    }
+}
+
 static void appm__camera_ray(const appm_renderer *r, uint32_t px, uint32_t py, appm__rng *rng,
                              appm__ray *ray)
 {
     const appm__camera *c = &r->scene->cam;
-    float u = appm__rng_float(rng), v = appm__rng_float(rng);
+    appm__rng prng;
+    float su[4], u, v, l1 = 0.0f, l2 = 0.0f;
     float aspect = (float)r->w / (float)r->h;
+    /* the rotation of pixel (px, py) is the same in every pass: a stream of its own */
+    appm__rng_seed(&prng, r->seed, 0, APPM__DOMAIN_PIXEL, (uint64_t)py * r->w + px);
+    appm__pixel_sample(r->pass, &prng, c->aperture > 0.0f, su);
+    u = su[0];
+    v = su[1];
+    if (c->aperture > 0.0f) {
+        l1 = su[2];
+        l2 = su[3];
+    }
+    (void)rng;
     float sx = (2.0f * ((float)px + u) / (float)r->w - 1.0f) * c->tan_half * aspect;
     float sy = (1.0f - 2.0f * ((float)py + v) / (float)r->h) * c->tan_half;
     appm__v3 d = appm__normalize(
         appm__add(c->forward, appm__add(appm__scale(c->right, sx), appm__scale(c->up, sy))));
     appm__v3 o = c->eye;
-    float l1 = appm__rng_float(rng), l2 = appm__rng_float(rng);
     if (c->aperture > 0.0f) {
         /* thin lens: a point on the lens disk, aimed at where the pinhole ray
          * meets the plane of focus */
@@ -3296,7 +3328,7 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
 #define APPM__RHI 4.0
 #endif
 #ifndef APPM__KAPPA
-#define APPM__KAPPA 2.0                          /* Laplacian bandwidth h = kappa r */
+#define APPM__KAPPA 2.0                          /* h = kappa r_auto j^(-1/8) */
 #endif
 #ifndef APPM__LAP_EVERY
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
@@ -3485,22 +3517,35 @@ static double appm__di2(const appm__pixel *p, uint64_t n)
     return c > APPM__DI_FLOOR * d2 ? c : APPM__DI_FLOOR * d2;
 }
 
-/* Radius for pass j from the pixel's statistics after j-1 passes.  Never NaN,
- * 0 or inf: every path ends inside [RLO, RHI] r_1 j^(-1/6). */
-static double appm__appm_radius(double r1, uint64_t M, uint64_t j, const appm__pixel *p)
+/* Radius for pass j from the pixel's statistics after j-1 passes; r1 is the
+ * initial radius, rb the scene's automatic one.  Never NaN, 0 or inf: every
+ * path ends inside [RLO min(r1, rb), RHI max(r1, rb)] j^(-1/6). */
+static double appm__appm_radius(double r1, double rb, uint64_t M, uint64_t j, const appm__pixel *p)
 {
-    double rk = r1 * pow((double)j, -1.0 / 6.0), rad = rk;
+    double sj = pow((double)j, -1.0 / 6.0), rk = r1 * sj, rad = rk;
+    double lo = APPM__RLO * (r1 < rb ? r1 : rb) * sj, hi = APPM__RHI * (r1 > rb ? r1 : rb) * sj;
     if (j > APPM__WARMUP && p->n >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
         rad = appm__r_opt(p->S, appm__di2(p, appm__lap_count(j - 1)), (double)M * (double)j, APPM__CF);
-        if (rad == 0.0) rad = APPM__RHI * rk; /* dI^2 so small the formula overflows: flat */
+        if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
         if (p->r > 0.0) {
             if (rad < 0.5 * p->r) rad = 0.5 * p->r;
             if (rad > 2.0 * p->r) rad = 2.0 * p->r;
         }
     }
-    if (!(rad >= APPM__RLO * rk)) rad = APPM__RLO * rk; /* also catches NaN */
-    if (rad > APPM__RHI * rk) rad = APPM__RHI * rk;
+    if (!(rad >= lo)) rad = lo; /* also catches NaN */
+    if (rad > hi) rad = hi;
     return rad;
+}
+
+/* The Laplacian bandwidth of pass j: h_j = kappa r_b j^(-1/8), a fixed schedule
+ * from the scene's automatic radius r_b (section 12), shrinking more slowly than
+ * r (design notes, section 4.6).  It deliberately does not follow the pixel's
+ * adaptive radius: with h = kappa r, a sharp feature seen through a wide h
+ * looks flat (|dI| falls like h^-4), which licenses a wider r, which keeps h
+ * wide - a start with a large radius would never come back. */
+static double appm__lap_h(double rb, uint64_t j)
+{
+    return APPM__KAPPA * rb * pow((double)j, -1.0 / 8.0);
 }
 
 /* Welford update of the per-pass estimate's luminance (for the noise estimate). */
@@ -3560,8 +3605,9 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.max_p = r->max_depth - vp->segs;
             g.biweight = r->method == APPM_METHOD_APPM;
             g.R = r->method == APPM_METHOD_PPM ? (float)sqrt(r->ppm_r2) : (float)p->r;
-            g.h = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass) ? (float)(APPM__KAPPA * p->r)
-                                                                             : 0.0f;
+            g.h = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)
+                      ? (float)appm__lap_h(r->r_auto, r->pass)
+                      : 0.0f;
             appm__gather_query(r, &g);
         }
         if (r->method == APPM_METHOD_SPPM) {
@@ -3589,7 +3635,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             e[0] = e[1] = e[2] = s = dl = 0.0;
         }
         {
-            double hr = g.h / r->r1;
+            double hr = g.h / r->r_auto;
             appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl,
                                g.h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g.count, (double)vp->ld_lum);
         }
@@ -4154,7 +4200,7 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
     (void)worker;
     for (x = 0; x < r->w; ++x) {
         appm__pixel *p = &r->pix[(size_t)row * r->w + x];
-        p->r = appm__appm_radius(r->r1, r->M, r->pass, p);
+        p->r = appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, p);
     }
 }
 
@@ -4186,8 +4232,10 @@ static float appm__median_gather_radius(appm_renderer *r)
         double g;
         if (r->vp[i].segs == 0) continue;
         g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2) : r->pix[i].r;
-        if (r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass) && 2.0 * APPM__KAPPA > 1.0)
-            g *= 2.0 * APPM__KAPPA;
+        if (r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)) {
+            double h2 = 2.0 * appm__lap_h(r->r_auto, r->pass);
+            if (h2 > g) g = h2;
+        }
         tmp[n++] = (float)g;
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
@@ -4234,7 +4282,8 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
         appm__parallel_for(r->threads, r->h, appm__eye_task, r);
         if (r->pass == 1) {
             size_t i, npix = (size_t)r->w * r->h;
-            if (r->r1_auto) r->r1 = appm__default_radius(r);
+            r->r_auto = appm__default_radius(r);
+            if (r->r1_auto) r->r1 = r->r_auto;
             r->ppm_r2 = r->r1 * r->r1;
             if (r->method == APPM_METHOD_SPPM)
                 for (i = 0; i < npix; ++i) r->pix[i].r = r->r1;
