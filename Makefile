@@ -38,7 +38,7 @@ build/embed: examples/embed.c appm.c appm.h
 
 test: appm build/embed $(TESTS) $(STESTS)
 	@mkdir -p tests/out
-	@sh tests/run.sh $(TESTS) $(addprefix APPM_TEST_QUICK=1 ,$(STESTS)) "sh tests/cli.sh ./appm build/embed"
+	@sh tests/run.sh $(TESTS) $(foreach t,$(STESTS),"APPM_TEST_QUICK=1 $(t)") "sh tests/cli.sh ./appm build/embed"
 
 test-long: $(TESTS)
 	@mkdir -p tests/out

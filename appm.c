@@ -134,11 +134,11 @@ static double appm__seconds(void)
 
 APPM_API unsigned appm_cpu_count(void)
 {
-#if APPM_THREADS == 1
+#if APPM_THREADS == 1 && !defined(_WIN32)
     long n = sysconf(_SC_NPROCESSORS_ONLN);
     if (n < 1) return 1;
     return n > APPM__MAX_THREADS ? APPM__MAX_THREADS : (unsigned)n;
-#elif APPM_THREADS == 2
+#elif APPM_THREADS != 0 /* Win32 threads, or winpthreads: Windows has no sysconf */
     SYSTEM_INFO si;
     GetSystemInfo(&si);
     if (si.dwNumberOfProcessors < 1) return 1;
@@ -444,6 +444,9 @@ static void appm__array_free(appm__mem *m, appm__array *a)
 
 typedef struct appm__v3 {
     float x, y, z;
+#if defined(__TINYC__) && defined(__x86_64__)
+    float tcc_pad; /* tcc 0.9.27 stores a returned 12-byte float struct as 16 bytes */
+#endif
 } appm__v3;
 
 static inline appm__v3 appm__v(float x, float y, float z)
@@ -549,6 +552,16 @@ static void appm__rng_seed(appm__rng *r, uint64_t seed, uint64_t pass, uint64_t 
 static inline float appm__rng_float(appm__rng *r)
 {
     return (float)(appm__rng_u32(r) >> 8) * (1.0f / 16777216.0f);
+}
+
+/* Three numbers in a fixed order.  (Several appm__rng_float() calls as the
+ * arguments of one call would be drawn in an order C leaves unspecified, and
+ * two compilers would render two different images from one seed.) */
+static void appm__rng_float3(appm__rng *r, float *u)
+{
+    u[0] = appm__rng_float(r);
+    u[1] = appm__rng_float(r);
+    u[2] = appm__rng_float(r);
 }
 
 /* ==== 3. IMAGE I/O =======================================================
@@ -1532,11 +1545,24 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
     for (k = 1; k + 1 < n; ++k) { /* fan: (0, k, k+1) */
         const appm__v3 *P = (const appm__v3 *)L->pos.data;
         appm__v3 a = P[f[0]], b = P[f[2 * k]], c = P[f[2 * k + 2]];
-        appm__v3 cr = appm__cross(appm__sub(b, a), appm__sub(c, a));
-        float area2 = appm__length(cr);
+        /* The normal in double: in float, the cross product of a needle's edges
+         * can point 1e-3 rad off (epsilon / angle), and a ray leaving the
+         * surface within that angle of its plane would be offset to the wrong
+         * side (appm__offset chooses the side by ng) and hit it again. */
+        double e1[3], e2[3], cr[3], area2;
         appm__tri *t;
         appm__tri_info *in;
-        if (!(area2 > 0.0f) || !(area2 < FLT_MAX)) {
+        e1[0] = (double)b.x - a.x;
+        e1[1] = (double)b.y - a.y;
+        e1[2] = (double)b.z - a.z;
+        e2[0] = (double)c.x - a.x;
+        e2[1] = (double)c.y - a.y;
+        e2[2] = (double)c.z - a.z;
+        cr[0] = e1[1] * e2[2] - e1[2] * e2[1];
+        cr[1] = e1[2] * e2[0] - e1[0] * e2[2];
+        cr[2] = e1[0] * e2[1] - e1[1] * e2[0];
+        area2 = sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]);
+        if (!(area2 > 0.0) || !(area2 < FLT_MAX)) {
             L->dropped++;
             appm__warn(L, APPM__W_DEGENERATE, line, "degenerate (zero-area) triangles dropped");
             continue;
@@ -1549,8 +1575,8 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
         t->p0 = a;
         t->p1 = b;
         t->p2 = c;
-        in->ng = appm__scale(cr, 1.0f / area2);
-        in->area = 0.5f * area2;
+        in->ng = appm__v((float)(cr[0] / area2), (float)(cr[1] / area2), (float)(cr[2] / area2));
+        in->area = (float)(0.5 * area2);
         in->mat = mat;
         in->light = -1;
         in->n0 = -1;
@@ -1742,6 +1768,8 @@ static appm_status appm__camera_set(appm__loader *L, unsigned line, appm__v3 eye
         return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "camera: up is parallel to the view direction");
     if (!(fov > 0.0 && fov < 180.0))
         return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "camera: fov %g is not in (0, 180)", fov);
+    if (!((float)tan(0.5 * fov * APPM__PI / 180.0) >= FLT_MIN)) /* tan(fov/2) would underflow */
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "camera: fov %g is too small", fov);
     c->eye = eye;
     c->forward = f;
     c->right = appm__normalize(r);
@@ -2001,37 +2029,55 @@ static int appm__tri_hit(const appm__ray *r, const appm__tri *tr, appm__hit *h)
     return 1;
 }
 
-/* One axis of the slab test: narrows [*t0, *t1] to where the ray is between
- * the planes lo and hi, and keeps in *m the largest finite |distance| to a
- * plane.  A direction component of 0 (or -0) makes inv infinite: a ray strictly
- * inside the slab gets (-inf, inf), one outside an empty interval, and one lying
+/* Slab test of a node against (tmin, tmax + slack).
+ *
+ * A direction component of 0 (or -0) makes inv infinite: a ray strictly inside
+ * the slab gets (-inf, inf), one outside an empty interval, and one lying
  * exactly in a bounding plane gets 0 * inf = NaN, which is taken as "no
- * constraint" - the ray stays on the closed slab for all t. */
-static inline void appm__slab(float lo, float hi, float o, float inv, float *t0, float *t1, float *m)
+ * constraint" (the ray stays on the closed slab for all t). */
+static inline int appm__box_hit(const appm__ray *r, const appm__node *n, float tmax, float slack,
+                                float *tnear)
 {
-    float a = (lo - o) * inv, b = (hi - o) * inv;
-    float n = a < b ? a : b, f = a < b ? b : a;
-    if (!(n <= f)) return; /* NaN: in a bounding plane */
-    if (n > *t0) *t0 = n;
-    if (f < *t1) *t1 = f;
-    if (fabsf(n) > *m && fabsf(n) <= FLT_MAX) *m = fabsf(n);
-    if (fabsf(f) > *m && fabsf(f) <= FLT_MAX) *m = fabsf(f);
+    float t0 = r->tmin, t1 = tmax, v[6];
+    int k;
+    v[0] = (n->bmin[0] - r->o.x) * r->inv.x;
+    v[1] = (n->bmax[0] - r->o.x) * r->inv.x;
+    v[2] = (n->bmin[1] - r->o.y) * r->inv.y;
+    v[3] = (n->bmax[1] - r->o.y) * r->inv.y;
+    v[4] = (n->bmin[2] - r->o.z) * r->inv.z;
+    v[5] = (n->bmax[2] - r->o.z) * r->inv.z;
+    for (k = 0; k < 6; k += 2) {
+        float lo = v[k] < v[k + 1] ? v[k] : v[k + 1], hi = v[k] < v[k + 1] ? v[k + 1] : v[k];
+        if (!(lo <= hi)) continue; /* NaN: in a bounding plane */
+        t0 = lo > t0 ? lo : t0;
+        t1 = hi < t1 ? hi : t1;
+    }
+    *tnear = t0;
+    return t0 <= t1 + slack;
 }
 
-/* Slab test of a node against (tmin, tmax), with slack.  A triangle's t from
- * the watertight test carries a rounding error that grows with the distance to
- * its vertices, not with t (the vertices are translated to the ray origin), so
- * the interval gets a slack of 64 epsilon times the farthest plane distance: a
- * triangle hit just below tmax, or lying on a face of its box, is never lost.
- * A false hit costs a node visit; a false miss would be a hole. */
-static int appm__box_hit(const appm__ray *r, const appm__node *n, float tmax, float *tnear)
+/* The slack of a ray's box tests.  A triangle's t from the watertight test
+ * carries a rounding error that grows with the distance to its vertices, not
+ * with t (they are translated to the ray origin), so a triangle hit just below
+ * tmax, or lying on a face of its box, could be culled by an exact box test.
+ * Every vertex lies in the root box, so 64 epsilon times the farthest finite
+ * distance to a root-box plane bounds that error for the whole traversal.  A
+ * false hit costs a node visit; a false miss would be a hole. */
+static float appm__box_slack(const appm__ray *r, const appm__node *root)
 {
-    float t0 = r->tmin, t1 = tmax, m = 0.0f;
-    appm__slab(n->bmin[0], n->bmax[0], r->o.x, r->inv.x, &t0, &t1, &m);
-    appm__slab(n->bmin[1], n->bmax[1], r->o.y, r->inv.y, &t0, &t1, &m);
-    appm__slab(n->bmin[2], n->bmax[2], r->o.z, r->inv.z, &t0, &t1, &m);
-    *tnear = t0;
-    return t0 <= t1 + 64.0f * FLT_EPSILON * m;
+    float v[6], m = 0.0f;
+    int k;
+    v[0] = (root->bmin[0] - r->o.x) * r->inv.x;
+    v[1] = (root->bmax[0] - r->o.x) * r->inv.x;
+    v[2] = (root->bmin[1] - r->o.y) * r->inv.y;
+    v[3] = (root->bmax[1] - r->o.y) * r->inv.y;
+    v[4] = (root->bmin[2] - r->o.z) * r->inv.z;
+    v[5] = (root->bmax[2] - r->o.z) * r->inv.z;
+    for (k = 0; k < 6; ++k) {
+        float a = fabsf(v[k]);
+        if (a > m && a <= FLT_MAX) m = a;
+    }
+    return 64.0f * FLT_EPSILON * m;
 }
 
 /* Closest hit in (tmin, tmax), ignoring triangle `skip` (the one a secondary ray
@@ -2041,10 +2087,11 @@ static int appm__intersect(const appm_scene *s, const appm__ray *r, uint32_t ski
     uint32_t stack[APPM__BVH_MAX_DEPTH + 4];
     int sp = 0, found = 0;
     uint32_t ni = 0;
-    float tmax = r->tmax;
+    float tmax = r->tmax, slack;
     appm__ray q;
     if (!r->valid || s->nnode == 0) return 0;
     q = *r;
+    slack = appm__box_slack(r, &s->node[0]);
     for (;;) {
         const appm__node *n = &s->node[ni];
         if (n->count) {
@@ -2060,8 +2107,8 @@ static int appm__intersect(const appm_scene *s, const appm__ray *r, uint32_t ski
             }
         } else {
             float d0, d1;
-            int h0 = appm__box_hit(r, &s->node[n->first], tmax, &d0);
-            int h1 = appm__box_hit(r, &s->node[n->first + 1], tmax, &d1);
+            int h0 = appm__box_hit(r, &s->node[n->first], tmax, slack, &d0);
+            int h1 = appm__box_hit(r, &s->node[n->first + 1], tmax, slack, &d1);
             if (h0 && h1) {
                 if (d1 < d0) {
                     stack[sp++] = n->first;
@@ -2081,7 +2128,7 @@ static int appm__intersect(const appm_scene *s, const appm__ray *r, uint32_t ski
         ni = stack[--sp];
         { /* pop nodes that now lie beyond the closest hit */
             float dn;
-            while (!appm__box_hit(r, &s->node[ni], tmax, &dn)) {
+            while (!appm__box_hit(r, &s->node[ni], tmax, slack, &dn)) {
                 if (sp == 0) return found;
                 ni = stack[--sp];
             }
@@ -2097,11 +2144,13 @@ static int appm__occluded(const appm_scene *s, const appm__ray *r, uint32_t skip
     int sp = 0;
     uint32_t ni = 0;
     appm__hit h;
+    float slack;
     if (!r->valid || s->nnode == 0) return 0;
+    slack = appm__box_slack(r, &s->node[0]);
     for (;;) {
         const appm__node *n = &s->node[ni];
         float d;
-        if (appm__box_hit(r, n, r->tmax, &d)) {
+        if (appm__box_hit(r, n, r->tmax, slack, &d)) {
             if (n->count) {
                 uint32_t i;
                 for (i = n->first; i < n->first + n->count; ++i)
@@ -2935,6 +2984,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         const appm__material *m;
         appm__v3 wo;
         appm__bsdf_sample bs;
+        float u3[3];
         if (++segs > r->max_depth) break;
         if (!appm__intersect(s, &ray, skip, &h)) {
             if (s->env >= 0) ld = appm__add(ld, appm__mul(W, s->light[s->env].value));
@@ -2959,8 +3009,8 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
             }
             break;
         }
-        if (!appm__bsdf_sample_dir(m, &sf, wo, appm__rng_float(&rng), appm__rng_float(&rng),
-                                   appm__rng_float(&rng), APPM__RADIANCE, &bs))
+        appm__rng_float3(&rng, u3);
+        if (!appm__bsdf_sample_dir(m, &sf, wo, u3[0], u3[1], u3[2], APPM__RADIANCE, &bs))
             break;
         W = appm__mul(W, bs.weight);
         if (segs > 4) { /* Russian roulette on long specular chains (glass) */
@@ -3053,6 +3103,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         const appm__material *m;
         appm__v3 wi, g2;
         appm__bsdf_sample bs;
+        float u3[3];
         float q;
         if (!appm__intersect(s, &ray, skip, &h)) break;
         appm__surface(s, &h, &sf);
@@ -3066,8 +3117,8 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
             if (!appm__store_photon(r, task, &sf, wi, gamma, segs)) return 0;
         }
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
-        if (!appm__bsdf_sample_dir(m, &sf, wi, appm__rng_float(&rng), appm__rng_float(&rng),
-                                   appm__rng_float(&rng), APPM__IMPORTANCE, &bs))
+        appm__rng_float3(&rng, u3);
+        if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs))
             break;
         g2 = appm__mul(gamma, bs.weight);
         q = appm__maxc(gamma) > 0.0f ? appm__maxc(g2) / appm__maxc(gamma) : 0.0f;
@@ -3678,6 +3729,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         const appm__material *m;
         appm__v3 wo;
         appm__bsdf_sample bs;
+        float u3[3];
         if (++segs > r->max_depth) break;
         if (!appm__intersect(s, &ray, skip, &h)) {
             if (s->env >= 0) {
@@ -3713,8 +3765,8 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
             }
             prev_ns = ns;
         }
-        if (!appm__bsdf_sample_dir(m, &sf, wo, appm__rng_float(&rng), appm__rng_float(&rng),
-                                   appm__rng_float(&rng), APPM__RADIANCE, &bs))
+        appm__rng_float3(&rng, u3);
+        if (!appm__bsdf_sample_dir(m, &sf, wo, u3[0], u3[1], u3[2], APPM__RADIANCE, &bs))
             break;
         W = appm__mul(W, bs.weight);
         prev_pdf = bs.pdf;

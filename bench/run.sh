@@ -4,6 +4,7 @@
 #   sh bench/run.sh quick     one scene, small image, 6 runs of 8 s (plus the reference
 #                             the first time)
 #   sh bench/run.sh full      four scenes, the full ppm grid, throughput and scaling
+#   sh bench/run.sh refs      only the references of the full suite (the slow part)
 #
 # For every scene: a reference (rendered once by a long path-tracing run and
 # cached in bench/ref/ with the exact command in NAME.cmd; never committed),
@@ -104,7 +105,13 @@ echo "scene,method,config,log" > "$out/runs.csv"
 } > "$out/meta.txt"
 cat "$out/meta.txt"
 
-if [ "$mode" = quick ]; then
+if [ "$mode" = refs ]; then # only render (or check) the references of the full suite
+    reference cornell-sphere-256 scenes/cornell-sphere.scene 256x256 16384
+    reference cornell-original-128 scenes/cornell-original.scene 128x128 16384
+    reference cornell-sphere-dof-128 scenes/cornell-sphere-dof.scene 128x128 16384
+    reference cornell-mm-128 scenes/cornell-mm.scene 128x128 16384
+    exit 0
+elif [ "$mode" = quick ]; then
     scene cornell-sphere-64 scenes/cornell-sphere.scene 64x64 8 16384 small
 else
     scene cornell-sphere-256 scenes/cornell-sphere.scene 256x256 30 16384 full

@@ -1,0 +1,310 @@
+#!/bin/sh
+# shellcheck disable=SC2016 # the awk programs in single quotes are not for the shell
+# tests/cli.sh - the command line contract (design: interface.md section 3):
+# help and version, info, render to every format, exit codes and messages for
+# bad options and bad files, compare, --log, --aux, failed writes, the embed
+# example and SIGINT.
+#
+#   sh tests/cli.sh ./appm build/embed        (from the repository root)
+#
+# Prints one line per failed check and "N passed, N failed" as its last line;
+# exits non-zero if any check failed.  Scratch files go to tests/out/cli/.
+# POSIX sh only: no arrays, no [[ ]], no local.
+
+if [ $# -lt 1 ]; then
+    echo "usage: sh tests/cli.sh APPM [EMBED]" >&2
+    exit 2
+fi
+if [ ! -f scenes/cornell-original.scene ]; then
+    echo "tests/cli.sh: run it from the repository root" >&2
+    exit 2
+fi
+
+# absolute paths, since some checks run in another folder
+abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd)" "$(basename "$1")"); }
+APPM=$(abspath "$1")
+EMBED=
+[ $# -ge 2 ] && EMBED=$(abspath "$2")
+ROOT=$(pwd)
+T=tests/out/cli
+rm -rf "$T"
+mkdir -p "$T"
+
+npass=0
+nfail=0
+
+# check DESCRIPTION COMMAND...: runs the test command, counts the result
+check() {
+    what=$1
+    shift
+    if "$@"; then
+        npass=$((npass + 1))
+    else
+        nfail=$((nfail + 1))
+        echo "FAIL: $what" >&2
+        if [ -s "$T/err" ]; then sed 's/^/    stderr: /' "$T/err" | head -n 5 >&2; fi
+    fi
+}
+
+# run COMMAND...: runs it with stdout in $T/out, stderr in $T/err, status in $rc
+run() {
+    "$@" >"$T/out" 2>"$T/err"
+    rc=$?
+}
+
+last_line() { tail -n 1 "$T/out"; }
+# contains FILE WORD...: FILE holds every WORD
+contains() {
+    f=$1
+    shift
+    for w in "$@"; do grep -q -- "$w" "$f" || return 1; done
+}
+# pfm_size FILE W H: a PFM header of that size
+pfm_size() { head -n 2 "$1" | tr '\n' ' ' | grep -q "^P[Ff] $2 $3 "; }
+# absent FILE: no file, no dangling link
+absent() { [ ! -e "$1" ] && [ ! -L "$1" ]; }
+# summary_ok LINE OUTPUT: the key=value line of a 2-pass render into OUTPUT
+summary_ok() {
+    case $1 in "passes=2 photons="*" radius="*" output=$2"*) return 0 ;; esac
+    return 1
+}
+# the first n bytes of a file, as printable characters
+magic() { dd if="$1" bs=1 count="$2" 2>/dev/null | od -An -c | tr -d ' \n'; }
+
+SCENE=scenes/cornell-original.scene
+# small ARGS...: a quick render (32x32, 2 passes, quiet) through run
+small() { run "$APPM" render "$@" --size 32x32 --passes 2 -q; }
+
+# ---- help, version, no arguments ----------------------------------------------
+
+run "$APPM" --help
+check "appm --help exits 0" [ "$rc" -eq 0 ]
+check "appm --help shows usage and the commands" contains "$T/out" usage render compare info
+
+run "$APPM" render --help
+check "appm render --help exits 0" [ "$rc" -eq 0 ]
+check "appm render --help lists the options" contains "$T/out" --method --passes --output --photons
+
+run "$APPM" --version
+check "appm --version exits 0" [ "$rc" -eq 0 ]
+check "appm --version prints a version number" grep -Eq '^appm [0-9]+\.[0-9]+\.[0-9]+' "$T/out"
+
+run "$APPM"
+check "appm without arguments exits 1" [ "$rc" -eq 1 ]
+check "appm without arguments explains on stderr" [ -s "$T/err" ]
+
+# ---- info ---------------------------------------------------------------------
+# The triangle count must be that of the meshes: every OBJ face of k corners
+# is fanned into k - 2 triangles (degenerate ones dropped and reported).
+
+for scene in scenes/*.scene; do
+    run "$APPM" info "$scene"
+    check "info $scene exits 0" [ "$rc" -eq 0 ]
+    expect=0
+    # shellcheck disable=SC2013 # mesh names here hold no blanks
+    for mesh in $(awk '$1 == "mesh" { print $2 }' "$scene"); do
+        n=$(awk '$1 == "f" { t += NF - 3 } END { print t + 0 }' "scenes/$mesh")
+        expect=$((expect + n))
+    done
+    got=$(awk '$1 == "triangles" { n = $2; d = $3; sub(/^\(/, "", d); print n + d }' "$T/out")
+    check "info $scene: $got triangles (with dropped ones), the OBJ has $expect" [ "$got" = "$expect" ]
+done
+
+# ---- render: every method to every format -------------------------------------
+
+for method in appm ppm sppm pt; do
+    for ext in png ppm pfm; do
+        out=$T/r-$method.$ext
+        small "$SCENE" --method "$method" -o "$out"
+        check "render --method $method -o .$ext exits 0" [ "$rc" -eq 0 ]
+        check "render --method $method wrote $out" [ -s "$out" ]
+        line=$(last_line)
+        check "render --method $method: summary '$line'" summary_ok "$line" "$out"
+        case $ext in # the signature: \211 P N G, P6 (binary PPM), PF (colour PFM)
+        png) want='211PNG' nbytes=4 ;;
+        ppm) want='P6' nbytes=2 ;;
+        pfm) want='PF' nbytes=2 ;;
+        esac
+        got=$(magic "$out" "$nbytes")
+        check "render --method $method: $out starts with $want (got $got)" [ "$got" = "$want" ]
+    done
+done
+
+# the default output is SCENENAME.png in the current folder
+mkdir -p "$T/cwd"
+(cd "$T/cwd" && "$APPM" render "$ROOT/$SCENE" --size 32x32 --passes 2 -q >out 2>err)
+rc=$?
+check "render without -o exits 0" [ "$rc" -eq 0 ]
+check "render without -o writes cornell-original.png in the current folder" [ -s "$T/cwd/cornell-original.png" ]
+check "render without -o names it in the summary" grep -q 'output=cornell-original.png' "$T/cwd/out"
+
+# ---- bad options: exit 1 and a message ------------------------------------------
+
+for opts in "--alpha 0" "--alpha 1.5" "--photons 0" "--size 0x0" "--size 10" "--method foo" \
+    "--passes" "--no-such-option" "--threads 0" "--radius -1" "--passes 0" "--seed x"; do
+    # shellcheck disable=SC2086 # the options are meant to split
+    run "$APPM" render "$SCENE" --size 8x8 -q -o "$T/never.png" $opts
+    check "render $opts exits 1 (got $rc)" [ "$rc" -eq 1 ]
+    check "render $opts explains on stderr" grep -q '^appm: ' "$T/err"
+done
+check "no image from the refused renders" [ ! -e "$T/never.png" ]
+
+# ---- bad files: exit 2, the file (and the line) in the message ---------------------
+
+small "$T/no-such.scene" -o "$T/never.png"
+check "a missing scene exits 2 (got $rc)" [ "$rc" -eq 2 ]
+check "a missing scene is named: appm: $T/no-such.scene" grep -q "^appm: $T/no-such.scene" "$T/err"
+
+printf '# a scene with a typo on line 3\nmesh ../../../scenes/CornellBox-Original.obj\ncamara eye 0 1 4 target 0 1 0\n' \
+    >"$T/bad.scene"
+small "$T/bad.scene" -o "$T/never.png"
+check "a malformed scene exits 2 (got $rc)" [ "$rc" -eq 2 ]
+check "a malformed scene is reported as appm: FILE:3: ..." grep -q "^appm: $T/bad.scene:3: " "$T/err"
+run "$APPM" info "$T/bad.scene"
+check "info of a malformed scene exits 2 (got $rc)" [ "$rc" -eq 2 ]
+check "info of a malformed scene reports FILE:3:" grep -q "$T/bad.scene:3: " "$T/err"
+
+# ---- compare ------------------------------------------------------------------
+# Two hand-made 2x1 PFMs.  A (little-endian, scale -1): pixels (1,1,1) and
+# (0.5,0.5,0.5); B (big-endian, scale 1): (1,1,1) and (1,1,1).  Per channel the
+# errors are 0,0,0,-0.5,-0.5,-0.5, so
+#   rmse   = sqrt(3 * 0.25 / 6)              = 0.353553
+#   relmse = 3 * 0.25 / (1 + 0.01) / 6       = 0.123762   (B is the reference)
+#   mae    = 1.5 / 6                         = 0.25
+#   mean_a = 4.5 / 6 = 0.75,  mean_b = 1
+# IEEE 754: 1.0 = 3f800000, 0.5 = 3f000000 (bytes as printf %b octal escapes).
+one_le='\0000\0000\0200\0077'
+half_le='\0000\0000\0000\0077'
+one_be='\0077\0200\0000\0000'
+printf 'PF\n2 1\n-1.0\n%b' "$one_le$one_le$one_le$half_le$half_le$half_le" >"$T/a.pfm"
+printf 'PF\n2 1\n1.0\n%b' "$one_be$one_be$one_be$one_be$one_be$one_be" >"$T/b.pfm"
+printf 'PF\n1 1\n-1.0\n%b' "$one_le$one_le$one_le" >"$T/c.pfm"
+
+line_re='^rmse=[^ ]* relmse=[^ ]* mae=[^ ]* mean_a=[^ ]* mean_b=[^ ]*$'
+run "$APPM" compare "$T/a.pfm" "$T/b.pfm"
+check "compare a b exits 0" [ "$rc" -eq 0 ]
+check "compare prints exactly one line" [ "$(wc -l <"$T/out")" -eq 1 ]
+check "compare line: $(cat "$T/out")" grep -q "$line_re" "$T/out"
+# value KEY: the number after KEY= on the compare line
+value() { tr ' ' '\n' <"$T/out" | sed -n "s/^$1=//p"; }
+near() { awk -v a="$1" -v b="$2" 'BEGIN { d = a - b; if (d < 0) d = -d; exit !(d <= 1e-5) }'; }
+check "compare a b: rmse $(value rmse) = 0.353553" near "$(value rmse)" 0.353553
+check "compare a b: relmse $(value relmse) = 0.123762" near "$(value relmse)" 0.123762
+check "compare a b: mae $(value mae) = 0.25" near "$(value mae)" 0.25
+check "compare a b: mean_a $(value mean_a) = 0.75" near "$(value mean_a)" 0.75
+check "compare a b: mean_b $(value mean_b) = 1" near "$(value mean_b)" 1
+
+run "$APPM" compare "$T/a.pfm" "$T/a.pfm"
+check "compare a a exits 0" [ "$rc" -eq 0 ]
+check "compare a a: rmse=0 relmse=0 mae=0" grep -q '^rmse=0 relmse=0 mae=0 ' "$T/out"
+
+run "$APPM" compare "$T/a.pfm" "$T/c.pfm"
+check "compare of different sizes exits 2 (got $rc)" [ "$rc" -eq 2 ]
+check "compare of different sizes explains" grep -q '^appm: ' "$T/err"
+run "$APPM" compare "$T/a.pfm" "$T/no-such.pfm"
+check "compare with a missing file exits 2 (got $rc)" [ "$rc" -eq 2 ]
+check "compare with a missing file names it" grep -q "no-such.pfm" "$T/err"
+
+# two renders of the same scene with different seeds differ; the same seed
+# gives the same image
+small "$SCENE" --seed 1 -o "$T/s1.pfm"
+small "$SCENE" --seed 2 -o "$T/s2.pfm"
+small "$SCENE" --seed 1 --threads 1 -o "$T/s1b.pfm"
+run "$APPM" compare "$T/s1.pfm" "$T/s2.pfm"
+check "compare of seeds 1 and 2 exits 0" [ "$rc" -eq 0 ]
+check "seeds 1 and 2 differ: rmse $(value rmse) > 0" awk -v x="$(value rmse)" 'BEGIN { exit !(x > 0) }'
+check "compare of renders: means agree within 10% ($(value mean_a), $(value mean_b))" \
+    awk -v a="$(value mean_a)" -v b="$(value mean_b)" 'BEGIN { exit !(a > 0.9 * b && a < 1.1 * b) }'
+check "seed 1 on 1 thread and on all threads: the same file" cmp -s "$T/s1.pfm" "$T/s1b.pfm"
+
+# ---- --log and --reference ---------------------------------------------------------
+
+run "$APPM" render "$SCENE" --size 32x32 --passes 3 -q -o "$T/log.pfm" --log "$T/log.csv"
+check "render --log exits 0" [ "$rc" -eq 0 ]
+check "log header starts pass,seconds,photons,rmse,relmse" grep -q '^pass,seconds,photons,rmse,relmse' "$T/log.csv"
+check "log has one row per pass" [ "$(wc -l <"$T/log.csv")" -eq 4 ]
+check "log rows are passes 1, 2, 3 with photon counts, error columns empty" \
+    awk -F, 'NR > 1 { if ($1 != NR - 1 || $2 !~ /^[0-9.]+$/ || $3 !~ /^[0-9]+$/ || $4 != "" || $5 != "") bad = 1 }
+             END { exit bad + 0 }' "$T/log.csv"
+
+run "$APPM" render "$SCENE" --size 32x32 --passes 3 -q -o "$T/log2.pfm" --log "$T/log2.csv" --reference "$T/s1.pfm"
+check "render --log --reference exits 0" [ "$rc" -eq 0 ]
+check "log with reference has one row per pass" [ "$(wc -l <"$T/log2.csv")" -eq 4 ]
+check "log with reference fills rmse and relmse (positive numbers)" \
+    awk -F, 'NR > 1 { if (!($4 + 0 > 0) || !($5 + 0 > 0) || $4 !~ /^[0-9.e+-]+$/) bad = 1 } END { exit bad + 0 }' "$T/log2.csv"
+run "$APPM" render "$SCENE" --size 16x16 --passes 1 -q -o "$T/never.png" --reference "$T/s1.pfm"
+check "a reference of another size exits 2 (got $rc)" [ "$rc" -eq 2 ]
+
+# ---- --aux ------------------------------------------------------------------------
+
+small "$SCENE" --method appm -o "$T/aux.png" --aux "$T/aux"
+check "render --aux exits 0" [ "$rc" -eq 0 ]
+for map in radius variance laplacian; do
+    check "--aux wrote $T/aux-$map.pfm" [ -s "$T/aux-$map.pfm" ]
+    if [ -s "$T/aux-$map.pfm" ]; then
+        check "$T/aux-$map.pfm is a 32x32 PFM" pfm_size "$T/aux-$map.pfm" 32 32
+    fi
+done
+
+# ---- failed writes: a message, a non-zero status, nothing left behind ---------------
+
+small "$SCENE" -o "$T/no-such-folder/x.png"
+check "writing into a missing folder fails (got $rc)" [ "$rc" -ne 0 ]
+check "writing into a missing folder explains" grep -q 'x.png' "$T/err"
+check "writing into a missing folder prints no summary" [ ! -s "$T/out" ]
+
+# The writer writes NAME.tmp and renames it.  With NAME.tmp a link to /dev/full
+# every write fails with "no space left": the disk-full case.
+if [ -c /dev/full ]; then
+    ln -s /dev/full "$T/full.png.tmp"
+    small "$SCENE" -o "$T/full.png"
+    check "writing to a full disk fails (got $rc)" [ "$rc" -ne 0 ]
+    check "writing to a full disk explains" grep -q 'full.png' "$T/err"
+    check "writing to a full disk leaves no file" absent "$T/full.png"
+    check "writing to a full disk removes its temporary" absent "$T/full.png.tmp"
+    # an output that is a device (here /dev/full itself, through a link with
+    # an image name) is written in place: the write fails, the link stays
+    ln -s /dev/full "$T/device.pfm"
+    small "$SCENE" -o "$T/device.pfm"
+    check "writing to /dev/full fails (got $rc)" [ "$rc" -ne 0 ]
+    check "writing to /dev/full explains" grep -q 'device.pfm' "$T/err"
+    check "writing to /dev/full leaves the device alone" [ -L "$T/device.pfm" ]
+    check "writing to /dev/full leaves no temporary" absent "$T/device.pfm.tmp"
+fi
+# a folder in the way of the final name: the rename fails after a complete write
+mkdir -p "$T/taken.pfm"
+small "$SCENE" -o "$T/taken.pfm"
+check "replacing a folder fails (got $rc)" [ "$rc" -ne 0 ]
+check "replacing a folder leaves no temporary" [ ! -e "$T/taken.pfm.tmp" ]
+
+# ---- the embedding example ------------------------------------------------------------
+
+if [ -n "$EMBED" ]; then
+    run "$EMBED" "$SCENE" "$T/embed.png"
+    check "embed exits 0" [ "$rc" -eq 0 ]
+    check "embed wrote a PNG" [ "$(magic "$T/embed.png" 4)" = '211PNG' ]
+fi
+
+# ---- SIGINT: stop after the pass in flight, write, report ----------------------------
+
+"$APPM" render "$SCENE" --size 64x64 --time 30 -q -o "$T/int.pfm" >"$T/int.out" 2>"$T/int.err" &
+pid=$!
+sleep 1
+kill -INT "$pid" 2>/dev/null
+waited=0
+while kill -0 "$pid" 2>/dev/null && [ "$waited" -lt 10 ]; do
+    sleep 1
+    waited=$((waited + 1))
+done
+if kill -0 "$pid" 2>/dev/null; then
+    check "SIGINT ends the render within 10 s" false
+    kill -KILL "$pid" 2>/dev/null
+fi
+wait "$pid"
+rc=$?
+check "SIGINT: exit status 0 (got $rc)" [ "$rc" -eq 0 ]
+check "SIGINT: the summary line" grep -q '^passes=[0-9]* photons=.* output=' "$T/int.out"
+check "SIGINT: the image is written" [ -s "$T/int.pfm" ]
+
+echo "$npass passed, $nfail failed"
+[ "$nfail" -eq 0 ]

@@ -1,0 +1,106 @@
+#!/bin/sh
+# tests/fuzz/run.sh - builds the libFuzzer targets of appm's readers and runs each
+# for a bounded time on a copy of its seed corpus (make fuzz).
+#
+#   sh tests/fuzz/run.sh [obj mtl scene pfm]     (default: all four)
+#
+# Environment:
+#   FUZZ_SECONDS=30    seconds per target
+#   FUZZ_OPTIONAL=1    exit 0 (with a message) when clang's libFuzzer is missing
+#   FUZZ_CC=clang      the compiler
+#
+# Each target: clang -g -O1 -fsanitize=fuzzer,address,undefined (UBSan made fatal,
+# so that a report counts as a crash), run with -rss_limit_mb=2000 -timeout=10.
+# New corpus entries go to build/fuzz/corpus-<target>/ (tests/fuzz/corpus/ is not
+# touched); crash, leak, timeout and OOM inputs go to build/fuzz/artifacts/.  Keep
+# a crash input, minimised (-minimize_crash=1), in tests/fuzz/regressions/ with a
+# descriptive name: tests/t_fuzz_regress.c replays that folder in make test.
+# Prints one line per target (executions, new corpus size, crashes) and exits
+# non-zero if a build failed or any target found a crash.
+# shellcheck disable=SC2086 # $FLAGS and $seeds are word lists on purpose
+set -u
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/../.." && pwd)
+cd "$root" || exit 1
+CC=${FUZZ_CC:-clang}
+SECONDS_EACH=${FUZZ_SECONDS:-30}
+OUT=build/fuzz
+FLAGS="-g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
+targets=${*:-obj mtl scene pfm}
+
+unavailable() {
+    echo "fuzz: $1"
+    if [ "${FUZZ_OPTIONAL:-0}" = 1 ]; then
+        echo "fuzz: skipped (FUZZ_OPTIONAL=1)"
+        exit 0
+    fi
+    echo "fuzz: install clang (with its libFuzzer runtime), or set FUZZ_OPTIONAL=1 to skip"
+    exit 1
+}
+
+mkdir -p "$OUT/artifacts"
+# Can this compiler link a trivial fuzzer at all?
+if ! command -v "$CC" >/dev/null 2>&1; then unavailable "$CC not found"; fi
+cat >"$OUT/probe.c" <<'EOF'
+#include <stddef.h>
+#include <stdint.h>
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) { (void)data; (void)size; return 0; }
+EOF
+if ! $CC $FLAGS "$OUT/probe.c" -o "$OUT/probe" >"$OUT/probe.log" 2>&1; then
+    cat "$OUT/probe.log"
+    unavailable "$CC cannot link a libFuzzer program (-fsanitize=fuzzer)"
+fi
+
+failed=0
+total_execs=0
+total_crashes=0
+summary=""
+for t in $targets; do
+    src=tests/fuzz/fuzz_$t.c
+    if [ ! -f "$src" ]; then
+        echo "fuzz: no target $t ($src)"
+        failed=1
+        continue
+    fi
+    echo "fuzz: building $t"
+    if ! $CC $FLAGS -std=c99 "$src" -o "$OUT/fuzz_$t" -lm -pthread; then
+        echo "FAIL fuzz_$t: build failed"
+        summary="$summary
+fuzz_$t: BUILD FAILED"
+        failed=1
+        continue
+    fi
+    corpus="$OUT/corpus-$t"
+    rm -rf "$corpus" "$OUT/artifacts/$t"
+    mkdir -p "$corpus" "$OUT/artifacts/$t"
+    cp tests/fuzz/corpus/"$t"/* "$corpus"/ 2>/dev/null
+    seeds=""
+    [ -d tests/fuzz/regressions ] && seeds=tests/fuzz/regressions
+    echo "fuzz: running $t for $SECONDS_EACH s"
+    "./$OUT/fuzz_$t" -max_total_time="$SECONDS_EACH" -rss_limit_mb=2000 -timeout=10 \
+        -max_len=8192 -print_final_stats=1 \
+        -artifact_prefix="$OUT/artifacts/$t/" "$corpus" $seeds >"$OUT/fuzz_$t.log" 2>&1
+    rc=$?
+    execs=$(sed -n 's/^stat::number_of_executed_units: *\([0-9]*\).*/\1/p' "$OUT/fuzz_$t.log" |
+        tail -n 1)
+    execs=${execs:-0}
+    crashes=$(find "$OUT/artifacts/$t" -type f | wc -l | tr -d ' ')
+    size=$(find "$corpus" -type f | wc -l | tr -d ' ')
+    line="fuzz_$t: $execs executions, corpus $size files, $crashes crashes"
+    if [ "$crashes" -ne 0 ] || [ "$rc" -ne 0 ]; then
+        grep -E 'ERROR|SUMMARY|invariant|leaked|runtime error|deadly signal|Test unit written' \
+            "$OUT/fuzz_$t.log" | head -n 20
+        line="$line (exit status $rc; inputs in $OUT/artifacts/$t/, log $OUT/fuzz_$t.log)"
+        [ "$crashes" -eq 0 ] && crashes=1
+        failed=1
+    fi
+    echo "$line"
+    summary="$summary
+$line"
+    total_execs=$((total_execs + execs))
+    total_crashes=$((total_crashes + crashes))
+done
+echo "fuzz summary:$summary"
+echo "fuzz: $total_execs executions, $total_crashes crashes"
+exit $failed

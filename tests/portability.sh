@@ -1,0 +1,221 @@
+#!/bin/sh
+# tests/portability.sh - the compiler matrix of make portability (style.md (c)).
+#
+#   gcc, clang      -std=c99 -pedantic -Wall -Wextra -Wshadow -Wvla -Werror, appm.c + main.c;
+#                   tests/t_portable.c built by gcc and run: its furnace means are the
+#                   reference (APPM_PORTABLE_REF) for every other run of it below
+#   tcc             -Wall -Werror, appm.c + main.c, and tests/t_portable.c built and run
+#   no threads      -DAPPM_THREADS=0: no pthread symbol in the object (nm), t_portable runs
+#   mingw-w64       Win32 threads (the default) and -DAPPM_THREADS=1 (winpthreads)
+#   the header      C89 and C++98, syntax only
+#   -ffast-math     must fail, with the library's #error
+# Optional, each behind a variable:
+#   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
+#   QEMU=1          t_portable built for aarch64 and big-endian s390x runs under qemu-user
+# A compiler or tool that is not installed is skipped with a message, unless
+# PORTABILITY_STRICT=1, where it counts as a failure.  Each step prints ok, FAIL or
+# skip; the last line is "N passed, N failed"; the exit status is non-zero on failure.
+# Run from anywhere; works in the repository root, builds into build/port/.
+# shellcheck disable=SC2086 # $C99 and $cc are word lists on purpose
+set -u
+cd "$(dirname "$0")/.." || exit 1
+OUT=build/port
+mkdir -p "$OUT" tests/out
+STRICT=${PORTABILITY_STRICT:-0}
+C99="-std=c99 -pedantic -Wall -Wextra -Wshadow -Wvla -Werror"
+pass=0
+fail=0
+log="$OUT/step.log"
+
+ok() {
+    echo "ok   $1"
+    pass=$((pass + 1))
+}
+
+bad() {
+    [ -s "$log" ] && tail -n 25 "$log" | sed 's/^/     | /'
+    echo "FAIL $1"
+    fail=$((fail + 1))
+}
+
+# have TOOL STEP: 0 if TOOL is installed; otherwise prints skip (or FAIL if strict).
+have() {
+    if command -v "$1" >/dev/null 2>&1; then return 0; fi
+    : >"$log"
+    if [ "$STRICT" = 1 ]; then
+        bad "$2 ($1 is not installed; PORTABILITY_STRICT=1)"
+    else
+        echo "skip $2: $1 is not installed"
+    fi
+    return 1
+}
+
+# step NAME COMMAND...: runs the command, output to the log; ok if it exits 0.
+step() {
+    name=$1
+    shift
+    if "$@" >"$log" 2>&1; then ok "$name"; else bad "$name"; fi
+}
+
+# run_test NAME COMMAND...: runs a test program; ok if it exits 0 and its last
+# line says "N passed, 0 failed".
+run_test() {
+    name=$1
+    shift
+    if command -v timeout >/dev/null 2>&1; then
+        timeout 600 "$@" >"$log" 2>&1
+    else
+        "$@" >"$log" 2>&1
+    fi
+    rc=$?
+    last=$(tr -d '\r' <"$log" | tail -n 1)
+    if [ "$rc" -eq 0 ] && printf '%s\n' "$last" | grep -q '^[0-9][0-9]* passed, 0 failed$'; then
+        ok "$name ($last)"
+    else
+        bad "$name (exit status $rc)"
+    fi
+}
+
+# ---- native compilers -----------------------------------------------------------
+
+for cc in gcc clang; do
+    if have $cc "$cc -std=c99 -pedantic -Werror"; then
+        step "$cc -std=c99 -pedantic -Werror: appm.c main.c" \
+            $cc $C99 -O2 appm.c main.c -o "$OUT/appm-$cc" -lm -pthread
+    fi
+done
+
+# The native t_portable: the reference for the other machines' furnace means.
+APPM_PORTABLE_REF=
+if have gcc "gcc: tests/t_portable.c runs (the reference)"; then
+    if gcc $C99 -O2 tests/t_portable.c -o "$OUT/t_portable" -lm -pthread >"$log" 2>&1; then
+        run_test "gcc: tests/t_portable.c runs (the reference)" "./$OUT/t_portable"
+        APPM_PORTABLE_REF=$(grep '^furnace means:' "$log" | tail -n 1)
+    else
+        bad "gcc: tests/t_portable.c"
+    fi
+fi
+export APPM_PORTABLE_REF
+
+if have tcc "tcc -Wall -Werror"; then
+    step "tcc -Wall -Werror: appm.c main.c" \
+        tcc -Wall -Werror appm.c main.c -o "$OUT/appm-tcc" -lm -lpthread
+    if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
+        >"$log" 2>&1; then
+        run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
+    else
+        bad "tcc -Wall -Werror: tests/t_portable.c"
+    fi
+fi
+
+# ---- no threads -------------------------------------------------------------------
+
+if have gcc "-DAPPM_THREADS=0"; then
+    step "gcc -DAPPM_THREADS=0: appm.c main.c, linked without -pthread" \
+        gcc $C99 -O2 -DAPPM_THREADS=0 appm.c main.c -o "$OUT/appm-nothreads" -lm
+    if gcc $C99 -O2 -DAPPM_THREADS=0 -c appm.c -o "$OUT/appm-nothreads.o" >"$log" 2>&1 &&
+        gcc $C99 -O2 -c appm.c -o "$OUT/appm-threads.o" >>"$log" 2>&1; then
+        if have nm "nm: no pthread symbol with -DAPPM_THREADS=0"; then
+            nm "$OUT/appm-nothreads.o" >"$OUT/nothreads.nm" 2>"$log"
+            nm "$OUT/appm-threads.o" >"$OUT/threads.nm" 2>>"$log"
+            if grep -qi pthread "$OUT/nothreads.nm"; then
+                grep -i pthread "$OUT/nothreads.nm" >"$log"
+                bad "nm: no pthread symbol with -DAPPM_THREADS=0"
+            elif ! grep -qi pthread "$OUT/threads.nm"; then
+                echo "the default build has no pthread symbol either: is nm working?" >"$log"
+                bad "nm: no pthread symbol with -DAPPM_THREADS=0"
+            else
+                ok "nm: no pthread symbol with -DAPPM_THREADS=0"
+            fi
+        fi
+    else
+        bad "gcc -DAPPM_THREADS=0 -c appm.c"
+    fi
+    if gcc $C99 -O2 -DAPPM_THREADS=0 tests/t_portable.c -o "$OUT/t_portable-nothreads" -lm \
+        >"$log" 2>&1; then
+        run_test "-DAPPM_THREADS=0: tests/t_portable.c runs" "./$OUT/t_portable-nothreads"
+    else
+        bad "gcc -DAPPM_THREADS=0: tests/t_portable.c"
+    fi
+fi
+
+# ---- mingw-w64 ----------------------------------------------------------------------
+
+MINGW=x86_64-w64-mingw32-gcc
+if have $MINGW "mingw-w64 (Win32 threads)"; then
+    step "mingw-w64 -Werror, Win32 threads: appm.c main.c" \
+        $MINGW $C99 -O2 appm.c main.c -o "$OUT/appm-win32.exe"
+    step "mingw-w64 -Werror, -DAPPM_THREADS=1 (winpthreads): appm.c main.c" \
+        $MINGW $C99 -O2 -DAPPM_THREADS=1 appm.c main.c -o "$OUT/appm-winpthreads.exe" -lpthread
+fi
+
+# ---- the header alone ----------------------------------------------------------------
+
+if have gcc "appm.h as C89"; then
+    step "appm.h: gcc -x c -std=c89 -pedantic -Werror -fsyntax-only" \
+        gcc -x c -std=c89 -pedantic -Wall -Wextra -Werror -fsyntax-only appm.h
+fi
+if have g++ "appm.h as C++98"; then
+    step "appm.h: g++ -x c++ -std=c++98 -pedantic -Werror -fsyntax-only" \
+        g++ -x c++ -std=c++98 -pedantic -Wall -Wextra -Werror -fsyntax-only appm.h
+fi
+
+# ---- -ffast-math must be refused -------------------------------------------------------
+
+if have gcc "-ffast-math is refused"; then
+    if gcc -std=c99 -O2 -ffast-math -c appm.c -o "$OUT/fast-math.o" >"$log" 2>&1; then
+        echo "appm.c compiled with -ffast-math" >"$log"
+        bad "-ffast-math is refused by the #error"
+    elif grep -q 'fast-math' "$log" && grep -q 'error' "$log"; then
+        ok "-ffast-math is refused by the #error"
+    else
+        bad "-ffast-math is refused by the #error (it failed, but not with the #error)"
+    fi
+fi
+
+# ---- optional: wine ------------------------------------------------------------------------
+
+if [ "${WINE:-0}" = 1 ]; then
+    if have $MINGW "wine: t_portable.exe" && have wine "wine: t_portable.exe"; then
+        WINEDEBUG=-all
+        export WINEDEBUG
+        if $MINGW $C99 -O2 tests/t_portable.c -o "$OUT/t_portable.exe" >"$log" 2>&1; then
+            run_test "wine: t_portable.exe (Win32 threads)" wine "$OUT/t_portable.exe"
+        else
+            bad "mingw-w64: tests/t_portable.c"
+        fi
+        # -static: winpthreads' DLL is not on wine's path
+        if $MINGW $C99 -O2 -DAPPM_THREADS=1 -static tests/t_portable.c \
+            -o "$OUT/t_portable-pthread.exe" -lpthread >"$log" 2>&1; then
+            run_test "wine: t_portable-pthread.exe (winpthreads)" wine "$OUT/t_portable-pthread.exe"
+        else
+            bad "mingw-w64 -DAPPM_THREADS=1 -static: tests/t_portable.c"
+        fi
+    fi
+else
+    echo "skip wine: set WINE=1 to run a mingw-w64 build under wine"
+fi
+
+# ---- optional: qemu-user -----------------------------------------------------------------------
+
+if [ "${QEMU:-0}" = 1 ]; then
+    for triple in aarch64-linux-gnu s390x-linux-gnu; do
+        arch=${triple%%-*}
+        what="$arch: t_portable under qemu"
+        if have $triple-gcc "$what" && have qemu-$arch "$what"; then
+            step "$triple-gcc -Werror: appm.c main.c" \
+                $triple-gcc $C99 -O2 appm.c main.c -o "$OUT/appm-$arch" -lm -pthread
+            if $triple-gcc $C99 -O2 tests/t_portable.c -o "$OUT/t_portable-$arch" -lm -pthread \
+                >"$log" 2>&1; then
+                run_test "qemu-$arch: t_portable" qemu-$arch -L /usr/$triple "$OUT/t_portable-$arch"
+            else
+                bad "$triple-gcc: tests/t_portable.c"
+            fi
+        fi
+    done
+else
+    echo "skip qemu: set QEMU=1 to run aarch64 and big-endian s390x builds under qemu-user"
+fi
+
+echo "$pass passed, $fail failed"
+[ "$fail" -eq 0 ]
