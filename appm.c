@@ -1562,7 +1562,8 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
         cr[1] = e1[2] * e2[0] - e1[0] * e2[2];
         cr[2] = e1[0] * e2[1] - e1[1] * e2[0];
         area2 = sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]);
-        if (!(area2 > 0.0) || !(area2 < FLT_MAX)) {
+        /* degenerate as stored: the area must survive the conversion to float */
+        if (!((float)(0.5 * area2) > 0.0f) || !(area2 < FLT_MAX)) {
             L->dropped++;
             appm__warn(L, APPM__W_DEGENERATE, line, "degenerate (zero-area) triangles dropped");
             continue;
