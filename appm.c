@@ -3985,8 +3985,26 @@ static void appm__loader_init(appm__loader *L, appm__mem *m, const appm_config *
     appm__array_init(&L->lights, sizeof(appm__light));
 }
 
-/* Common path of the two public loaders.  `obj` non-NULL: an in-memory OBJ. */
-static appm_status appm__scene_load(const char *path, const char *obj, size_t obj_len,
+/* A loader ready to read `file`, with material 0, the default diffuse, in place. */
+static appm_status appm__loader_begin(appm__loader *L, appm__mem *m, const appm_config *cfg,
+                                      appm_diag *diag, const char *file)
+{
+    appm__material *def;
+    appm__loader_init(L, m, cfg, diag);
+    L->file = file;
+    def = (appm__material *)appm__array_push(m, &L->mat);
+    if (!def || !appm__array_push(m, &L->names)) return APPM_ERR_NOMEM;
+    def->kind = APPM__MAT_DIFFUSE;
+    def->color = appm__v(0.8f, 0.8f, 0.8f);
+    def->ior = 1.5f;
+    return APPM_OK;
+}
+
+enum { APPM__TEXT_NONE = 0, APPM__TEXT_OBJ, APPM__TEXT_SCENE };
+
+/* Common path of the public loaders.  text_kind NONE: read `path` (a .scene or
+ * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead. */
+static appm_status appm__scene_load(const char *path, int text_kind, const char *text, size_t text_len,
                                     const char *mtl, size_t mtl_len, const appm_config *cfg,
                                     appm_scene **out, appm_diag *diag)
 {
@@ -3994,7 +4012,6 @@ static appm_status appm__scene_load(const char *path, const char *obj, size_t ob
     appm__loader L;
     appm_scene *s;
     appm_status st;
-    appm__material *def;
     appm_diag local;
     if (!diag) diag = &local;
     appm__diag_clear(diag);
@@ -4005,20 +4022,15 @@ static appm_status appm__scene_load(const char *path, const char *obj, size_t ob
     m.diag = diag;
     s = (appm_scene *)appm__alloc(&m, 1, sizeof *s);
     if (!s) return APPM_ERR_NOMEM;
-    appm__loader_init(&L, &m, cfg, diag);
-    L.file = path;
+    st = appm__loader_begin(&L, &m, cfg, diag, path);
     L.mem_mtl = mtl;
     L.mem_mtl_len = mtl ? mtl_len : 0;
-    if (mtl) L.mem_mtl = mtl;
     appm__copy_str(s->name, sizeof s->name, path);
-    def = (appm__material *)appm__array_push(&m, &L.mat); /* material 0: default diffuse */
-    st = APPM_ERR_NOMEM;
-    if (def && appm__array_push(&m, &L.names)) {
-        def->kind = APPM__MAT_DIFFUSE;
-        def->color = appm__v(0.8f, 0.8f, 0.8f);
-        def->ior = 1.5f;
-        if (obj) {
-            st = appm__obj_parse(&L, obj, obj_len, path);
+    if (st == APPM_OK) {
+        if (text_kind == APPM__TEXT_OBJ) {
+            st = appm__obj_parse(&L, text, text_len, path);
+        } else if (text_kind == APPM__TEXT_SCENE) {
+            st = appm__scene_parse(&L, text, text_len, path);
         } else if (appm__ends_with(path, ".obj")) {
             L.file = NULL;
             st = appm__obj_load(&L, path, 0);
@@ -4053,7 +4065,7 @@ static appm_status appm__scene_load(const char *path, const char *obj, size_t ob
 APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
                                      appm_diag *diag)
 {
-    return appm__scene_load(path, NULL, 0, NULL, 0, cfg, out, diag);
+    return appm__scene_load(path, APPM__TEXT_NONE, NULL, 0, NULL, 0, cfg, out, diag);
 }
 
 APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len, const char *mtl,
@@ -4066,7 +4078,8 @@ APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len,
         if (out) *out = NULL;
         return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, "no OBJ text");
     }
-    return appm__scene_load(name ? name : "(memory)", obj, obj_len, mtl, mtl_len, cfg, out, diag);
+    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_OBJ, obj, obj_len, mtl, mtl_len, cfg, out,
+                            diag);
 }
 
 APPM_API void appm_scene_destroy(appm_scene *scene)

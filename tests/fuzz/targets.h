@@ -33,8 +33,7 @@
  * APPM_ERR_IO, harmlessly.  Buffers are exact-size copies, so ASan sees a read
  * one byte past the end of any of them.
  *
- * fuzz__scene_from_buffer mirrors the tail of appm__scene_load (section 12);
- * keep the two in step. */
+ * fuzz__scene_from_buffer goes through appm__scene_load (section 12). */
 #ifndef APPM_FUZZ_TARGETS_H
 #define APPM_FUZZ_TARGETS_H
 
@@ -292,15 +291,7 @@ static void fuzz__mem_begin(appm__mem *m, fuzz_env *e)
 /* `m` comes from fuzz__mem_begin. */
 static appm_status fuzz__loader_begin(appm__loader *L, appm__mem *m, fuzz_env *e, const char *file)
 {
-    appm__material *def;
-    appm__loader_init(L, m, &e->cfg, &e->diag);
-    L->file = file;
-    def = (appm__material *)appm__array_push(m, &L->mat);
-    if (!def || !appm__array_push(m, &L->names)) return APPM_ERR_NOMEM;
-    def->kind = APPM__MAT_DIFFUSE;
-    def->color = appm__v(0.8f, 0.8f, 0.8f);
-    def->ior = 1.5f;
-    return APPM_OK;
+    return appm__loader_begin(L, m, &e->cfg, &e->diag, file);
 }
 
 /* Materials after appm__mtl_parse: names inside the pool, kinds known, colours
@@ -527,37 +518,12 @@ static int fuzz_mtl_one(const unsigned char *data, size_t size)
 
 /* ---- .scene -------------------------------------------------------------------- */
 
-/* appm__scene_load for a .scene held in memory: parse, finish, as section 12. */
+/* A .scene held in memory, through the loaders' common path. */
 static appm_status fuzz__scene_from_buffer(const char *buf, size_t len, const char *path,
                                            fuzz_env *e, appm_scene **out)
 {
-    appm__mem m;
-    appm__loader L;
-    appm_scene *s;
-    appm_status st;
-    *out = NULL;
-    fuzz__mem_begin(&m, e);
-    s = (appm_scene *)appm__alloc(&m, 1, sizeof *s);
-    if (!s) return APPM_ERR_NOMEM;
-    st = fuzz__loader_begin(&L, &m, e, path);
-    appm__copy_str(s->name, sizeof s->name, path);
-    if (st == APPM_OK) st = appm__scene_parse(&L, buf, len, path);
-    if (st == APPM_OK) {
-        s->mem = m;
-        st = appm__scene_finish(s, &L, path);
-        m = s->mem;
-    }
-    if (st == APPM_ERR_NOMEM) appm__fail(&e->diag, APPM_ERR_NOMEM, path, 0, "out of memory");
-    appm__loader_free(&L);
-    if (st != APPM_OK) {
-        appm__scene_free_parts(&m, s);
-        appm__free(&m, s);
-        return st;
-    }
-    m.diag = NULL;
-    s->mem = m;
-    *out = s;
-    return APPM_OK;
+    appm__diag_clear(&e->diag);
+    return appm__scene_load(path, APPM__TEXT_SCENE, buf, len, NULL, 0, &e->cfg, out, &e->diag);
 }
 
 /* Absolute `mesh` paths become relative (to a folder that does not exist). */
