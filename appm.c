@@ -3576,6 +3576,13 @@ static double appm__appm_radius(double r1, double rb, uint64_t M, uint64_t j, co
 {
     double sj = pow((double)j, -1.0 / 6.0), rk = r1 * sj, rad = rk;
     double lo = APPM__RLO * (r1 < rb ? r1 : rb) * sj, hi = APPM__RHI * (r1 > rb ? r1 : rb) * sj;
+    if (j > 1 && p->n < APPM__KMIN && p->r > 0.0) {
+        /* too few photons seen to estimate anything: widen, as a k-nearest-
+         * neighbour radius would, instead of waiting at a radius that may be
+         * the reason so few photons arrive */
+        rad = 2.0 * p->r;
+        return rad > hi ? hi : rad;
+    }
     if (j > APPM__WARMUP && p->n >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
         rad = appm__r_opt(p->S, appm__di2(p, appm__lap_count(j - 1)), (double)M * (double)j, APPM__CF);
         if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */

@@ -275,6 +275,114 @@ static void test_progressive_toy(void)
               a3, p1, p3);
 }
 
+/* ---- The selector in a real scene ----------------------------------------------
+ *
+ * CornellBox-Sphere at 32x32 (glass caustic, mirror, diffuse walls), equal
+ * passes.  The reference is the mean of two independent path-traced renders A
+ * and B; its own noise, E[(A - B)^2] / 4, is subtracted from every measured MSE
+ * (a method's error and the reference's are independent, so they add).  MSEs
+ * are averaged over several seeds: one seed's RMSE at this size varies by
+ * about 10% (a few bright pixels dominate). */
+static double scene_mse(const appm_scene *s, appm_method method, double radius, uint64_t seed,
+                        int passes, const appm_image *ref)
+{
+    appm_config cfg;
+    appm_renderer *r = NULL;
+    appm_image img;
+    appm_compare_result c;
+    appm_diag d;
+    int i;
+    appm_config_init(&cfg);
+    cfg.method = method;
+    cfg.radius = radius;
+    cfg.seed = seed;
+    cfg.width = cfg.height = 32;
+    cfg.threads = 2;
+    if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) return -1.0;
+    for (i = 0; i < passes; ++i) appm_renderer_pass(r);
+    appm_renderer_image(r, &img);
+    appm_image_compare(&img, ref, &c);
+    appm_renderer_destroy(r);
+    return c.rmse * c.rmse;
+}
+
+static int render_into(const appm_scene *s, appm_method method, uint64_t seed, int passes, float *out)
+{
+    appm_config cfg;
+    appm_renderer *r = NULL;
+    appm_image img;
+    appm_diag d;
+    int i;
+    appm_config_init(&cfg);
+    cfg.method = method;
+    cfg.seed = seed;
+    cfg.width = cfg.height = 32;
+    cfg.threads = 2;
+    if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) return 0;
+    for (i = 0; i < passes; ++i) appm_renderer_pass(r);
+    appm_renderer_image(r, &img);
+    memcpy(out, img.rgb, 32 * 32 * 3 * sizeof(float));
+    appm_renderer_destroy(r);
+    return 1;
+}
+
+static void test_scene_insensitivity(void)
+{
+    static float a[32 * 32 * 3], b[32 * 32 * 3], m[32 * 32 * 3];
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_image A = {32, 32, a}, B = {32, 32, b}, ref = {32, 32, m};
+    appm_compare_result c;
+    double ref_mse, r0, mse[5] = {0, 0, 0, 0, 0};
+    const double scale[5] = {0.25, 1.0, 4.0, 0.25, 4.0}; /* appm x3, then ppm x2 */
+    int k, i, seeds = check_quick() ? 4 : 6, passes = 256, refpasses = check_quick() ? 2048 : 4096;
+    if (appm_scene_load("scenes/cornell-sphere.scene", NULL, &s, &d) != APPM_OK) {
+        CHECK_MSG(0, "cannot load the sphere box: %s", d.message);
+        return;
+    }
+    CHECK(render_into(s, APPM_METHOD_PT, 101, refpasses, a));
+    CHECK(render_into(s, APPM_METHOD_PT, 102, refpasses, b));
+    for (i = 0; i < 32 * 32 * 3; ++i) m[i] = 0.5f * (a[i] + b[i]);
+    appm_image_compare(&A, &B, &c);
+    ref_mse = c.rmse * c.rmse / 4.0;
+    { /* the automatic radius of this size */
+        appm_config cfg;
+        appm_renderer *r;
+        appm_stats st;
+        appm_config_init(&cfg);
+        cfg.width = cfg.height = 32;
+        appm_renderer_create(s, &cfg, &r, &d);
+        appm_renderer_pass(r);
+        appm_renderer_stats(r, &st);
+        r0 = st.initial_radius;
+        appm_renderer_destroy(r);
+    }
+    for (k = 0; k < 5; ++k) {
+        for (i = 0; i < seeds; ++i)
+            mse[k] += scene_mse(s, k < 3 ? APPM_METHOD_APPM : APPM_METHOD_PPM, r0 * scale[k],
+                                (uint64_t)(7 + i), passes, &ref) / seeds;
+        mse[k] -= ref_mse;
+    }
+    printf("sphere box 32x32, %d passes, %d seeds, reference noise rmse %.4f: appm r0 x1/4 %.4f, x1 %.4f, "
+           "x4 %.4f; ppm x1/4 %.4f, x4 %.4f\n",
+           passes, seeds, sqrt(ref_mse), sqrt(mse[0]), sqrt(mse[1]), sqrt(mse[2]), sqrt(mse[3]), sqrt(mse[4]));
+    for (k = 0; k < 5; ++k) CHECK_MSG(mse[k] > 0.0, "MSE %d below the reference's noise", k);
+    {
+        double lo = mse[0], hi = mse[0];
+        for (k = 1; k < 3; ++k) {
+            lo = mse[k] < lo ? mse[k] : lo;
+            hi = mse[k] > hi ? mse[k] : hi;
+        }
+        CHECK_MSG(sqrt(hi) < 1.3 * sqrt(lo), "appm RMSE over r0 x1/4..x4 spans %.4f .. %.4f", sqrt(lo),
+                  sqrt(hi));
+    }
+    for (k = 0; k < 3; ++k)
+        CHECK_MSG(mse[k] < mse[3] && mse[k] < mse[4],
+                  "appm r0 x%.2f (%.4f) not better than ppm with a bad radius (%.4f, %.4f)", scale[k],
+                  sqrt(mse[k]), sqrt(mse[3]), sqrt(mse[4]));
+    appm_scene_destroy(s);
+}
+
 int main(void)
 {
     test_kernel_normalisation();
@@ -282,5 +390,6 @@ int main(void)
     test_optimal_radius();
     test_selector_guards();
     test_progressive_toy();
+    test_scene_insensitivity();
     return check_finish();
 }
