@@ -5,6 +5,7 @@
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
 #   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
+#   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 # Without make:  cc -std=c99 -O2 appm.c main.c -lm -pthread -o appm
 
 CC      ?= cc
@@ -17,7 +18,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability bench bench-quick fuzz clean
+.PHONY: all test test-long portability dynamic bench bench-quick fuzz clean
 
 all: appm
 
@@ -46,6 +47,9 @@ test-long: $(TESTS)
 
 portability:
 	sh tests/portability.sh
+
+dynamic: appm
+	sh tests/dynamic.sh
 
 bench: appm
 	sh bench/run.sh full

@@ -2638,6 +2638,7 @@ static int appm__emit(const appm_scene *s, appm__rng *rng, appm__photon_start *p
     appm__v3 o, d;
     float w;
     ps->skip = UINT32_MAX;
+    ps->gamma = appm__v(0, 0, 0);
     if (!(l->pick > 0.0)) return 0;
     if (l->kind == APPM__LIGHT_AREA) {
         float b1, b2;
@@ -2775,12 +2776,16 @@ static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi
  *
  * The renderer's state is declared here, since every later section uses it.
  */
-typedef struct appm__vp { /* visible point of one pixel in the current pass: 52 bytes */
+/* Everything a pass computes for a pixel stays here until the gather commits
+ * it to the pixel's state, so a pass that fails (out of memory in the photon
+ * pass) leaves no trace and can simply be run again. */
+typedef struct appm__vp { /* visible point of one pixel in the current pass: 60 bytes */
     appm__v3 x;           /* position */
     appm__v3 n;           /* unit geometric normal on the eye's side */
     appm__v3 wf;          /* W f = W albedo / pi: multiplies each photon's gamma */
-    float ld_lum;         /* luminance of this pass's direct term */
+    appm__v3 ld;          /* this pass's emission + direct light */
     float footprint;      /* width of the pixel at x, scene units */
+    float r;              /* appm: the radius of this pass */
     uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
     uint8_t pad[3];
 } appm__vp;
@@ -3025,11 +3030,10 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         skip = sf.tri;
     }
     if (appm__finite3(ld)) {
-        appm__add3(r->pix[pi].ld, ld);
-        vp->ld_lum = appm__lum(ld);
+        vp->ld = ld;
     } else {
         r->dropped[worker]++;
-        vp->ld_lum = 0.0f;
+        vp->ld = appm__v(0, 0, 0);
     }
 }
 
@@ -3094,7 +3098,10 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     unsigned segs = 0;
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
     appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_PHOTON, index);
-    if (!appm__emit(s, &rng, &ps)) return 1;
+    if (!appm__emit(s, &rng, &ps)) {
+        if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
+        return 1;
+    }
     ray = ps.ray;
     gamma = ps.gamma;
     skip = ps.skip;
@@ -3656,6 +3663,8 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
         double e[3] = {0, 0, 0}, s = 0.0, dl = 0.0;
         int c;
         memset(&g, 0, sizeof g);
+        appm__add3(p->ld, vp->ld); /* the pass has succeeded: commit its direct term */
+        if (r->method == APPM_METHOD_APPM) p->r = vp->r;
         if (vp->segs > 0 && vp->segs < r->max_depth) {
             g.x = vp->x;
             g.n = vp->n;
@@ -3696,7 +3705,8 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
         {
             double hr = g.h / r->r_auto;
             appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl,
-                               g.h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g.count, (double)vp->ld_lum);
+                               g.h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g.count,
+                               (double)appm__lum(vp->ld));
         }
     }
 }
@@ -3919,6 +3929,15 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
     for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
     if (!(total > 0.0) || !(total < HUGE_VAL))
         return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
+    /* Lights are picked by power, so every photon starts with about the total
+     * power in each channel: at most 3 times it (a channel against the mean of
+     * three), 15 times for a spot whose falloff spans its whole cone.  Photon
+     * weights are floats: beyond FLT_MAX / 16 every photon would overflow. */
+    if (total > FLT_MAX / 16.0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
+                          "the lights emit %g W, more than a photon's single-precision weight can "
+                          "carry (%g W): use larger units or a smaller Ke",
+                          total, FLT_MAX / 16.0);
     s->light_cdf[0] = 0.0;
     for (i = 0; i < k; ++i) {
         s->light[i].pick = appm__mean3(s->light[i].power) / total;
@@ -4165,7 +4184,6 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     appm_renderer *r;
     appm_config c;
     size_t npix;
-    int k;
     appm_diag local;
     if (!diag) diag = &local;
     appm__diag_clear(diag);
@@ -4226,7 +4244,6 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->vp = (appm__vp *)appm__alloc(&r->mem, npix, sizeof *r->vp);
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
-    for (k = 0; k < APPM_AUX_COUNT; ++k) r->aux[k] = (float *)appm__alloc(&r->mem, npix, sizeof(float));
     if (r->method != APPM_METHOD_PT) {
         r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks, sizeof *r->chunk);
         r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
@@ -4236,8 +4253,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }
-    if (!r->vp || !r->pix || !r->image || !r->aux[APPM_AUX_COUNT - 1] || !r->aux[0] ||
-        !r->aux[1] || !r->aux[2] ||
+    if (!r->vp || !r->pix || !r->image ||
         (r->method != APPM_METHOD_PT && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
@@ -4272,8 +4288,8 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
     uint32_t x;
     (void)worker;
     for (x = 0; x < r->w; ++x) {
-        appm__pixel *p = &r->pix[(size_t)row * r->w + x];
-        p->r = appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, p);
+        size_t i = (size_t)row * r->w + x;
+        r->vp[i].r = (float)appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, &r->pix[i]);
     }
 }
 
@@ -4286,7 +4302,7 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
 static double appm__default_radius(appm_renderer *r)
 {
     size_t n = 0, i, npix = (size_t)r->w * r->h;
-    float *tmp = r->aux[0];
+    float *tmp = r->image; /* scratch: the image is rebuilt on request */
     double rad = 0.0;
     for (i = 0; i < npix; ++i)
         if (r->vp[i].segs > 0 && r->vp[i].footprint > 0.0f) tmp[n++] = r->vp[i].footprint;
@@ -4300,11 +4316,13 @@ static double appm__default_radius(appm_renderer *r)
 static float appm__median_gather_radius(appm_renderer *r)
 {
     size_t n = 0, i, npix = (size_t)r->w * r->h;
-    float *tmp = r->aux[0];
+    float *tmp = r->image; /* scratch: the image is rebuilt on request */
     for (i = 0; i < npix; ++i) {
         double g;
         if (r->vp[i].segs == 0) continue;
-        g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2) : r->pix[i].r;
+        g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2)
+            : r->method == APPM_METHOD_APPM ? (double)r->vp[i].r
+                                            : r->pix[i].r;
         if (r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)) {
             double h2 = 2.0 * appm__lap_h(r->r_auto, r->pass);
             if (h2 > g) g = h2;
@@ -4447,6 +4465,10 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
     if (which == APPM_AUX_ERROR && r->method == APPM_METHOD_PPM) return NULL;
     npix = (size_t)r->w * r->h;
     j = (double)r->pass;
+    if (!r->aux[which]) { /* allocated on first request: most renders never ask */
+        r->aux[which] = (float *)appm__alloc(&r->mem, npix, sizeof(float));
+        if (!r->aux[which]) return NULL;
+    }
     a = r->aux[which];
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];

@@ -302,8 +302,9 @@ APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
 
 /* Diagnostic images of the adaptive method (a teacher's pictures), width*height
  * floats each, borrowed until the next pass.  Returns NULL when the method keeps
- * no such map (e.g. laplacian for ppm) or before the first pass.
- *   RADIUS     the radius each pixel will gather with next (scene units)
+ * no such map (e.g. laplacian for ppm), before the first pass, or when the map's
+ * memory (allocated on the first request) cannot be had.
+ *   RADIUS     the radius each pixel gathered with in the last pass (scene units)
  *   VARIANCE   the estimated variance of the pixel (luminance)
  *   LAPLACIAN  the estimated pixel Laplacian dI (luminance per area^2)
  *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)        */
