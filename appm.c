@@ -2039,17 +2039,28 @@ static int appm__tri_hit(const appm__ray *r, const appm__tri *tr, appm__hit *h)
 static inline int appm__box_hit(const appm__ray *r, const appm__node *n, float tmax, float slack,
                                 float *tnear)
 {
-    float t0 = r->tmin, t1 = tmax, v[6];
-    int k;
-    v[0] = (n->bmin[0] - r->o.x) * r->inv.x;
-    v[1] = (n->bmax[0] - r->o.x) * r->inv.x;
-    v[2] = (n->bmin[1] - r->o.y) * r->inv.y;
-    v[3] = (n->bmax[1] - r->o.y) * r->inv.y;
-    v[4] = (n->bmin[2] - r->o.z) * r->inv.z;
-    v[5] = (n->bmax[2] - r->o.z) * r->inv.z;
-    for (k = 0; k < 6; k += 2) {
-        float lo = v[k] < v[k + 1] ? v[k] : v[k + 1], hi = v[k] < v[k + 1] ? v[k + 1] : v[k];
-        if (!(lo <= hi)) continue; /* NaN: in a bounding plane */
+    float t0 = r->tmin, t1 = tmax, a, b, lo, hi;
+    a = (n->bmin[0] - r->o.x) * r->inv.x;
+    b = (n->bmax[0] - r->o.x) * r->inv.x;
+    lo = a < b ? a : b;
+    hi = a < b ? b : a;
+    if (lo <= hi) { /* false only for NaN: the ray lies in a bounding plane */
+        t0 = lo > t0 ? lo : t0;
+        t1 = hi < t1 ? hi : t1;
+    }
+    a = (n->bmin[1] - r->o.y) * r->inv.y;
+    b = (n->bmax[1] - r->o.y) * r->inv.y;
+    lo = a < b ? a : b;
+    hi = a < b ? b : a;
+    if (lo <= hi) {
+        t0 = lo > t0 ? lo : t0;
+        t1 = hi < t1 ? hi : t1;
+    }
+    a = (n->bmin[2] - r->o.z) * r->inv.z;
+    b = (n->bmax[2] - r->o.z) * r->inv.z;
+    lo = a < b ? a : b;
+    hi = a < b ? b : a;
+    if (lo <= hi) {
         t0 = lo > t0 ? lo : t0;
         t1 = hi < t1 ? hi : t1;
     }
