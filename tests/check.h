@@ -121,4 +121,37 @@ static inline void check_use_alloc(appm_config *cfg, check_alloc *a, long fail_a
     cfg->allocator.user = a;
 }
 
+/* Loads a scene, recording a failed CHECK (with file:line: message) on error. */
+static inline appm_scene *check_load_scene(const char *path)
+{
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_status st = appm_scene_load(path, NULL, &s, &d);
+    CHECK_MSG(st == APPM_OK, "loading %s: %s:%u: %s", path, d.file, d.line, d.message);
+    return st == APPM_OK ? s : NULL;
+}
+
+static inline appm_renderer *check_renderer(const appm_scene *s, const appm_config *cfg)
+{
+    appm_renderer *r = NULL;
+    appm_diag d;
+    appm_status st = appm_renderer_create(s, cfg, &r, &d);
+    CHECK_MSG(st == APPM_OK, "appm_renderer_create: %s", d.message);
+    return st == APPM_OK ? r : NULL;
+}
+
+/* Runs n passes; 0 (and a failed CHECK) at the first failure. */
+static inline int check_passes(appm_renderer *r, int n)
+{
+    int i;
+    for (i = 0; i < n; ++i) {
+        appm_status st = appm_renderer_pass(r);
+        if (st != APPM_OK) {
+            CHECK_MSG(st == APPM_OK, "appm_renderer_pass: %s", appm_renderer_last_error(r));
+            return 0;
+        }
+    }
+    return 1;
+}
+
 #endif

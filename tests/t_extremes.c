@@ -37,6 +37,12 @@ static const char *method_name(appm_method m)
     return names[m];
 }
 
+/* A scene written under tests/out/ by this group. */
+static appm_scene *load_scene(const char *file)
+{
+    return check_load_scene(check_path(GROUP, file));
+}
+
 static int write_scratch(const char *file, const char *text)
 {
     int ok = check_write_file(check_path(GROUP, file), text);
@@ -44,37 +50,8 @@ static int write_scratch(const char *file, const char *text)
     return ok;
 }
 
-static appm_scene *load_scene(const char *file)
-{
-    appm_scene *s = NULL;
-    appm_diag d;
-    const char *path = check_path(GROUP, file);
-    appm_status st = appm_scene_load(path, NULL, &s, &d);
-    CHECK_MSG(st == APPM_OK, "loading %s: %s:%u: %s", path, d.file, d.line, d.message);
-    return st == APPM_OK ? s : NULL;
-}
 
-static appm_renderer *new_renderer(const appm_scene *s, const appm_config *cfg)
-{
-    appm_renderer *r = NULL;
-    appm_diag d;
-    appm_status st = appm_renderer_create(s, cfg, &r, &d);
-    CHECK_MSG(st == APPM_OK, "appm_renderer_create: %s", d.message);
-    return st == APPM_OK ? r : NULL;
-}
 
-static int run_passes(appm_renderer *r, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        appm_status st = appm_renderer_pass(r);
-        if (st != APPM_OK) {
-            CHECK_MSG(st == APPM_OK, "appm_renderer_pass: %s", appm_renderer_last_error(r));
-            return 0;
-        }
-    }
-    return 1;
-}
 
 /* Summary of an image: how many values are NaN or infinite, the smallest
  * value, and the mean luminance (Rec. 709 weights, as the library's). */
@@ -110,7 +87,7 @@ static img_sum render(const appm_scene *s, const appm_config *cfg, int passes, f
                       appm_stats *stats)
 {
     img_sum sum;
-    appm_renderer *r = new_renderer(s, cfg);
+    appm_renderer *r = check_renderer(s, cfg);
     appm_image img;
     sum.nonfinite = 0;
     sum.min = 0.0;
@@ -118,7 +95,7 @@ static img_sum render(const appm_scene *s, const appm_config *cfg, int passes, f
     if (stats) memset(stats, 0, sizeof *stats);
     if (!r) return sum;
     if (copy) memset(copy, 0, (size_t)r->w * r->h * 3 * sizeof(float));
-    if (run_passes(r, passes)) {
+    if (check_passes(r, passes)) {
         appm_renderer_image(r, &img);
         sum = summarize(&img);
         if (copy) memcpy(copy, img.rgb, (size_t)img.width * img.height * 3 * sizeof(float));
@@ -257,9 +234,9 @@ static void test_radius(void)
             cfg.photons = M;
             cfg.seed = 11;
             cfg.threads = 2;
-            r = new_renderer(s, &cfg);
+            r = check_renderer(s, &cfg);
             if (!r) continue;
-            if (!run_passes(r, passes)) {
+            if (!check_passes(r, passes)) {
                 appm_renderer_destroy(r);
                 continue;
             }
@@ -329,13 +306,13 @@ static void test_alpha(void)
             cfg.alpha = alphas[ai];
             cfg.photons = 4096;
             cfg.threads = 2;
-            r = new_renderer(s, &cfg);
+            r = check_renderer(s, &cfg);
             if (!r) continue;
             for (j = 1; j <= 8; ++j) {
                 appm_image img;
                 const float *rad;
                 size_t i;
-                if (!run_passes(r, 1)) break;
+                if (!check_passes(r, 1)) break;
                 appm_renderer_image(r, &img);
                 finite &= summarize(&img).nonfinite == 0;
                 rad = appm_renderer_aux(r, APPM_AUX_RADIUS);
@@ -374,11 +351,11 @@ static void test_alpha(void)
     /* the two ends of the valid range, and 0 meaning the default */
     appm_config_init(&cfg);
     cfg.alpha = 1.0;
-    r = new_renderer(s, &cfg);
+    r = check_renderer(s, &cfg);
     CHECK(r && r->alpha == 1.0);
     appm_renderer_destroy(r);
     cfg.alpha = 0.0;
-    r = new_renderer(s, &cfg);
+    r = check_renderer(s, &cfg);
     CHECK(r && r->alpha == 2.0 / 3.0);
     appm_renderer_destroy(r);
     appm_scene_destroy(s);
@@ -465,7 +442,7 @@ static void failed_pass(const appm_scene *s, long long margin, const char *what)
     if (!ref) return;
     render(s, &cfg, 2, ref, NULL); /* a renderer that never ran out of memory */
     use_budget(&cfg, &b, 1ll << 40);
-    r = new_renderer(s, &cfg);
+    r = check_renderer(s, &cfg);
     if (r) {
         after_create = b.live;
         b.limit = after_create + margin;
@@ -478,7 +455,7 @@ static void failed_pass(const appm_scene *s, long long margin, const char *what)
         CHECK_MSG(b.live >= after_create && b.live <= b.limit, "%s: %lld bytes held, budget %lld", what,
                   b.live, b.limit);
         b.limit = 1ll << 40;
-        if (run_passes(r, 2)) {
+        if (check_passes(r, 2)) {
             appm_renderer_image(r, &img);
             CHECK(summarize(&img).nonfinite == 0);
             CHECK_MSG(memcmp(img.rgb, ref, sizeof(float) * 8 * 8 * 3) == 0,
@@ -622,8 +599,8 @@ static void test_accumulators(void)
         cfg.direct = APPM_DIRECT_PHOTONS;
         cfg.photons = 65536;
         cfg.threads = 2;
-        r = s ? new_renderer(s, &cfg) : NULL;
-        if (r && run_passes(r, 1)) {
+        r = s ? check_renderer(s, &cfg) : NULL;
+        if (r && check_passes(r, 1)) {
             const double N0 = 1099511627776.0;
             double r_before[64];
             int i, moved = 0, consistent = 1;
@@ -631,7 +608,7 @@ static void test_accumulators(void)
                 r->pix[i].n = N0;
                 r_before[i] = r->pix[i].r;
             }
-            if (run_passes(r, 1)) {
+            if (check_passes(r, 1)) {
                 for (i = 0; i < 64; ++i) {
                     const appm__pixel *p = &r->pix[i];
                     double m = (p->n - N0) / r->alpha, expect_r;
@@ -664,15 +641,15 @@ static void test_accumulators(void)
         cfg.radius = 0.05;
         cfg.photons = M;
         cfg.threads = 1;
-        r = s ? new_renderer(s, &cfg) : NULL;
-        if (r && run_passes(r, 1)) {
+        r = s ? check_renderer(s, &cfg) : NULL;
+        if (r && check_passes(r, 1)) {
             appm_stats st;
             appm_image img;
             /* the state 6291455 passes in: counters consistent with it */
             r->pass = before;
             r->stats.photons_emitted = before * M;
             r->stats.eye_paths = before * 64;
-            if (run_passes(r, 1)) {
+            if (check_passes(r, 1)) {
                 appm_renderer_stats(r, &st);
                 appm_renderer_image(r, &img);
                 CHECK_MSG(st.passes == before + 1 && st.photons_emitted == target &&
@@ -740,9 +717,9 @@ static void scale_render(const appm_scene *s, appm_method m, uint64_t seed, doub
     cfg.threads = 2;
     *mean = *r1 = -1.0;
     *nonfinite = 1;
-    r = new_renderer(s, &cfg);
+    r = check_renderer(s, &cfg);
     if (!r) return;
-    if (run_passes(r, SCALE_PASSES)) {
+    if (check_passes(r, SCALE_PASSES)) {
         img_sum sum;
         appm_renderer_image(r, &img);
         appm_renderer_stats(r, &st);
@@ -1116,9 +1093,9 @@ static void test_camera_inside(void)
         cfg.photons = 4096;
         cfg.radius = 0.2;
         cfg.threads = 2;
-        r = new_renderer(s, &cfg);
+        r = check_renderer(s, &cfg);
         if (!r) continue;
-        if (run_passes(r, 3)) {
+        if (check_passes(r, 3)) {
             appm_renderer_image(r, &img);
             appm_renderer_stats(r, &st);
             for (i = 0; i < (size_t)16 * 16 * 3; ++i) nonzero += !(img.rgb[i] == 0.0f);

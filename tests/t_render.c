@@ -64,36 +64,8 @@ static double rmse_of(const float *a, const float *b, size_t n)
     return sqrt(s / (double)n);
 }
 
-static appm_scene *load_scene(const char *path)
-{
-    appm_scene *s = NULL;
-    appm_diag d;
-    appm_status st = appm_scene_load(path, NULL, &s, &d);
-    CHECK_MSG(st == APPM_OK, "loading %s: %s:%u: %s", path, d.file, d.line, d.message);
-    return st == APPM_OK ? s : NULL;
-}
 
-static appm_renderer *new_renderer(const appm_scene *s, const appm_config *cfg)
-{
-    appm_renderer *r = NULL;
-    appm_diag d;
-    appm_status st = appm_renderer_create(s, cfg, &r, &d);
-    CHECK_MSG(st == APPM_OK, "appm_renderer_create: %s", d.message);
-    return st == APPM_OK ? r : NULL;
-}
 
-static int run_passes(appm_renderer *r, int n)
-{
-    int i;
-    for (i = 0; i < n; ++i) {
-        appm_status st = appm_renderer_pass(r);
-        if (st != APPM_OK) {
-            CHECK_MSG(st == APPM_OK, "appm_renderer_pass: %s", appm_renderer_last_error(r));
-            return 0;
-        }
-    }
-    return 1;
-}
 
 static const char *method_name(appm_method m)
 {
@@ -191,9 +163,9 @@ static double furnace_render(const appm_scene *s, appm_method m, appm_direct dir
     cfg.radius = FURNACE_R1;
     cfg.photons = photons;
     cfg.seed = seed;
-    r = new_renderer(s, &cfg);
+    r = check_renderer(s, &cfg);
     if (!r) return v;
-    if (run_passes(r, passes)) {
+    if (check_passes(r, passes)) {
         appm_renderer_image(r, &img);
         v = image_mean(&img);
     }
@@ -243,8 +215,8 @@ static void test_furnace(void)
     CHECK(check_write_file(check_path(GROUP, "furnace.mtl"), FURNACE_MTL));
     CHECK(check_write_file(check_path(GROUP, "furnace.scene"), FURNACE_SCENE));
     CHECK(check_write_file(check_path(GROUP, "furnace-mirror.scene"), FURNACE_MIRROR_SCENE));
-    s = load_scene(check_path(GROUP, "furnace.scene"));
-    sm = load_scene(check_path(GROUP, "furnace-mirror.scene"));
+    s = check_load_scene(check_path(GROUP, "furnace.scene"));
+    sm = check_load_scene(check_path(GROUP, "furnace-mirror.scene"));
     if (s && sm) {
         appm_scene_get_info(s, &info);
         CHECK(info.triangles == 12 && info.lights_area == 12);
@@ -370,11 +342,11 @@ static void pl_render(const appm_scene *s, double alpha, uint64_t M, uint64_t se
     cfg.photons = M;
     cfg.seed = seed;
     cfg.width = cfg.height = 1;
-    r = new_renderer(s, &cfg);
+    r = check_renderer(s, &cfg);
     for (k = 0; at[k]; ++k) out[k] = -1.0;
     if (!r) return;
     for (j = 1, k = 0; at[k]; ++j) {
-        if (!run_passes(r, 1)) break;
+        if (!check_passes(r, 1)) break;
         if (j == at[k]) {
             appm_renderer_image(r, &img);
             out[k++] = image_mean(&img);
@@ -396,8 +368,8 @@ static void test_point_light(void)
     CHECK(check_write_file(check_path(GROUP, "plane.mtl"), PLANE_MTL));
     CHECK(check_write_file(check_path(GROUP, "plane-point.scene"), PLANE_POINT_SCENE));
     CHECK(check_write_file(check_path(GROUP, "plane-spot.scene"), PLANE_SPOT_SCENE));
-    point = load_scene(check_path(GROUP, "plane-point.scene"));
-    spot = load_scene(check_path(GROUP, "plane-spot.scene"));
+    point = check_load_scene(check_path(GROUP, "plane-point.scene"));
+    spot = check_load_scene(check_path(GROUP, "plane-spot.scene"));
     if (!point || !spot) {
         appm_scene_destroy(point);
         appm_scene_destroy(spot);
@@ -567,11 +539,11 @@ static int xrender_run(const appm_scene *s, appm_method m, uint32_t w, int passe
     cfg.method = m;
     cfg.width = cfg.height = w;
     cfg.seed = seed;
-    if (rsum && out->img && out->pm) r = new_renderer(s, &cfg);
+    if (rsum && out->img && out->pm) r = check_renderer(s, &cfg);
     if (!r) goto done;
     for (j = 1; j <= passes; ++j) {
         double mj;
-        if (!run_passes(r, 1)) goto done;
+        if (!check_passes(r, 1)) goto done;
         appm_renderer_image(r, &img);
         mj = image_mean(&img);
         out->pm[j - 1] = j * mj - (j - 1) * prev;
@@ -601,7 +573,7 @@ static void crosscheck_scene(const char *path)
     const uint32_t w = g_quick ? 32 : 64;
     const int ref_passes = 128, passes = XC_PASSES;
     static const appm_method methods[2] = {APPM_METHOD_PPM, APPM_METHOD_APPM};
-    appm_scene *s = load_scene(path);
+    appm_scene *s = check_load_scene(path);
     xrender ref, pair, x;
     int mi, j;
     memset(&ref, 0, sizeof ref);
@@ -667,8 +639,8 @@ static int det_render(const appm_scene *s, appm_method m, unsigned threads, uint
     cfg.photons = 5000;
     cfg.threads = threads;
     cfg.seed = seed;
-    r = new_renderer(s, &cfg);
-    if (r && run_passes(r, 3)) {
+    r = check_renderer(s, &cfg);
+    if (r && check_passes(r, 3)) {
         appm_renderer_image(r, &img);
         memcpy(out, img.rgb, sizeof(float) * 3 * 32 * 32);
         ok = 1;
@@ -707,7 +679,7 @@ static void test_determinism(void)
     static const appm_method methods[4] = {APPM_METHOD_PPM, APPM_METHOD_SPPM, APPM_METHOD_APPM,
                                            APPM_METHOD_PT};
     const size_t n = 3 * 32 * 32;
-    appm_scene *s = load_scene("scenes/cornell-sphere.scene");
+    appm_scene *s = check_load_scene("scenes/cornell-sphere.scene");
     float *img[4];
     int mi, t, k;
     if (!s) return;
@@ -773,10 +745,10 @@ static void memory_case(const appm_scene *s, appm_method m, uint64_t photons, in
     cfg.width = cfg.height = 16;
     cfg.photons = photons;
     cfg.threads = 1;
-    r = new_renderer(s, &cfg);
+    r = check_renderer(s, &cfg);
     if (!r) return;
     for (j = 1; j <= 50; ++j) {
-        if (!run_passes(r, 1)) break;
+        if (!check_passes(r, 1)) break;
         appm_renderer_stats(r, &st);
         if (j > 1 && st.memory_bytes != prev_mem) {
             changes += j > 5;
@@ -802,7 +774,7 @@ static void memory_case(const appm_scene *s, appm_method m, uint64_t photons, in
 
 static void test_memory(void)
 {
-    appm_scene *s = load_scene("scenes/cornell-original.scene");
+    appm_scene *s = check_load_scene("scenes/cornell-original.scene");
     if (!s) return;
     memory_case(s, APPM_METHOD_PPM, 256, 1);
     memory_case(s, APPM_METHOD_APPM, 256, 1);
