@@ -4136,8 +4136,14 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
     if (!s) return;
     info->triangles = s->ntri;
     info->dropped_triangles = s->dropped;
-    for (i = 1; i < s->nmat; ++i) { /* material 0 is the implicit default */
+    for (i = 0; i < s->nmat; ++i) {
         const appm__material *m = &s->mat[i];
+        if (i == 0) { /* the implicit default counts only if some face uses it */
+            uint32_t k;
+            for (k = 0; k < s->ntri && s->info[k].mat != 0; ++k) {
+            }
+            if (k == s->ntri) continue;
+        }
         info->materials_diffuse += m->kind == APPM__MAT_DIFFUSE;
         info->materials_mirror += m->kind == APPM__MAT_MIRROR;
         info->materials_dielectric += m->kind == APPM__MAT_DIELECTRIC;

@@ -76,6 +76,25 @@ run_test() {
     fi
 }
 
+# suite NAME COMPILER-COMMAND LIBS: every tests/t_*.c built with the given
+# compiler command and run through tests/run.sh in quick mode
+# (APPM_TEST_QUICK=1); ok if the runner's total has no failure.
+suite() {
+    name=$1 cc=$2 libs=$3 dir="$OUT/suite-$1"
+    mkdir -p "$dir"
+    set --
+    for t in tests/t_*.c; do
+        n=$(basename "$t" .c)
+        # shellcheck disable=SC2086
+        if ! $cc "$t" -o "$dir/$n" $libs >"$log" 2>&1; then
+            bad "$name: the test suite ($n does not build)"
+            return
+        fi
+        set -- "$@" "APPM_TEST_QUICK=1 $dir/$n"
+    done
+    run_test "$name: the test suite" sh tests/run.sh "$@"
+}
+
 # ---- native compilers -----------------------------------------------------------
 
 for cc in gcc clang; do
@@ -103,6 +122,7 @@ if have tcc "tcc -Wall -Werror"; then
     if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
         >"$log" 2>&1; then
         run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
+        suite tcc "tcc -Wall" "-lm -lpthread"
     else
         bad "tcc -Wall -Werror: tests/t_portable.c"
     fi
@@ -134,6 +154,7 @@ if have gcc "-DAPPM_THREADS=0"; then
     if gcc $C99 -O2 -DAPPM_THREADS=0 tests/t_portable.c -o "$OUT/t_portable-nothreads" -lm \
         >"$log" 2>&1; then
         run_test "-DAPPM_THREADS=0: tests/t_portable.c runs" "./$OUT/t_portable-nothreads"
+        suite "gcc -DAPPM_THREADS=0" "gcc $C99 -O2 -DAPPM_THREADS=0" "-lm"
     else
         bad "gcc -DAPPM_THREADS=0: tests/t_portable.c"
     fi
