@@ -77,7 +77,7 @@
  *        its first diffuse vertex x with weight W; direct light at x by next-event
  *        estimation (shadow rays).
  *     2. radius: r = [c R(K) S / (M j mu2^2 dI^2)]^(1/6) from the pixel's running
- *        second moment S and Laplacian dI, clamped to [0.1, 4] r1 j^(-1/6).
+ *        second moment S and Laplacian dI, clamped to [0.1, 2] r1 j^(-1/6).
  *     3. photon pass: M photon paths from the lights (chosen by power), stored at
  *        diffuse hits, binned into a hash grid.
  *     4. gather: per pixel, I += (1/j) ((1/M) sum_i k_r(x - y_i) W f gamma_i - I);
