@@ -107,17 +107,17 @@ cat "$out/meta.txt"
 
 if [ "$mode" = refs ]; then # only render (or check) the references of the full suite
     reference cornell-sphere-256 scenes/cornell-sphere.scene 256x256 8192
-    reference cornell-original-128 scenes/cornell-original.scene 128x128 8192
-    reference cornell-sphere-dof-128 scenes/cornell-sphere-dof.scene 128x128 8192
-    reference cornell-mm-128 scenes/cornell-mm.scene 128x128 8192
+    reference cornell-original-128 scenes/cornell-original.scene 128x128 4096
+    reference cornell-sphere-dof-128 scenes/cornell-sphere-dof.scene 128x128 4096
+    reference cornell-mm-128 scenes/cornell-mm.scene 128x128 4096
     exit 0
 elif [ "$mode" = quick ]; then
     scene cornell-sphere-64 scenes/cornell-sphere.scene 64x64 8 8192 small
 else
     scene cornell-sphere-256 scenes/cornell-sphere.scene 256x256 30 8192 full
-    scene cornell-original-128 scenes/cornell-original.scene 128x128 10 8192 small
-    scene cornell-sphere-dof-128 scenes/cornell-sphere-dof.scene 128x128 10 8192 small
-    scene cornell-mm-128 scenes/cornell-mm.scene 128x128 10 8192 small
+    scene cornell-original-128 scenes/cornell-original.scene 128x128 10 4096 small
+    scene cornell-sphere-dof-128 scenes/cornell-sphere-dof.scene 128x128 10 4096 small
+    scene cornell-mm-128 scenes/cornell-mm.scene 128x128 10 4096 small
 fi
 bench/report "$out" > /dev/null || exit 1
 
