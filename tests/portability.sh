@@ -80,7 +80,8 @@ run_test() {
 # compiler command and run through tests/run.sh in quick mode
 # (APPM_TEST_QUICK=1); ok if the runner's total has no failure.
 suite() {
-    name=$1 cc=$2 libs=$3 dir="$OUT/suite-$1"
+    name=$1 cc=$2 libs=$3
+    dir="$OUT/suite-$(printf '%s' "$1" | tr -c 'A-Za-z0-9_\n' '_')"
     mkdir -p "$dir"
     set --
     for t in tests/t_*.c; do
