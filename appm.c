@@ -3522,9 +3522,9 @@ static void appm__gather_query(const appm_renderer *r, appm__gather *g)
             }
 }
 
-/* Whether pass j estimates the Laplacian.  Its gather reaches 2h = 2 kappa r,
- * kappa^2 times the area of the radiance kernel, so it is the expensive part of
- * a pass.  For a fixed cost f h^2 (f: the fraction of passes that estimate it),
+/* Whether pass j estimates the Laplacian.  Its gather reaches 2h (h from
+ * appm__lap_h below: 1.5 r_a j^(-1/8)), several times the area of the radiance
+ * kernel, so it is the expensive part of a pass.  For a fixed cost f h^2 (f: the fraction of passes that estimate it),
  * the variance of the running mean dI goes as 1 / (f h^6) = 1 / (cost h^4):
  * a wide bandwidth on a few passes beats a narrow one on every pass.  The price
  * is smoothing bias in dI, of which r only feels the cube root.  Every pass of
