@@ -2401,7 +2401,6 @@ typedef struct appm__surf {
     appm__v3 ns;   /* unit shading normal, on the side of ng */
     uint32_t tri, mat;
     float t;
-    int smooth;    /* has shading normals */
 } appm__surf;
 
 static void appm__surface(const appm_scene *s, const appm__hit *h, appm__surf *out)
@@ -2418,7 +2417,6 @@ static void appm__surface(const appm_scene *s, const appm__hit *h, appm__surf *o
                            g7);
     out->ng = in->ng;
     out->ns = in->ng;
-    out->smooth = in->n0 >= 0;
     if (in->n0 >= 0) {
         const appm__v3 *n = s->normals + in->n0;
         appm__v3 ns = appm__normalize(
@@ -2918,8 +2916,7 @@ static void appm__pixel_sample(uint64_t pass, appm__rng *rng, int lens, float *u
     }
 }
 
-static void appm__camera_ray(const appm_renderer *r, uint32_t px, uint32_t py, appm__rng *rng,
-                             appm__ray *ray)
+static void appm__camera_ray(const appm_renderer *r, uint32_t px, uint32_t py, appm__ray *ray)
 {
     const appm__camera *c = &r->scene->cam;
     appm__rng prng;
@@ -2934,7 +2931,6 @@ static void appm__camera_ray(const appm_renderer *r, uint32_t px, uint32_t py, a
         l1 = su[2];
         l2 = su[3];
     }
-    (void)rng;
     float sx = (2.0f * ((float)px + u) / (float)r->w - 1.0f) * c->tan_half * aspect;
     float sy = (1.0f - 2.0f * ((float)py + v) / (float)r->h) * c->tan_half;
     appm__v3 d = appm__normalize(
@@ -2986,7 +2982,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
     unsigned segs = 0;
     float travelled = 0.0f;
     appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_EYE, pi);
-    appm__camera_ray(r, px, py, &rng, &ray);
+    appm__camera_ray(r, px, py, &ray);
     vp->segs = 0;
     for (;;) {
         appm__hit h;
@@ -3528,13 +3524,10 @@ static void appm__gather_query(const appm_renderer *r, appm__gather *g)
  * the variance of the running mean dI goes as 1 / (f h^6) = 1 / (cost h^4):
  * a wide bandwidth on a few passes beats a narrow one on every pass.  The price
  * is smoothing bias in dI, of which r only feels the cube root.  Every pass of
- * the warm-up estimates it, then every APPM__LAP_EVERY-th.  Returns how many
- * passes up to and including j estimate it when it is one of them, else 0. */
-static uint64_t appm__lap_pass(uint64_t j)
+ * the warm-up estimates it, then every APPM__LAP_EVERY-th. */
+static int appm__lap_pass(uint64_t j)
 {
-    if (j <= APPM__WARMUP) return j;
-    if ((j - APPM__WARMUP) % APPM__LAP_EVERY != 0) return 0;
-    return APPM__WARMUP + (j - APPM__WARMUP) / APPM__LAP_EVERY;
+    return j <= APPM__WARMUP || (j - APPM__WARMUP) % APPM__LAP_EVERY == 0;
 }
 
 /* Laplacian passes among the first j. */
@@ -3752,7 +3745,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
     uint32_t skip = UINT32_MAX;
     unsigned segs = 0;
     appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_EYE, pi);
-    appm__camera_ray(r, px, py, &rng, &ray);
+    appm__camera_ray(r, px, py, &ray);
     for (;;) {
         appm__hit h;
         appm__surf sf;
@@ -4335,17 +4328,16 @@ static float appm__median_gather_radius(appm_renderer *r)
 {
     size_t n = 0, i, npix = (size_t)r->w * r->h;
     float *tmp = r->image; /* scratch: the image is rebuilt on request */
+    const double h2 = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)
+                          ? 2.0 * appm__lap_h(r->r_auto, r->pass) /* the Laplacian's reach */
+                          : 0.0;
     for (i = 0; i < npix; ++i) {
         double g;
         if (r->vp[i].segs == 0) continue;
         g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2)
             : r->method == APPM_METHOD_APPM ? (double)r->vp[i].r
                                             : r->pix[i].r;
-        if (r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)) {
-            double h2 = 2.0 * appm__lap_h(r->r_auto, r->pass);
-            if (h2 > g) g = h2;
-        }
-        tmp[n++] = (float)g;
+        tmp[n++] = (float)(h2 > g ? h2 : g);
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
     return APPM__CELL_SCALE * appm__select(tmp, n, n / 2);
