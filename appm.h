@@ -172,8 +172,16 @@ typedef enum appm_method {
     APPM_METHOD_APPM = 0, /* adaptive bandwidth, per pixel and pass (default)       */
     APPM_METHOD_PPM,      /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */
     APPM_METHOD_SPPM,     /* per-pixel N, tau, R statistics (Hachisuka-Jensen)       */
-    APPM_METHOD_PT        /* unbiased path tracer with NEE + MIS, for references    */
+    APPM_METHOD_PT,       /* unbiased path tracer with NEE + MIS, for references    */
+    APPM_METHOD_COUNT
 } appm_method;
+
+/* "appm", "ppm", "sppm", "pt"; NULL for a value that is not a method. */
+APPM_API const char *appm_method_name(appm_method m);
+
+/* The method called `name` (as appm_method_name spells it) into *out;
+ * APPM_ERR_INVALID_ARG (and *out untouched) for any other name or NULL. */
+APPM_API appm_status appm_method_parse(const char *name, appm_method *out);
 
 typedef enum appm_direct {
     APPM_DIRECT_NEE = 0,  /* direct light at the visible point by shadow rays      */

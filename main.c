@@ -294,11 +294,8 @@ static int parse_render(int argc, char **argv, render_opts *o)
         else if (strcmp(a, "--log") == 0) o->log = v;
         else if (strcmp(a, "--aux") == 0) o->aux = v;
         else if (strcmp(a, "--method") == 0) {
-            if (strcmp(v, "appm") == 0) o->cfg.method = APPM_METHOD_APPM;
-            else if (strcmp(v, "ppm") == 0) o->cfg.method = APPM_METHOD_PPM;
-            else if (strcmp(v, "sppm") == 0) o->cfg.method = APPM_METHOD_SPPM;
-            else if (strcmp(v, "pt") == 0) o->cfg.method = APPM_METHOD_PT;
-            else return usage_error("unknown method '%s' (appm, ppm, sppm or pt)", v);
+            if (appm_method_parse(v, &o->cfg.method) != APPM_OK)
+                return usage_error("unknown method '%s' (appm, ppm, sppm or pt)", v);
         } else if (strcmp(a, "--direct") == 0) {
             if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
             else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
@@ -491,12 +488,11 @@ static int cmd_render(int argc, char **argv)
         }
     }
     if (rc == 0) {
-        static const char *const mname[4] = {"appm", "ppm", "sppm", "pt"};
         appm_renderer_stats(r, &st);
         printf("passes=%llu photons=%llu seconds=%.2f radius=%.6g output=%s method=%s threads=%u "
                "peak_bytes=%llu dropped=%llu",
                (unsigned long long)st.passes, (unsigned long long)st.photons_emitted, st.seconds,
-               st.initial_radius, o.output, mname[o.cfg.method], st.threads,
+               st.initial_radius, o.output, appm_method_name(o.cfg.method), st.threads,
                (unsigned long long)st.peak_bytes, (unsigned long long)st.dropped_samples);
         printf(" eye_s=%.3f photon_s=%.3f grid_s=%.3f gather_s=%.3f photons_stored=%llu",
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
