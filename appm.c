@@ -2901,6 +2901,38 @@ static int appm__quant(float v, float scale)
     return (int)(q >= 0.0f ? q + 0.5f : q - 0.5f);
 }
 
+/* The inverse of appm__oct_encode before normalisation: (a, b) in [-1, 1]^2 ->
+ * a vector with |x| + |y| + |z| = 1 along the encoded direction. */
+static appm__v3 appm__oct_unpack(float a, float b)
+{
+    float z = 1.0f - fabsf(a) - fabsf(b);
+    if (z < 0.0f) {
+        float t = a;
+        a = (1.0f - fabsf(b)) * (t >= 0.0f ? 1.0f : -1.0f);
+        b = (1.0f - fabsf(t)) * (b >= 0.0f ? 1.0f : -1.0f);
+    }
+    return appm__v(a, b, z);
+}
+
+/* A photon's stored directions as unit vectors: wi (towards where it came
+ * from, 16 bits per coordinate: about 3e-5 rad) and the normal on its side
+ * (8 bits: about 1e-2 rad).  Kept for glossy gathering, which needs wi; the
+ * diffuse gather tests the normal without normalising (10). */
+#if defined(__GNUC__) || defined(__clang__)
+#define APPM__UNUSED __attribute__((unused))
+#else
+#define APPM__UNUSED
+#endif
+APPM__UNUSED static appm__v3 appm__photon_wi(const appm__photon *p)
+{
+    return appm__normalize(appm__oct_unpack((float)p->wi[0] * (1.0f / 32767.0f), (float)p->wi[1] * (1.0f / 32767.0f)));
+}
+
+APPM__UNUSED static appm__v3 appm__photon_normal(const appm__photon *p)
+{
+    return appm__normalize(appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f)));
+}
+
 /* ---- 7.2 Camera rays ---------------------------------------------------------- */
 
 /* Where in the pixel (and on the lens) pass j samples: the R2 sequence of
@@ -3546,14 +3578,8 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
     if (!(d2 < Rg2) || p->segs > g->max_p) return;
     { /* same surface: angle(n_photon, n) < 60 deg.  The octahedral decode without
        * its normalisation: cos >= c  <=>  dot > 0 and dot^2 >= c^2 |v|^2 */
-        float ox = (float)p->n[0] * (1.0f / 127.0f), oy = (float)p->n[1] * (1.0f / 127.0f);
-        float oz = 1.0f - fabsf(ox) - fabsf(oy), dn;
-        if (oz < 0.0f) {
-            float tx = ox;
-            ox = (1.0f - fabsf(oy)) * (tx >= 0.0f ? 1.0f : -1.0f);
-            oy = (1.0f - fabsf(tx)) * (oy >= 0.0f ? 1.0f : -1.0f);
-        }
-        pn = appm__v(ox, oy, oz);
+        float dn;
+        pn = appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f));
         dn = appm__dot(pn, g->n);
         if (!(dn > 0.0f) || dn * dn < APPM__NORMAL_COS * APPM__NORMAL_COS * appm__dot(pn, pn)) return;
     }
