@@ -1126,10 +1126,15 @@ typedef struct appm__lines {
     unsigned line;
 } appm__lines;
 
-/* Next line as [*s, *e) without its terminator; comments (#...) stripped. */
+/* Next line as [*s, *e) without its terminator; comments (#...) stripped.
+ * A UTF-8 byte order mark before the first line (Windows editors write one)
+ * is skipped, in every format read line by line (.scene, .obj, .mtl). */
 static int appm__next_line(appm__lines *it, const char **s, const char **e)
 {
     const char *p = it->p, *q;
+    if (it->line == 0 && it->end - p >= 3 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB &&
+        (unsigned char)p[2] == 0xBF)
+        p += 3;
     if (p >= it->end) return 0;
     q = p;
     while (q < it->end && *q != '\n' && *q != '\r') q++;

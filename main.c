@@ -470,6 +470,7 @@ static int cmd_render(int argc, char **argv)
         if (o.have_until && st.est_relerr >= 0 && st.est_relerr < o.until_error) break;
     }
     if (progress) fprintf(stderr, "\n");
+    appm_renderer_stats(r, &st); /* also after a failed pass, even the first */
     if (rc == 0 || st.passes > 0) {
         appm_renderer_image(r, &img);
         if ((s = appm_image_write(o.output, &img, o.exposure, &d)) != APPM_OK) {
@@ -515,6 +516,26 @@ done:
 
 /* ---- appm compare / info --------------------------------------------------- */
 
+/* Pixels of `img` with a NaN or infinite channel; the first (in reading order,
+ * row 0 at the top) into *fx, *fy.  Says so on stderr and returns their count. */
+static unsigned long report_nonfinite(const char *path, const appm_image *img)
+{
+    unsigned long n = 0, fx = 0, fy = 0, i, npix = (unsigned long)img->width * img->height;
+    for (i = 0; i < npix; ++i) {
+        const float *p = &img->rgb[3 * i];
+        int c, bad = 0;
+        for (c = 0; c < 3; ++c) bad |= !(p[c] - p[c] == 0.0f); /* NaN or inf */
+        if (bad && n++ == 0) {
+            fx = i % img->width;
+            fy = i / img->width;
+        }
+    }
+    if (n)
+        fprintf(stderr, "appm: %s: %lu pixel%s hold NaN or infinite values; the first is x=%lu y=%lu (row 0 at the top)\n",
+                path, n, n == 1 ? "" : "s", fx, fy);
+    return n;
+}
+
 static int cmd_compare(int argc, char **argv)
 {
     appm_image a, b;
@@ -534,6 +555,11 @@ static int cmd_compare(int argc, char **argv)
     if (appm_image_compare(&a, &b, &c) != APPM_OK) {
         fprintf(stderr, "appm: %s is %lux%lu but %s is %lux%lu\n", argv[2], (unsigned long)a.width,
                 (unsigned long)a.height, argv[3], (unsigned long)b.width, (unsigned long)b.height);
+        appm_image_free(NULL, &a);
+        appm_image_free(NULL, &b);
+        return EXIT_INPUT;
+    }
+    if (report_nonfinite(argv[2], &a) + report_nonfinite(argv[3], &b) > 0) {
         appm_image_free(NULL, &a);
         appm_image_free(NULL, &b);
         return EXIT_INPUT;
