@@ -282,7 +282,7 @@ static void appm__parallel_for(unsigned threads, uint32_t count, appm__task_fn f
 
 static const char *const appm__status_text[APPM_STATUS_COUNT] = {
     "ok", "out of memory", "input/output error", "malformed input",
-    "invalid argument", "not supported by this build", "cancelled"};
+    "invalid argument"};
 
 APPM_API const char *appm_status_string(appm_status s)
 {
@@ -3475,28 +3475,32 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  * with k_r(d) = K(|d|/r) / r^2, mu2 the per-axis second moment, R(K) = int K^2.
  * The biweight is smooth (C1), which the finite-difference Laplacian needs.
  *
- * ppm  (Knaus-Zwicker 2011): one global radius, r_j^2 = r_1^2 prod_{k<j}
- *      (k + alpha) / (k + 1); the pixel is the plain mean over passes of
+ * The formulas, their derivations and their sources are in docs/algorithm.md,
+ * cited here by section (the papers' own equation numbers could not be
+ * checked against the papers, so they are not quoted).
+ *
+ * ppm  (Knaus-Zwicker 2011, algorithm.md 2.3): one global radius, r_j^2 = r_1^2
+ *      prod_{k<j} (k + alpha) / (k + 1); the pixel is the plain mean over passes of
  *      Ihat_j = (1/M) sum_i k_{r_j}(x_j - y_i) Psi_ji.
- * sppm (Hachisuka-Jensen 2009): per pixel N, R, tau; after a pass that found m
+ * sppm (Hachisuka-Jensen 2009, algorithm.md 2.2): per pixel N, R, tau; after a pass that found m
  *      photons with flux Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)),
  *      tau' = (tau + Phi) R'^2 / R^2; L = tau / (j M pi R^2).
- * appm (Kaplanyan-Dachsbacher 2013): per pixel and pass, the radius that
- *      minimises the estimated MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
+ * appm (Kaplanyan-Dachsbacher 2013, algorithm.md 4): per pixel and pass, the radius that
+ *      minimises the estimated MSE(r) (4.2) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
  *         r^6 = c_f R(K) S / (M j mu2^2 dI^2),   c_f = 2/3,
  *      where S is the running mean of s_j = (1/M) sum_i k_r lum(Psi_i)^2 (a
  *      second moment) and dI the running mean of the per-vertex Laplacian,
  *      estimated from the same photons by a 5-point finite difference of kernel
- *      estimates with bandwidth h (section 10.2).  c_f = 2/3 is the constant
+ *      estimates with bandwidth h (algorithm.md 4.6).  c_f = 2/3 is the constant
  *      that is optimal when every pass is averaged with weight 1/j and r_j
- *      shrinks as j^(-1/6) (the plug-in constant would be 2; see the design
- *      notes).  Safeguards: KZ radius r_1 j^(-1/6) while warming up; while a
+ *      shrinks as j^(-1/6) (the plug-in constant would be 2; algorithm.md 4.3
+ *      and the toy of 4.9).  Safeguards (4.7): KZ radius r_1 j^(-1/6) while warming up; while a
  *      pixel has seen fewer than 8 photons its radius doubles each pass; the
- *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_a),
- *      2 max(r_1, r_a)] j^(-1/6) (r_a: the automatic radius), so the clamps
+ *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_auto),
+ *      2 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), so the clamps
  *      shrink at the optimal rate.  The Laplacian bandwidth is a fixed
- *      schedule, h = 1.5 r_a j^(-1/8), estimated on every 8th pass and
- *      averaged with weights h^6 (section 10.2); dI^2 is corrected for the
+ *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
+ *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
  *      noise of its estimate.
  *
  *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
@@ -3507,30 +3511,16 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
-#ifndef APPM__CF
-#define APPM__CF (2.0 / 3.0)
-#endif
-#ifndef APPM__WARMUP
+/* The constants of the adaptive method, measured or derived as the comment
+ * above says; fixed at compile time (no build option changes them). */
+#define APPM__CF (2.0 / 3.0)                     /* c_f of the radius formula */
 #define APPM__WARMUP 4                           /* passes on the KZ schedule */
-#endif
-#ifndef APPM__KMIN
 #define APPM__KMIN 8.0                           /* photons before adapting */
-#endif
-#ifndef APPM__RLO
-#define APPM__RLO 0.1
-#endif
-#ifndef APPM__RHI
-#define APPM__RHI 2.0
-#endif
-#ifndef APPM__KAPPA
+#define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
+#define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
-#endif
-#ifndef APPM__LAP_EVERY
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
-#endif
-#ifndef APPM__DI_FLOOR
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
-#endif
 #define APPM__NORMAL_COS 0.5f
 
 /* Per-pixel state of each method (beside appm__pixel, which all share), named
@@ -3603,7 +3593,7 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
         g->count++;
     }
     if (g->h > 0.0f) {
-        /* 10.2  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
+        /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
          * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h. */
         double ih = 1.0 / g->h, a = (double)d2 * ih * ih, sum = 0.0, v;
         double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
@@ -3638,7 +3628,7 @@ static void appm__gather_query(const appm__pmap *m, appm__gather *g)
 }
 
 /* Whether pass j estimates the Laplacian.  Its gather reaches 2h (h from
- * appm__lap_h below: 1.5 r_a j^(-1/8)), several times the area of the radiance
+ * appm__lap_h below: 1.5 r_auto j^(-1/8)), several times the area of the radiance
  * kernel, so it is the expensive part of a pass.  For a fixed cost f h^2 (f: the fraction of passes that estimate it),
  * the variance of the running mean dI goes as 1 / (f h^6) = 1 / (cost h^4):
  * a wide bandwidth on a few passes beats a narrow one on every pass.  The price
@@ -3674,7 +3664,7 @@ static void appm__gather_finish(const appm__gather *g, double invM, double *e, d
     if (g->h > 0.0f) *dl = g->dl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
 }
 
-/* ---- 10.1 The adaptive radius (section 4 of the design notes) -------------- */
+/* ---- 10.1 The adaptive radius (docs/algorithm.md 4.3 - 4.7) ----------------- */
 
 /* The closed-form minimiser of MSE(r) = R(K) S / (M N r^2) + (mu2 r^2 dI / 2)^2
  * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M N mu2^2 dI^2).  Takes dI^2; returns
@@ -3729,7 +3719,7 @@ static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j
 
 /* The Laplacian bandwidth of pass j: h_j = kappa r_auto j^(-1/8), a fixed schedule
  * from the automatic radius r_auto (section 12), shrinking more slowly than
- * r (design notes, section 4.6).  It deliberately does not follow the pixel's
+ * r (docs/algorithm.md 4.6).  It deliberately does not follow the pixel's
  * adaptive radius: with h = kappa r, a sharp feature seen through a wide h
  * looks flat (|dI| falls like h^-4), which licenses a wider r, which keeps h
  * wide - a start with a large radius would never come back. */
@@ -3844,7 +3834,7 @@ static void appm__gather_estimates(appm_renderer *r, const appm__gather *g, unsi
 }
 
 /* -- ppm (Knaus-Zwicker 2011): one global radius, r_{j+1}^2 = r_j^2 (j + alpha) / (j + 1)
- *    (their eq. 15 with the pass index j), the plain mean of the Ihat_j. */
+ *    (algorithm.md 2.3), the plain mean of the Ihat_j. */
 static const appm__field appm__ppm_fields[] = {{"I", offsetof(appm__ppm_state, I), 3, 0}};
 
 static void appm__ppm_start(appm_renderer *r) { r->ppm.R2 = r->r1 * r->r1; }
@@ -3891,7 +3881,7 @@ static double appm__ppm_aux(const appm_renderer *r, const void *st, appm_aux whi
 
 /* -- sppm (Hachisuka-Jensen 2009): after a pass that found m photons with flux
  *    Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)), tau' = (tau + Phi) R'^2 / R^2
- *    (their eqs. 6, 9, 10); L = tau / (j M pi R^2). */
+ *    (algorithm.md 2.2); L = tau / (j M pi R^2). */
 static const appm__field appm__sppm_fields[] = {{"tau", offsetof(appm__sppm_state, tau), 3, 0},
                                                 {"N", offsetof(appm__sppm_state, N), 1, 0},
                                                 {"R", offsetof(appm__sppm_state, R), 1, 0}};

@@ -1,6 +1,6 @@
 #!/bin/sh
 # shellcheck disable=SC2016 # the awk programs in single quotes are not for the shell
-# tests/cli.sh - the command line contract (design: interface.md section 3):
+# tests/cli.sh - the command line contract (docs/scene-format.md section 3):
 # help and version, info, render to every format, exit codes and messages for
 # bad options and bad files, compare, --log, --aux, failed writes, the embed
 # example and SIGINT.

@@ -1,6 +1,6 @@
 /* tests/t_appm.c - the adaptive bandwidth selector on synthetic photons, no scene.
  *
- * The toy of the design notes (algorithm.md 4.9): photons uniform on the square
+ * The toy of docs/algorithm.md 4.9: photons uniform on the square
  * [-1,1]^2 of the plane z = 0 (density rho = 1/4 per emitted path) carrying
  * Psi = (1 + 50 |y|^2) U, U uniform on (0, 2).  At x = 0 the gathered quantity
  * is L(x) = rho E[Psi | x] = (1 + 50 |x|^2) / 4, so
@@ -228,7 +228,7 @@ static void test_selector_guards(void)
 /* The full progressive loop on the toy (M = 1000 photons a pass): APPM must be
  * insensitive to its initial radius (final RMSEs for r1 = 0.03, 0.1, 0.3 within
  * a factor 1.5 of each other) and better than Knaus-Zwicker PPM with a badly
- * chosen radius (0.03 or 0.3), as the design notes' simulation found. */
+ * chosen radius (0.03 or 0.3), as the simulation of docs/algorithm.md 4.9 found. */
 #define TOY_RB 0.1 /* the scene's own scale (in a render: the automatic radius) */
 
 static double toy_progressive(double r1, int adaptive, int passes, int runs, uint64_t seed)

@@ -1,4 +1,4 @@
-/* tests/t_extremes.c - numerical extremes (design notes, testing.md section 2).
+/* tests/t_extremes.c - numerical extremes (docs/testing.md section 2).
  *
  * Each group pushes one quantity to its limit and states, in its comment, what
  * good behaviour is there; the checks assert exactly that:

@@ -1,6 +1,6 @@
 /* tests/t_loader.c - the OBJ/MTL/.scene loader against the interface contract
- * (design/interface.md sections 1 and 2) and the malformed inputs that crashed
- * other loaders (design/testing.md section 3).
+ * (docs/scene-format.md sections 1 and 2) and the malformed inputs that crashed
+ * other loaders (docs/testing.md section 3).
  *
  * What is checked, and why it matters:
  *   - the Cornell boxes of scenes/ load with the triangle, material and light
@@ -955,7 +955,7 @@ static void test_mtl_values(void)
 }
 
 /* OBJ statements that are understood but not modelled (l, p, curves, ...):
- * one warning per statement kind and file (interface.md section 2). */
+ * one warning per statement kind and file (docs/scene-format.md section 2). */
 static void test_obj_ignored_warnings(void)
 {
     appm_scene *s;
@@ -1118,7 +1118,7 @@ static void test_scene_malformed(void)
 }
 
 /* Numbers after a complete statement are not silently skipped either
- * ("no silent skipping", interface.md section 1). */
+ * ("no silent skipping", docs/scene-format.md section 1). */
 static void test_scene_trailing_tokens(void)
 {
     static const char *const bad[] = {"image 64 48 junk", "environment 1 1 1 7"};
@@ -1136,7 +1136,7 @@ static void test_scene_trailing_tokens(void)
 }
 
 /* A bare .obj gets a camera that frames its bounding box looking along -z,
- * 512x512 and fov 40 (interface.md section 1). */
+ * 512x512 and fov 40 (docs/scene-format.md section 1). */
 static void test_bare_obj_camera(void)
 {
     appm_scene *s;
@@ -1230,7 +1230,7 @@ static void test_parse_number(void)
 }
 
 /* A UTF-8 byte order mark at the start of a .scene, .obj or .mtl (Windows
- * editors write one) is skipped, not an unknown keyword (interface.md 1);
+ * editors write one) is skipped, not an unknown keyword (docs/scene-format.md 1);
  * a BOM anywhere else is still an error, and line numbers stay right. */
 static void test_bom(void)
 {
