@@ -2635,6 +2635,33 @@ typedef struct appm__photon_start {
     uint32_t skip;      /* the emitting triangle, or UINT32_MAX */
 } appm__photon_start;
 
+/* The power Phi (W, RGB) light l emits: what appm__emit's photon weight gamma
+ * carries on average, E[gamma] = Phi / pick, so the two must agree (lights are
+ * picked by power: pick = mean(Phi) / sum of mean(Phi)).
+ *   area         Phi = pi A Le               (a Lambertian emitter)
+ *   point        Phi = 4 pi I
+ *   spot         Phi = 2 pi I [(1 - cos_inner) + (cos_inner - cos_cone) / 5]
+ *                (the d^4 ramp integrates to a fifth of its width in cos theta)
+ *   environment  Phi = 4 pi^2 R^2 L          (L through the disk of the bounding
+ *                sphere, radius R, from every direction) */
+static void appm__light_power(const appm_scene *s, const appm__light *l, double *power)
+{
+    double f;
+    if (l->kind == APPM__LIGHT_AREA) {
+        double a = (double)s->info[l->tri].area;
+        power[0] = APPM__PI * a * l->value.x;
+        power[1] = APPM__PI * a * l->value.y;
+        power[2] = APPM__PI * a * l->value.z;
+        return;
+    }
+    if (l->kind == APPM__LIGHT_POINT) f = 4.0 * APPM__PI;
+    else if (l->kind == APPM__LIGHT_SPOT) f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
+    else f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
+    power[0] = f * l->value.x;
+    power[1] = f * l->value.y;
+    power[2] = f * l->value.z;
+}
+
 /* Samples the start of a photon path: light by power, then position and direction. */
 static int appm__emit(const appm_scene *s, appm__rng *rng, appm__photon_start *ps)
 {
@@ -4201,40 +4228,23 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
     for (i = 0; i < s->ntri; ++i) {
         const appm__material *m = &s->mat[s->info[i].mat];
         appm__light *l;
-        double a = (double)s->info[i].area;
         if (!m->emissive) continue;
         l = &s->light[k];
         l->kind = APPM__LIGHT_AREA;
         l->tri = i;
         l->value = m->ke;
-        l->power[0] = APPM__PI * a * m->ke.x; /* Phi = pi A Le for a Lambertian emitter */
-        l->power[1] = APPM__PI * a * m->ke.y;
-        l->power[2] = APPM__PI * a * m->ke.z;
+        appm__light_power(s, l, l->power);
         s->info[i].light = (int32_t)k++;
     }
     for (i = 0; i < extra; ++i) {
         appm__light *l = &s->light[k];
         *l = ((appm__light *)L->lights.data)[i];
-        if (l->kind == APPM__LIGHT_POINT) {
-            l->power[0] = 4.0 * APPM__PI * l->value.x;
-            l->power[1] = 4.0 * APPM__PI * l->value.y;
-            l->power[2] = 4.0 * APPM__PI * l->value.z;
-        } else if (l->kind == APPM__LIGHT_SPOT) {
-            /* 2 pi I [ (1 - cos_inner) + (cos_inner - cos_cone) / 5 ]: the d^4 ramp
-             * integrates to a fifth of its width in cos(theta) */
-            double f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
-            l->power[0] = f * l->value.x;
-            l->power[1] = f * l->value.y;
-            l->power[2] = f * l->value.z;
-        } else { /* environment: L through the disk of the bounding sphere from all directions */
-            double f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
+        if (l->kind == APPM__LIGHT_ENV) {
             if (s->env >= 0)
                 return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
             s->env = (int)k;
-            l->power[0] = f * l->value.x;
-            l->power[1] = f * l->value.y;
-            l->power[2] = f * l->value.z;
         }
+        appm__light_power(s, l, l->power);
         k++;
     }
     s->nlight = k;
