@@ -4506,19 +4506,12 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__pmap_free(&r->pmap, &r->mem);
 }
 
-APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
-                                          appm_renderer **out, appm_diag *diag)
+/* The options of a renderer of `scene`: cfg (NULL: all defaults) with every 0
+ * replaced by its default, validated.  APPM_ERR_INVALID_ARG for an absurd one. */
+static appm_status appm__config_resolve(const appm_scene *scene, const appm_config *cfg, appm_config *out,
+                                        appm_diag *diag)
 {
-    appm__mem m;
-    appm_renderer *r;
     appm_config c;
-    size_t npix;
-    appm_diag local;
-    if (!diag) diag = &local;
-    appm__diag_clear(diag);
-    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
-    *out = NULL;
-    if (!scene) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene");
     if (cfg) c = *cfg;
     else memset(&c, 0, sizeof c);
     if (c.width == 0) c.width = scene->width;
@@ -4548,6 +4541,26 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
+    *out = c;
+    return APPM_OK;
+}
+
+APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
+                                          appm_renderer **out, appm_diag *diag)
+{
+    appm__mem m;
+    appm_renderer *r;
+    appm_config c;
+    appm_status st;
+    size_t npix;
+    appm_diag local;
+    if (!diag) diag = &local;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
+    *out = NULL;
+    if (!scene) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene");
+    memset(&c, 0, sizeof c); /* filled below; gcc cannot see that on every path */
+    if ((st = appm__config_resolve(scene, cfg, &c, diag)) != APPM_OK) return st;
     appm__mem_init(&m, &c);
     m.diag = diag;
     r = (appm_renderer *)appm__alloc(&m, 1, sizeof *r);

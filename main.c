@@ -122,6 +122,21 @@ static const char *const RENDER_HELP =
     "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
     "  -q, --quiet           no progress output and no warnings\n";
 
+/* "appm, ppm, sppm or pt": the library's method names, for messages. */
+static const char *method_list(char *buf, size_t size)
+{
+    size_t len = 0;
+    int m, n = (int)APPM_METHOD_COUNT;
+    buf[0] = 0;
+    for (m = 0; m < n; ++m) {
+        int k = snprintf(buf + len, size - len, "%s%s", m == 0 ? "" : (m + 1 < n ? ", " : " or "),
+                         appm_method_name((appm_method)m));
+        if (k < 0 || (size_t)k >= size - len) break;
+        len += (size_t)k;
+    }
+    return buf;
+}
+
 /* ---- Strict number parsing ---------------------------------------------- */
 
 static int parse_double(const char *s, double *out)
@@ -294,8 +309,10 @@ static int parse_render(int argc, char **argv, render_opts *o)
         else if (strcmp(a, "--log") == 0) o->log = v;
         else if (strcmp(a, "--aux") == 0) o->aux = v;
         else if (strcmp(a, "--method") == 0) {
-            if (appm_method_parse(v, &o->cfg.method) != APPM_OK)
-                return usage_error("unknown method '%s' (appm, ppm, sppm or pt)", v);
+            if (appm_method_parse(v, &o->cfg.method) != APPM_OK) {
+                char names[256];
+                return usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
+            }
         } else if (strcmp(a, "--direct") == 0) {
             if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
             else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
