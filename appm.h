@@ -326,7 +326,8 @@ APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
  * floats each, borrowed until the next pass.  Returns NULL when the method keeps
  * no such map (e.g. laplacian for ppm), before the first pass, or when the map's
  * memory (allocated on the first request) cannot be had.
- *   RADIUS     the radius each pixel gathered with in the last pass (scene units)
+ *   RADIUS     the radius each pixel gathered with in the last pass (scene units;
+ *              sppm: the radius R of its next gather)
  *   VARIANCE   the estimated variance of the pixel (luminance)
  *   LAPLACIAN  the estimated pixel Laplacian dI (luminance per area^2)
  *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)        */
