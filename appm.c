@@ -4850,6 +4850,727 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
     return APPM_ERR_INVALID_ARG;
 }
 
+/* ---- 12.2 Checkpoints ----------------------------------------------------------
+ *
+ * A checkpoint is everything the next pass reads that a fresh renderer of the
+ * same scene and options does not already have: the pass counter j, the radii
+ * r1 and r_auto fixed by pass 1, ppm's global radius, the counters of
+ * appm_stats, and per pixel the shared appm__pixel plus the method's state,
+ * written field by field from the estimator table (10.2) - so a field added
+ * to a method's table is saved without a change here.  What a pass rebuilds
+ * (visible points, the photon store and map, the image, the aux maps) is not
+ * saved: the random numbers of pass j are a function of (seed, j, index)
+ * (section 2), and the photon store's capacity only decides whether a pass
+ * is traced twice, never what it stores.  So N passes, save, load into a
+ * renderer of the same scene and options (any thread count), N passes give
+ * the bytes of 2N passes.
+ *
+ * Layout, little-endian, each value packed byte by byte (doubles as their
+ * IEEE-754 bits), so a checkpoint moves between machines:
+ *   "APPMCKPT", u32 format version, u32 x 3 library version,
+ *   u32 method, direct, width, height, max_depth; u64 photons, seed;
+ *   f64 alpha, radius option (0: automatic); u64 scene hash;
+ *   u64 pass, photons emitted, photons stored, eye paths, dropped samples;
+ *   f64 r1, r_auto, ppm R^2, ppm R, seconds (total, eye, photons, grid, gather);
+ *   the field lists of appm__pixel and of the method's state (u32 count, then
+ *   per field u32 name length, name, u32 count, u32 is_u64);
+ *   per pixel, in reading order, those fields' values (8 bytes each);
+ *   u64 FNV-1a hash of all bytes before it.
+ * A checkpoint of another format or library version, scene, method, option set,
+ * image size or field list is refused (APPM_ERR_INVALID_ARG, saying which); a
+ * truncated, altered or impossible one is APPM_ERR_PARSE.  Loading reads the
+ * input twice - first to check everything, then to apply it - so a refused
+ * checkpoint leaves the renderer as it was. */
+#define APPM__CK_FORMAT 1u
+#define APPM__CK_BLOCK 65536              /* file buffer */
+#define APPM__CK_MAXFIELDS 64
+#define APPM__FNV_BASIS 14695981039346656037ull
+#define APPM__FNV_PRIME 1099511628211ull
+
+/* The shared per-pixel state (section 7's appm__pixel), field by field as the
+ * estimator table lists each method's: a field added to appm__pixel must be
+ * listed here (t_checkpoint checks that the list tiles the struct). */
+static const appm__field appm__pixel_fields[] = {{"ld", offsetof(appm__pixel, ld), 3, 0},
+                                                 {"wmean", offsetof(appm__pixel, wmean), 1, 0},
+                                                 {"wm2", offsetof(appm__pixel, wm2), 1, 0}};
+
+/* The field lists one checkpoint is written with: the pixel's and the method's. */
+typedef struct appm__ck_layout {
+    const appm__field *f[2];
+    unsigned n[2];
+} appm__ck_layout;
+
+static void appm__ck_layout_of(const appm_renderer *r, appm__ck_layout *L)
+{
+    L->f[0] = appm__pixel_fields;
+    L->n[0] = sizeof appm__pixel_fields / sizeof appm__pixel_fields[0];
+    L->f[1] = r->est->fields;
+    L->n[1] = r->est->nfields;
+}
+
+/* The scene as the renderer sees it - geometry in BVH order, materials, lights,
+ * camera, image size - hashed value by value (struct padding never enters), so
+ * the same scene file gives the same hash on every machine. */
+static uint64_t appm__hash_u(uint64_t h, uint64_t v) { return appm__mix64(h ^ v) + 0x9E3779B97F4A7C15ull; }
+
+static uint64_t appm__hash_f(uint64_t h, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return appm__hash_u(h, u);
+}
+
+static uint64_t appm__hash_d(uint64_t h, double d)
+{
+    uint64_t u;
+    memcpy(&u, &d, sizeof u);
+    return appm__hash_u(h, u);
+}
+
+static uint64_t appm__hash_v3(uint64_t h, appm__v3 v)
+{
+    return appm__hash_f(appm__hash_f(appm__hash_f(h, v.x), v.y), v.z);
+}
+
+static uint64_t appm__scene_hash(const appm_scene *s)
+{
+    uint64_t h = appm__hash_u(appm__hash_u(appm__hash_u(0, s->ntri), s->nmat), s->nlight);
+    const appm__camera *c = &s->cam;
+    uint32_t i;
+    int k;
+    for (i = 0; i < s->ntri; ++i) {
+        const appm__tri_info *t = &s->info[i];
+        h = appm__hash_v3(appm__hash_v3(appm__hash_v3(h, s->tri[i].p0), s->tri[i].p1), s->tri[i].p2);
+        h = appm__hash_f(appm__hash_v3(h, t->ng), t->area);
+        h = appm__hash_u(appm__hash_u(appm__hash_u(h, t->mat), (uint32_t)t->light), (uint32_t)t->n0);
+    }
+    for (i = 0; i < s->nnormals; ++i) h = appm__hash_v3(h, s->normals[i]);
+    for (i = 0; i < s->nmat; ++i) {
+        const appm__material *m = &s->mat[i];
+        h = appm__hash_u(appm__hash_u(h, (uint32_t)m->kind), (uint32_t)m->emissive);
+        h = appm__hash_f(appm__hash_v3(appm__hash_v3(h, m->color), m->ke), m->ior);
+    }
+    for (i = 0; i < s->nlight; ++i) {
+        const appm__light *l = &s->light[i];
+        h = appm__hash_u(appm__hash_u(h, (uint32_t)l->kind), l->tri);
+        h = appm__hash_v3(appm__hash_v3(appm__hash_v3(h, l->pos), l->axis), l->value);
+        h = appm__hash_f(appm__hash_f(h, l->cos_cone), l->cos_inner);
+        for (k = 0; k < 3; ++k) h = appm__hash_d(h, l->power[k]);
+        h = appm__hash_d(h, l->pick);
+    }
+    h = appm__hash_v3(appm__hash_v3(appm__hash_v3(appm__hash_v3(h, c->eye), c->forward), c->right), c->up);
+    h = appm__hash_f(appm__hash_f(appm__hash_f(appm__hash_f(h, c->fov), c->tan_half), c->aperture), c->focus);
+    return appm__hash_u(appm__hash_u(appm__hash_u(h, (uint32_t)s->env), s->width), s->height);
+}
+
+/* -- Byte sinks and sources.  The writer fills the caller's buffer (counting
+ *    on past its end, so that a NULL buffer measures) or a block flushed to a
+ *    file; the reader walks a buffer or refills a block from a file.  Both keep
+ *    the FNV-1a hash of every byte that passes. */
+typedef struct appm__ckw {
+    unsigned char *buf;
+    size_t cap, len;
+    FILE *f;         /* NULL: memory */
+    uint64_t total;  /* bytes produced */
+    uint64_t sum;
+    int ok;
+} appm__ckw;
+
+static void appm__ckw_bytes(appm__ckw *w, const unsigned char *p, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; ++i) {
+        w->sum = (w->sum ^ p[i]) * APPM__FNV_PRIME;
+        if (w->len == w->cap && w->f) {
+            if (fwrite(w->buf, 1, w->len, w->f) != w->len) w->ok = 0;
+            w->len = 0;
+        }
+        if (w->len < w->cap) w->buf[w->len++] = p[i];
+    }
+    w->total += n;
+}
+
+static void appm__ckw_u(appm__ckw *w, uint64_t v, int bytes)
+{
+    unsigned char b[8];
+    int k;
+    for (k = 0; k < bytes; ++k) b[k] = (unsigned char)(v >> (8 * k));
+    appm__ckw_bytes(w, b, (size_t)bytes);
+}
+
+static void appm__ckw_d(appm__ckw *w, double d)
+{
+    uint64_t u;
+    memcpy(&u, &d, sizeof u);
+    appm__ckw_u(w, u, 8);
+}
+
+typedef struct appm__ckr {
+    const unsigned char *p;
+    size_t len, pos;     /* bytes at p, bytes of them read */
+    FILE *f;             /* NULL: memory */
+    unsigned char *blk;  /* file: the block p points to */
+    uint64_t sum;
+    int ok;              /* 0 once a read ran past the end (or failed) */
+} appm__ckr;
+
+static void appm__ckr_rewind(appm__ckr *r)
+{
+    r->pos = 0;
+    r->sum = APPM__FNV_BASIS;
+    r->ok = 1;
+    if (r->f) {
+        r->len = 0;
+        if (fseek(r->f, 0L, SEEK_SET) != 0) r->ok = 0;
+    }
+}
+
+/* The next byte into *b; 0 at the end.  hashed: whether it enters the sum. */
+static int appm__ckr_byte(appm__ckr *r, unsigned char *b, int hashed)
+{
+    if (r->pos == r->len) {
+        if (r->f && r->ok) {
+            r->len = fread(r->blk, 1, APPM__CK_BLOCK, r->f);
+            r->pos = 0;
+            r->p = r->blk;
+        }
+        if (r->pos == r->len) {
+            r->ok = 0;
+            return 0;
+        }
+    }
+    *b = r->p[r->pos++];
+    if (hashed) r->sum = (r->sum ^ *b) * APPM__FNV_PRIME;
+    return 1;
+}
+
+static uint64_t appm__ckr_u(appm__ckr *r, int bytes)
+{
+    uint64_t v = 0;
+    unsigned char b = 0;
+    int k;
+    for (k = 0; k < bytes && appm__ckr_byte(r, &b, 1); ++k) v |= (uint64_t)b << (8 * k);
+    return r->ok ? v : 0;
+}
+
+static double appm__ckr_d(appm__ckr *r)
+{
+    uint64_t u = appm__ckr_u(r, 8);
+    double d;
+    memcpy(&d, &u, sizeof d);
+    return d;
+}
+
+/* -- What a checkpoint says about its render (compared on load) and the
+ *    renderer-wide state (applied on load). */
+typedef struct appm__ck_head {
+    uint32_t format, version[3], method, direct, w, h, max_depth;
+    uint64_t M, seed, scene;
+    double alpha, radius;
+} appm__ck_head;
+
+typedef struct appm__ck_glob {
+    uint64_t pass, emitted, stored, eye, dropped;
+    double r1, r_auto, ppm_R2, ppm_R, sec[5];
+} appm__ck_glob;
+
+static void appm__ck_head_of(const appm_renderer *r, uint64_t scene, appm__ck_head *h)
+{
+    h->format = APPM__CK_FORMAT;
+    h->version[0] = APPM_VERSION_MAJOR;
+    h->version[1] = APPM_VERSION_MINOR;
+    h->version[2] = APPM_VERSION_PATCH;
+    h->method = (uint32_t)(r->est - appm__estimators);
+    h->direct = (uint32_t)r->direct;
+    h->w = r->w;
+    h->h = r->h;
+    h->max_depth = r->max_depth;
+    h->M = r->M;
+    h->seed = r->seed;
+    h->scene = scene;
+    h->alpha = r->alpha;
+    h->radius = r->r1_auto ? 0.0 : r->r1;
+}
+
+static void appm__ck_glob_of(const appm_renderer *r, appm__ck_glob *g)
+{
+    unsigned k;
+    g->pass = r->pass;
+    g->emitted = r->stats.photons_emitted;
+    g->stored = r->stats.photons_stored;
+    g->eye = r->stats.eye_paths;
+    g->dropped = 0;
+    for (k = 0; k < APPM__MAX_THREADS; ++k) g->dropped += r->dropped[k];
+    g->r1 = r->r1;
+    g->r_auto = r->r_auto;
+    g->ppm_R2 = r->ppm.R2;
+    g->ppm_R = r->ppm.R;
+    g->sec[0] = r->stats.seconds;
+    g->sec[1] = r->stats.seconds_eye;
+    g->sec[2] = r->stats.seconds_photons;
+    g->sec[3] = r->stats.seconds_grid;
+    g->sec[4] = r->stats.seconds_gather;
+}
+
+/* One pixel's or one state's fields, 8 bytes a value. */
+static void appm__ck_put_fields(appm__ckw *w, const unsigned char *base, const appm__field *f, unsigned n)
+{
+    unsigned i, k;
+    for (i = 0; i < n; ++i)
+        for (k = 0; k < f[i].count; ++k) {
+            uint64_t u;
+            memcpy(&u, base + f[i].offset + 8 * (size_t)k, sizeof u); /* a double's bits or a count */
+            appm__ckw_u(w, u, 8);
+        }
+}
+
+/* The whole checkpoint of `r` with field lists L into w. */
+static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_layout *L)
+{
+    appm__ck_head h;
+    appm__ck_glob g;
+    size_t i, npix = (size_t)r->w * r->h;
+    unsigned t, k;
+    appm__ck_head_of(r, appm__scene_hash(r->scene), &h);
+    appm__ck_glob_of(r, &g);
+    appm__ckw_bytes(w, (const unsigned char *)"APPMCKPT", 8);
+    appm__ckw_u(w, h.format, 4);
+    for (k = 0; k < 3; ++k) appm__ckw_u(w, h.version[k], 4);
+    appm__ckw_u(w, h.method, 4);
+    appm__ckw_u(w, h.direct, 4);
+    appm__ckw_u(w, h.w, 4);
+    appm__ckw_u(w, h.h, 4);
+    appm__ckw_u(w, h.max_depth, 4);
+    appm__ckw_u(w, h.M, 8);
+    appm__ckw_u(w, h.seed, 8);
+    appm__ckw_d(w, h.alpha);
+    appm__ckw_d(w, h.radius);
+    appm__ckw_u(w, h.scene, 8);
+    appm__ckw_u(w, g.pass, 8);
+    appm__ckw_u(w, g.emitted, 8);
+    appm__ckw_u(w, g.stored, 8);
+    appm__ckw_u(w, g.eye, 8);
+    appm__ckw_u(w, g.dropped, 8);
+    appm__ckw_d(w, g.r1);
+    appm__ckw_d(w, g.r_auto);
+    appm__ckw_d(w, g.ppm_R2);
+    appm__ckw_d(w, g.ppm_R);
+    for (k = 0; k < 5; ++k) appm__ckw_d(w, g.sec[k]);
+    for (t = 0; t < 2; ++t) {
+        appm__ckw_u(w, L->n[t], 4);
+        for (k = 0; k < L->n[t]; ++k) {
+            size_t len = strlen(L->f[t][k].name);
+            appm__ckw_u(w, len, 4);
+            appm__ckw_bytes(w, (const unsigned char *)L->f[t][k].name, len);
+            appm__ckw_u(w, L->f[t][k].count, 4);
+            appm__ckw_u(w, L->f[t][k].is_u64, 4);
+        }
+    }
+    for (i = 0; i < npix; ++i) {
+        appm__ck_put_fields(w, (const unsigned char *)&r->pix[i], L->f[0], L->n[0]);
+        if (r->est->state_size) appm__ck_put_fields(w, (const unsigned char *)appm__state(r, i), L->f[1], L->n[1]);
+    }
+    appm__ckw_u(w, w->sum, 8);
+}
+
+/* -- Reading.  What comes before the pixels, as the file says it. */
+#define APPM__CK_NAME 32
+
+typedef struct appm__ck_file {
+    appm__ck_head h;
+    appm__ck_glob g;
+    unsigned n[2];
+    struct {
+        char name[APPM__CK_NAME];
+        uint32_t count, is_u64;
+    } f[2][APPM__CK_MAXFIELDS];
+    int magic, layout_ok;
+} appm__ck_file;
+
+static void appm__ck_read_layout(appm__ckr *rd, appm__ck_file *F)
+{
+    unsigned t, k;
+    F->layout_ok = 1;
+    for (t = 0; t < 2 && F->layout_ok; ++t) {
+        F->n[t] = (unsigned)appm__ckr_u(rd, 4);
+        /* a pixel always has fields: so each pixel costs at least 8 bytes and no
+         * header can make the reader loop longer than the input is long */
+        if (F->n[t] > APPM__CK_MAXFIELDS || (t == 0 && F->n[t] == 0)) F->layout_ok = 0;
+        for (k = 0; k < F->n[t] && F->layout_ok; ++k) {
+            uint64_t len = appm__ckr_u(rd, 4), c;
+            unsigned char b = 0;
+            if (len >= APPM__CK_NAME) {
+                F->layout_ok = 0;
+                break;
+            }
+            for (c = 0; c < len; ++c) {
+                appm__ckr_byte(rd, &b, 1);
+                F->f[t][k].name[c] = (char)b;
+            }
+            F->f[t][k].name[len] = 0;
+            F->f[t][k].count = (uint32_t)appm__ckr_u(rd, 4);
+            F->f[t][k].is_u64 = (uint32_t)appm__ckr_u(rd, 4);
+            if (F->f[t][k].count == 0 || F->f[t][k].count > 64 || F->f[t][k].is_u64 > 1) F->layout_ok = 0;
+        }
+    }
+}
+
+static void appm__ck_read_front(appm__ckr *rd, appm__ck_file *F)
+{
+    appm__ck_head *h = &F->h;
+    appm__ck_glob *g = &F->g;
+    unsigned char m[8];
+    unsigned k;
+    memset(F, 0, sizeof *F);
+    for (k = 0; k < 8; ++k)
+        if (!appm__ckr_byte(rd, &m[k], 1)) m[k] = 0;
+    F->magic = memcmp(m, "APPMCKPT", 8) == 0;
+    h->format = (uint32_t)appm__ckr_u(rd, 4);
+    if (!F->magic || h->format != APPM__CK_FORMAT) return; /* the rest may mean something else */
+    for (k = 0; k < 3; ++k) h->version[k] = (uint32_t)appm__ckr_u(rd, 4);
+    h->method = (uint32_t)appm__ckr_u(rd, 4);
+    h->direct = (uint32_t)appm__ckr_u(rd, 4);
+    h->w = (uint32_t)appm__ckr_u(rd, 4);
+    h->h = (uint32_t)appm__ckr_u(rd, 4);
+    h->max_depth = (uint32_t)appm__ckr_u(rd, 4);
+    h->M = appm__ckr_u(rd, 8);
+    h->seed = appm__ckr_u(rd, 8);
+    h->alpha = appm__ckr_d(rd);
+    h->radius = appm__ckr_d(rd);
+    h->scene = appm__ckr_u(rd, 8);
+    g->pass = appm__ckr_u(rd, 8);
+    g->emitted = appm__ckr_u(rd, 8);
+    g->stored = appm__ckr_u(rd, 8);
+    g->eye = appm__ckr_u(rd, 8);
+    g->dropped = appm__ckr_u(rd, 8);
+    g->r1 = appm__ckr_d(rd);
+    g->r_auto = appm__ckr_d(rd);
+    g->ppm_R2 = appm__ckr_d(rd);
+    g->ppm_R = appm__ckr_d(rd);
+    for (k = 0; k < 5; ++k) g->sec[k] = appm__ckr_d(rd);
+    appm__ck_read_layout(rd, F);
+}
+
+/* First reading of the pixels: only their length and whether every double is
+ * finite (the renderer never stores a NaN or an infinity in its statistics). */
+static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *nonfinite)
+{
+    uint64_t i, npix = (uint64_t)F->h.w * F->h.h;
+    unsigned t, k, c;
+    for (i = 0; i < npix && rd->ok; ++i)
+        for (t = 0; t < 2; ++t)
+            for (k = 0; k < F->n[t]; ++k)
+                for (c = 0; c < F->f[t][k].count; ++c) {
+                    uint64_t u = appm__ckr_u(rd, 8);
+                    double d;
+                    memcpy(&d, &u, sizeof d);
+                    if (!F->f[t][k].is_u64 && !(d - d == 0.0)) *nonfinite = 1;
+                }
+}
+
+/* Second reading: the values into the renderer, at the offsets of its own
+ * field lists (which the first reading found equal to the file's). */
+static void appm__ck_get_fields(appm__ckr *rd, unsigned char *base, const appm__field *f, unsigned n)
+{
+    unsigned i, k;
+    for (i = 0; i < n; ++i)
+        for (k = 0; k < f[i].count; ++k) {
+            uint64_t u = appm__ckr_u(rd, 8);
+            memcpy(base + f[i].offset + 8 * (size_t)k, &u, sizeof u);
+        }
+}
+
+static void appm__ck_load_pixels(appm__ckr *rd, appm_renderer *r, const appm__ck_layout *L)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    for (i = 0; i < npix; ++i) {
+        appm__ck_get_fields(rd, (unsigned char *)&r->pix[i], L->f[0], L->n[0]);
+        if (r->est->state_size) appm__ck_get_fields(rd, (unsigned char *)appm__state(r, i), L->f[1], L->n[1]);
+    }
+}
+
+/* The stored hash after the pixels: 1 it matches and the input ends there,
+ * 0 it differs, -1 the input ends early, -2 bytes follow. */
+static int appm__ck_trailer(appm__ckr *rd)
+{
+    uint64_t sum = rd->sum, stored = 0;
+    unsigned char b = 0;
+    int k;
+    if (!rd->ok) return -1;
+    for (k = 0; k < 8; ++k) {
+        if (!appm__ckr_byte(rd, &b, 0)) return -1;
+        stored |= (uint64_t)b << (8 * k);
+    }
+    if (appm__ckr_byte(rd, &b, 0)) return -2;
+    return stored == sum ? 1 : 0;
+}
+
+static appm_status appm__ck_option(appm_diag *d, const char *name, const char *what, double file, double mine)
+{
+    return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,
+                      "a checkpoint of another option set: %s is %.17g there, %.17g in this render", what, file,
+                      mine);
+}
+
+/* The checkpoint's render against this renderer's: the first difference, named. */
+static appm_status appm__ck_compare(const appm__ck_file *F, const appm__ck_head *want, const appm__ck_layout *L,
+                                    const char *name, appm_diag *d)
+{
+    const appm__ck_head *h = &F->h;
+    unsigned t, k;
+    if (memcmp(h->version, want->version, sizeof h->version) != 0)
+        return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,
+                          "a checkpoint of appm %u.%u.%u; this is appm %s, whose passes may differ", h->version[0],
+                          h->version[1], h->version[2], APPM_VERSION);
+    if (h->method != want->method)
+        return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0, "a checkpoint of method %s; this render uses %s",
+                          h->method < APPM_METHOD_COUNT ? appm__estimators[h->method].name : "(unknown)",
+                          appm__estimators[want->method].name);
+    if (h->w != want->w || h->h != want->h)
+        return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0, "a checkpoint of a %lux%lu image; this render is %lux%lu",
+                          (unsigned long)h->w, (unsigned long)h->h, (unsigned long)want->w, (unsigned long)want->h);
+    if (h->scene != want->scene)
+        return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,
+                          "a checkpoint of another scene (its geometry, materials, lights or camera differ)");
+    if (h->direct != want->direct) return appm__ck_option(d, name, "direct", h->direct, want->direct);
+    if (h->M != want->M) return appm__ck_option(d, name, "photons", (double)h->M, (double)want->M);
+    if (h->seed != want->seed) return appm__ck_option(d, name, "seed", (double)h->seed, (double)want->seed);
+    if (memcmp(&h->alpha, &want->alpha, sizeof h->alpha) != 0)
+        return appm__ck_option(d, name, "alpha", h->alpha, want->alpha);
+    if (memcmp(&h->radius, &want->radius, sizeof h->radius) != 0)
+        return appm__ck_option(d, name, "radius (0: automatic)", h->radius, want->radius);
+    if (h->max_depth != want->max_depth) return appm__ck_option(d, name, "max depth", h->max_depth, want->max_depth);
+    for (t = 0; t < 2; ++t)
+        for (k = 0; k < (F->n[t] > L->n[t] ? F->n[t] : L->n[t]); ++k)
+            if (k >= F->n[t] || k >= L->n[t] || strcmp(F->f[t][k].name, L->f[t][k].name) != 0 ||
+                F->f[t][k].count != L->f[t][k].count || F->f[t][k].is_u64 != L->f[t][k].is_u64)
+                return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,
+                                  "a checkpoint whose %s state differs from this build's (field %u: '%s' there, "
+                                  "'%s' here): written by another version",
+                                  t == 0 ? "pixel" : appm__estimators[want->method].name, k + 1,
+                                  k < F->n[t] ? F->f[t][k].name : "", k < L->n[t] ? L->f[t][k].name : "");
+    return APPM_OK;
+}
+
+/* Values no render produces: a non-finite or negative radius or time, r1
+ * unlike the radius option, a radius of 0 after pass 1, an absurd pass count. */
+static int appm__ck_glob_ok(const appm__ck_glob *g, const appm__ck_head *h, int photons)
+{
+    const double v[4] = {g->r1, g->r_auto, g->ppm_R2, g->ppm_R};
+    int k;
+    if (g->pass > ((uint64_t)1 << 52)) return 0;
+    for (k = 0; k < 4; ++k)
+        if (!(v[k] >= 0.0 && v[k] < HUGE_VAL)) return 0;
+    for (k = 0; k < 5; ++k)
+        if (!(g->sec[k] >= 0.0 && g->sec[k] < HUGE_VAL)) return 0;
+    if (h->radius > 0.0 && g->r1 != h->radius) return 0;
+    if (photons && g->pass > 0 && !(g->r1 > 0.0 && g->r_auto > 0.0)) return 0;
+    return 1;
+}
+
+static void appm__ck_apply(appm_renderer *r, const appm__ck_glob *g)
+{
+    r->pass = g->pass;
+    r->r1 = g->r1;
+    r->r_auto = g->r_auto;
+    r->ppm.R2 = g->ppm_R2;
+    r->ppm.R = g->ppm_R;
+    memset(r->dropped, 0, sizeof r->dropped);
+    r->dropped[0] = g->dropped;
+    r->stats.passes = g->pass;
+    r->stats.photons_emitted = g->emitted;
+    r->stats.photons_stored = g->stored;
+    r->stats.eye_paths = g->eye;
+    r->stats.dropped_samples = g->dropped;
+    r->stats.initial_radius = g->pass ? g->r1 : 0.0;
+    r->stats.seconds = g->sec[0];
+    r->stats.seconds_eye = g->sec[1];
+    r->stats.seconds_photons = g->sec[2];
+    r->stats.seconds_grid = g->sec[3];
+    r->stats.seconds_gather = g->sec[4];
+    appm__estimate_error(r);
+}
+
+/* Back to the state after creation (a file that changed between the readings). */
+static void appm__ck_reset(appm_renderer *r)
+{
+    appm__ck_glob g;
+    size_t npix = (size_t)r->w * r->h;
+    memset(&g, 0, sizeof g);
+    g.r1 = r->r1_auto ? 0.0 : r->r1;
+    memset(r->pix, 0, npix * sizeof *r->pix);
+    if (r->est->state_size) memset(r->state, 0, npix * r->est->state_size);
+    appm__ck_apply(r, &g);
+}
+
+/* Checks all of rd, then (a second reading) applies it to r. */
+static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck_layout *L, const char *name,
+                                 appm_diag *d)
+{
+    appm__ck_file F;
+    appm__ck_head want;
+    appm__ck_glob g;
+    appm_status st;
+    int nonfinite = 0, tr;
+    appm__ck_head_of(r, appm__scene_hash(r->scene), &want);
+    appm__ck_read_front(rd, &F);
+    if (!F.magic) return appm__fail(d, APPM_ERR_PARSE, name, 0, "not an appm checkpoint");
+    if (!rd->ok) return appm__fail(d, APPM_ERR_PARSE, name, 0, "truncated checkpoint");
+    if (F.h.format != APPM__CK_FORMAT)
+        return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,
+                          "checkpoint format version %lu; this build reads version %u only",
+                          (unsigned long)F.h.format, APPM__CK_FORMAT);
+    if (rd->ok && (!F.layout_ok || F.h.w < 1 || F.h.w > 32768 || F.h.h < 1 || F.h.h > 32768))
+        return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (impossible image size or field list)");
+    appm__ck_scan_pixels(rd, &F, &nonfinite);
+    tr = appm__ck_trailer(rd);
+    if (tr == -1) return appm__fail(d, APPM_ERR_PARSE, name, 0, "truncated checkpoint");
+    if (tr == -2) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (bytes after its end)");
+    if (tr == 0) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (checksum mismatch)");
+    if ((st = appm__ck_compare(&F, &want, L, name, d)) != APPM_OK) return st;
+    if (nonfinite || !appm__ck_glob_ok(&F.g, &F.h, (r->est->caps & APPM__CAP_PHOTONS) != 0))
+        return appm__fail(d, APPM_ERR_PARSE, name, 0,
+                          "corrupted checkpoint (a value no render produces: non-finite statistics, radii or "
+                          "times, or an absurd pass count)");
+    g = F.g;
+    appm__ckr_rewind(rd);
+    appm__ck_read_front(rd, &F);
+    appm__ck_load_pixels(rd, r, L);
+    if (appm__ck_trailer(rd) != 1 || memcmp(&g, &F.g, sizeof g) != 0) {
+        appm__ck_reset(r);
+        return appm__fail(d, APPM_ERR_IO, name, 0, "the checkpoint changed while it was read");
+    }
+    appm__ck_apply(r, &F.g);
+    return APPM_OK;
+}
+
+/* -- The public calls, over memory or files (through r's allocator). */
+static appm_status appm__ck_save_mem(const appm_renderer *r, const appm__ck_layout *L, void *buf, size_t cap,
+                                     size_t *size, appm_diag *d)
+{
+    appm__ckw w;
+    memset(&w, 0, sizeof w);
+    w.buf = (unsigned char *)buf;
+    w.cap = buf ? cap : 0;
+    w.sum = APPM__FNV_BASIS;
+    w.ok = 1;
+    appm__ck_write(&w, r, L);
+    if (w.total > (uint64_t)SIZE_MAX)
+        return appm__fail(d, APPM_ERR_NOMEM, NULL, 0, "a checkpoint of %.0f bytes does not fit in memory",
+                          (double)w.total);
+    if (size) *size = (size_t)w.total;
+    if (buf && w.total > cap)
+        return appm__fail(d, APPM_ERR_INVALID_ARG, NULL, 0, "the buffer holds %.0f bytes; the checkpoint needs %.0f",
+                          (double)cap, (double)w.total);
+    return APPM_OK;
+}
+
+static appm_status appm__ck_save_file(appm_renderer *r, const appm__ck_layout *L, const char *path, appm_diag *d)
+{
+    char tmp[4096];
+    int special;
+    appm__ckw w;
+    appm_diag *keep = r->mem.diag;
+    if (strlen(path) + 5 > sizeof tmp) return appm__fail(d, APPM_ERR_INVALID_ARG, path, 0, "path too long");
+    special = appm__is_special_file(path);
+    sprintf(tmp, "%s.tmp", path);
+    memset(&w, 0, sizeof w);
+    w.sum = APPM__FNV_BASIS;
+    w.ok = 1;
+    w.cap = APPM__CK_BLOCK;
+    r->mem.diag = d;
+    w.buf = (unsigned char *)appm__alloc(&r->mem, APPM__CK_BLOCK, 1);
+    r->mem.diag = keep;
+    if (!w.buf) return appm__fail(d, APPM_ERR_NOMEM, path, 0, "out of memory writing the checkpoint");
+    w.f = fopen(special ? path : tmp, "wb");
+    if (w.f) {
+        appm__ck_write(&w, r, L);
+        if (w.len && fwrite(w.buf, 1, w.len, w.f) != w.len) w.ok = 0;
+        if (fclose(w.f) != 0) w.ok = 0;
+        if (!special) {
+            if (w.ok && appm__rename_replace(tmp, path) != 0) w.ok = 0;
+            if (!w.ok) remove(tmp);
+        }
+    } else {
+        w.ok = 0;
+    }
+    appm__free(&r->mem, w.buf);
+    if (!w.ok) return appm__fail(d, APPM_ERR_IO, path, 0, "cannot write the checkpoint");
+    return APPM_OK;
+}
+
+static appm_status appm__ck_load_mem(appm_renderer *r, const appm__ck_layout *L, const void *buf, size_t len,
+                                     appm_diag *d)
+{
+    appm__ckr rd;
+    memset(&rd, 0, sizeof rd);
+    rd.p = (const unsigned char *)buf;
+    rd.len = len;
+    appm__ckr_rewind(&rd);
+    return appm__ck_load(r, &rd, L, NULL, d);
+}
+
+static appm_status appm__ck_load_file(appm_renderer *r, const appm__ck_layout *L, const char *path, appm_diag *d)
+{
+    appm__ckr rd;
+    appm_status st;
+    appm_diag *keep = r->mem.diag;
+    memset(&rd, 0, sizeof rd);
+    rd.f = fopen(path, "rb");
+    if (!rd.f) return appm__fail(d, APPM_ERR_IO, path, 0, "cannot open the checkpoint");
+    r->mem.diag = d;
+    rd.blk = (unsigned char *)appm__alloc(&r->mem, APPM__CK_BLOCK, 1);
+    r->mem.diag = keep;
+    if (!rd.blk) {
+        fclose(rd.f);
+        return appm__fail(d, APPM_ERR_NOMEM, path, 0, "out of memory reading the checkpoint");
+    }
+    appm__ckr_rewind(&rd);
+    st = appm__ck_load(r, &rd, L, path, d);
+    if (st == APPM_OK && ferror(rd.f)) st = appm__fail(d, APPM_ERR_IO, path, 0, "read error");
+    fclose(rd.f);
+    appm__free(&r->mem, rd.blk);
+    return st;
+}
+
+APPM_API appm_status appm_renderer_save(const appm_renderer *r, void *buf, size_t cap, size_t *size,
+                                        appm_diag *diag)
+{
+    appm__ck_layout L;
+    appm__diag_clear(diag);
+    if (size) *size = 0;
+    if (!r) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no renderer");
+    appm__ck_layout_of(r, &L);
+    return appm__ck_save_mem(r, &L, buf, cap, size, diag);
+}
+
+APPM_API appm_status appm_renderer_save_file(appm_renderer *r, const char *path, appm_diag *diag)
+{
+    appm__ck_layout L;
+    appm__diag_clear(diag);
+    if (!r || !path) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no renderer or no path");
+    appm__ck_layout_of(r, &L);
+    return appm__ck_save_file(r, &L, path, diag);
+}
+
+APPM_API appm_status appm_renderer_load(appm_renderer *r, const void *buf, size_t len, appm_diag *diag)
+{
+    appm__ck_layout L;
+    appm__diag_clear(diag);
+    if (!r || (!buf && len)) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no renderer or no checkpoint");
+    appm__ck_layout_of(r, &L);
+    return appm__ck_load_mem(r, &L, buf, len, diag);
+}
+
+APPM_API appm_status appm_renderer_load_file(appm_renderer *r, const char *path, appm_diag *diag)
+{
+    appm__ck_layout L;
+    appm__diag_clear(diag);
+    if (!r || !path) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no renderer or no path");
+    appm__ck_layout_of(r, &L);
+    return appm__ck_load_file(r, &L, path, diag);
+}
+
 /* ==== LICENSE =============================================================
  *
  * MIT License.  Copyright (c) 2026 the appm authors.

@@ -340,6 +340,35 @@ typedef enum appm_aux {
 } appm_aux;
 APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which);
 
+/* ---- Checkpoints -------------------------------------------------------------
+ *
+ * A checkpoint holds everything the next pass depends on (per-pixel statistics,
+ * pass counter, radius schedule, counters of appm_stats, seed, method, options,
+ * image size, a hash of the scene, the format and library version) in a fixed
+ * little-endian layout, so it moves between machines.  Load it into a renderer
+ * created from the same scene and options - the thread count may differ - and
+ * the passes that follow give, bit for bit, the image of a render that was
+ * never interrupted.  A checkpoint of another scene, method, option set, image
+ * size or version is refused with APPM_ERR_INVALID_ARG and a message naming
+ * the difference; a truncated or altered one gives APPM_ERR_PARSE (a checksum
+ * covers every byte).  A refused load leaves the renderer as it was.  The
+ * layout is described in appm.c, section 12.2.
+ *
+ * appm_renderer_save writes into buf (cap bytes) and sets *size to the bytes
+ * the checkpoint takes; buf NULL only measures.  APPM_ERR_INVALID_ARG when cap
+ * is too small (*size still says how much is needed).  It allocates nothing.
+ * appm_renderer_save_file writes `path` atomically (a temporary, then renamed,
+ * as appm_image_write does) through a 64 KiB buffer from cfg.allocator.
+ * appm_renderer_load reads a checkpoint from memory (it allocates nothing);
+ * appm_renderer_load_file from `path`, through a 64 KiB buffer from
+ * cfg.allocator; if the file changes between its two readings, the load fails
+ * with APPM_ERR_IO and the renderer is back at its state after creation. */
+APPM_API appm_status appm_renderer_save(const appm_renderer *r, void *buf, size_t cap, size_t *size,
+                                        appm_diag *diag);
+APPM_API appm_status appm_renderer_save_file(appm_renderer *r, const char *path, appm_diag *diag);
+APPM_API appm_status appm_renderer_load(appm_renderer *r, const void *buf, size_t len, appm_diag *diag);
+APPM_API appm_status appm_renderer_load_file(appm_renderer *r, const char *path, appm_diag *diag);
+
 /* The message of the last failed call on `r` ("" if none). */
 APPM_API const char *appm_renderer_last_error(const appm_renderer *r);
 

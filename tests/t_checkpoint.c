@@ -1,0 +1,497 @@
+/* tests/t_checkpoint.c - checkpoint and resume (appm.c section 12.2).
+ *
+ * What is checked, and against what:
+ *   1. Resume is exact: for every method and thread counts 1 and 2, N passes,
+ *      save, load into a new renderer (with the other thread count), N more
+ *      passes give the render of 2N uninterrupted passes bit for bit: the
+ *      image, every aux map the method has, est_relerr and the counters of
+ *      appm_stats.  A loaded renderer saves the bytes it was loaded from; the
+ *      bytes do not depend on the thread count; the file calls round trip too.
+ *   2. Nothing is left out: a checkpoint written and read with any one field
+ *      of the per-pixel lists left out resumes to another render, so every
+ *      listed field is state the next passes depend on (the round trip of 1
+ *      would fail if the estimator table missed a field).  And the pixel list
+ *      tiles appm__pixel as the estimator entries tile their states.
+ *   3. Refusals: a checkpoint of another method, seed, photon count, alpha,
+ *      radius, depth, direct mode, image size, scene, format version, library
+ *      version or field list is refused with APPM_ERR_INVALID_ARG and a message
+ *      that names it; the renderer is left as it was.
+ *   4. Damage: every truncation and every single-bit flip of a checkpoint is
+ *      an error (never APPM_OK), and the renderer is left as it was.
+ *   5. Hostile input with a valid checksum (absurd sizes, field counts, name
+ *      lengths, pass counts, NaN statistics, negative radii) is APPM_ERR_PARSE.
+ *   6. Byte order: the file is little-endian whatever the host: values read
+ *      back byte by byte at their documented offsets. */
+#include "../appm.c"
+#include "check.h"
+
+#define NPASS 6 /* appm: past the warm-up of 4, and 2N = 12 estimates the Laplacian */
+/* The omission test saves at the end of appm's warm-up, where its radius
+ * limits bind, with so few photons that some pixels still widen their radius
+ * (fewer than 8 photons seen): then its last radius R is state too. */
+#define NSAVE 4
+#define SPARSE 300
+
+/* Offsets of the layout comment of section 12.2. */
+#define OFF_FORMAT 8
+#define OFF_VERSION 12
+#define OFF_W 32
+#define OFF_PASS 84
+#define OFF_R1 124
+#define OFF_SECONDS 156
+#define OFF_LAYOUT 196
+
+static appm_config config(appm_method m, unsigned threads)
+{
+    appm_config c;
+    appm_config_init(&c);
+    c.method = m;
+    c.width = 12;
+    c.height = 10;
+    c.photons = 3000;
+    c.threads = threads;
+    c.seed = 7;
+    return c;
+}
+
+static appm_renderer *make(const appm_scene *s, const appm_config *c, int passes)
+{
+    appm_renderer *r = check_renderer(s, c);
+    if (r && !check_passes(r, passes)) {
+        appm_renderer_destroy(r);
+        r = NULL;
+    }
+    return r;
+}
+
+/* Whether a and b show the same render: image, aux maps, error estimate, counters. */
+static int same_render(appm_renderer *a, appm_renderer *b)
+{
+    appm_image ia, ib;
+    appm_stats sa, sb;
+    int k, same;
+    size_t n;
+    appm_renderer_image(a, &ia);
+    appm_renderer_image(b, &ib);
+    n = (size_t)ia.width * ia.height;
+    same = ia.width == ib.width && ia.height == ib.height && memcmp(ia.rgb, ib.rgb, n * 3 * sizeof(float)) == 0;
+    for (k = 0; k < APPM_AUX_COUNT && same; ++k) {
+        const float *xa = appm_renderer_aux(a, (appm_aux)k), *xb = appm_renderer_aux(b, (appm_aux)k);
+        same = (xa == NULL) == (xb == NULL) && (!xa || memcmp(xa, xb, n * sizeof(float)) == 0);
+    }
+    appm_renderer_stats(a, &sa);
+    appm_renderer_stats(b, &sb);
+    return same && sa.passes == sb.passes && sa.photons_emitted == sb.photons_emitted &&
+           sa.eye_paths == sb.eye_paths && sa.dropped_samples == sb.dropped_samples &&
+           memcmp(&sa.est_relerr, &sb.est_relerr, sizeof(double)) == 0 &&
+           memcmp(&sa.initial_radius, &sb.initial_radius, sizeof(double)) == 0;
+}
+
+/* A checkpoint of r in a malloc'd buffer (NULL on failure). */
+static unsigned char *save(appm_renderer *r, size_t *n)
+{
+    unsigned char *buf;
+    appm_diag d;
+    size_t need = 0, got = 0;
+    *n = 0;
+    if (appm_renderer_save(r, NULL, 0, &need, &d) != APPM_OK || need == 0) return NULL;
+    buf = (unsigned char *)malloc(need);
+    if (buf && appm_renderer_save(r, buf, need, &got, &d) == APPM_OK && got == need) {
+        *n = need;
+        return buf;
+    }
+    free(buf);
+    return NULL;
+}
+
+static void put_le(unsigned char *p, uint64_t v, int bytes)
+{
+    int k;
+    for (k = 0; k < bytes; ++k) p[k] = (unsigned char)(v >> (8 * k));
+}
+
+static uint64_t get_le(const unsigned char *p, int bytes)
+{
+    uint64_t v = 0;
+    int k;
+    for (k = 0; k < bytes; ++k) v |= (uint64_t)p[k] << (8 * k);
+    return v;
+}
+
+/* Rewrites the trailing FNV-1a hash, so that an edit reaches the checks behind it. */
+static void fix_sum(unsigned char *p, size_t n)
+{
+    uint64_t h = 14695981039346656037ull;
+    size_t i;
+    for (i = 0; i + 8 < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+    put_le(p + n - 8, h, 8);
+}
+
+/* 1. N + save + load + N == 2N, for every method and thread count. */
+static void test_resume(const appm_scene *s)
+{
+    int m;
+    unsigned t;
+    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m) {
+        unsigned char *bytes[2] = {NULL, NULL};
+        size_t len[2] = {0, 0};
+        for (t = 1; t <= 2; ++t) {
+            appm_config ca = config((appm_method)m, t), cb = config((appm_method)m, 3 - t);
+            appm_renderer *whole = make(s, &ca, 2 * NPASS), *a = make(s, &ca, NPASS), *b = make(s, &cb, 0);
+            appm_diag d;
+            appm_status st;
+            unsigned char *again;
+            size_t n2;
+            if (!whole || !a || !b) goto next;
+            bytes[t - 1] = save(a, &len[t - 1]);
+            CHECK(bytes[t - 1] != NULL);
+            if (!bytes[t - 1]) goto next;
+            st = appm_renderer_load(b, bytes[t - 1], len[t - 1], &d);
+            CHECK_MSG(st == APPM_OK, "%s: load: %s", appm_method_name((appm_method)m), d.message);
+            again = save(b, &n2);
+            CHECK_MSG(again && n2 == len[t - 1] && memcmp(again, bytes[t - 1], n2) == 0,
+                      "%s: a loaded renderer saves other bytes", appm_method_name((appm_method)m));
+            free(again);
+            CHECK(b->pass == NPASS);
+            if (st == APPM_OK && check_passes(b, NPASS))
+                CHECK_MSG(same_render(whole, b), "%s, %u then %u threads: %d + save + load + %d passes differ "
+                          "from %d passes", appm_method_name((appm_method)m), t, 3 - t, NPASS, NPASS, 2 * NPASS);
+        next:
+            appm_renderer_destroy(whole);
+            appm_renderer_destroy(a);
+            appm_renderer_destroy(b);
+        }
+        /* all but the wall times (and the checksum over them) */
+        CHECK_MSG(bytes[0] && bytes[1] && len[0] == len[1] && memcmp(bytes[0], bytes[1], OFF_SECONDS) == 0 &&
+                      memcmp(bytes[0] + OFF_LAYOUT, bytes[1] + OFF_LAYOUT, len[0] - OFF_LAYOUT - 8) == 0,
+                  "%s: the checkpoint depends on the thread count", appm_method_name((appm_method)m));
+        free(bytes[0]);
+        free(bytes[1]);
+    }
+}
+
+/* The file calls: atomic (no temporary left), and the same resume. */
+static void test_file(const appm_scene *s)
+{
+    appm_config c = config(APPM_METHOD_APPM, 2);
+    appm_renderer *whole = make(s, &c, 2 * NPASS), *a = make(s, &c, NPASS), *b = make(s, &c, 0);
+    const char *path = check_path("checkpoint", "resume.ckpt");
+    char tmp[1100];
+    appm_diag d;
+    FILE *f;
+    if (!whole || !a || !b) goto done;
+    CHECK_MSG(appm_renderer_save_file(a, path, &d) == APPM_OK, "save_file: %s", d.message);
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    f = fopen(tmp, "rb");
+    CHECK_MSG(f == NULL, "the temporary %s is left behind", tmp);
+    if (f) fclose(f);
+    CHECK_MSG(appm_renderer_load_file(b, path, &d) == APPM_OK, "load_file: %s", d.message);
+    if (check_passes(b, NPASS)) CHECK_MSG(same_render(whole, b), "a resume through a file differs");
+    CHECK(appm_renderer_load_file(b, check_path("checkpoint", "missing.ckpt"), &d) == APPM_ERR_IO);
+    CHECK(appm_renderer_save_file(a, "tests/out/no-such-folder/x.ckpt", &d) == APPM_ERR_IO);
+done:
+    appm_renderer_destroy(whole);
+    appm_renderer_destroy(a);
+    appm_renderer_destroy(b);
+}
+
+/* 2. Every listed field matters: leave it out of both writing and reading. */
+static int resumes_same_without(const appm_scene *s, appm_method m, unsigned table, unsigned field,
+                                appm_renderer *whole)
+{
+    appm_config c = config(m, 1);
+    appm_renderer *a, *b;
+    c.photons = SPARSE;
+    a = make(s, &c, NSAVE);
+    b = make(s, &c, 0);
+    appm__ck_layout L;
+    appm__field less[APPM__CK_MAXFIELDS];
+    unsigned char *buf = NULL;
+    size_t n = 0, k, j = 0;
+    int same = -1;
+    if (!a || !b) goto done;
+    appm__ck_layout_of(a, &L);
+    for (k = 0; k < L.n[table]; ++k)
+        if (k != field) less[j++] = L.f[table][k];
+    L.f[table] = less;
+    L.n[table] = (unsigned)j;
+    if (appm__ck_save_mem(a, &L, NULL, 0, &n, NULL) != APPM_OK || !(buf = (unsigned char *)malloc(n))) goto done;
+    if (appm__ck_save_mem(a, &L, buf, n, &n, NULL) != APPM_OK) goto done;
+    if (appm__ck_load_mem(b, &L, buf, n, NULL) != APPM_OK || !check_passes(b, 2 * NPASS - NSAVE)) goto done;
+    same = same_render(whole, b);
+done:
+    free(buf);
+    appm_renderer_destroy(a);
+    appm_renderer_destroy(b);
+    return same;
+}
+
+static void test_fields_matter(const appm_scene *s)
+{
+    int m;
+    size_t covered = 0;
+    unsigned f, t;
+    for (f = 0; f < sizeof appm__pixel_fields / sizeof appm__pixel_fields[0]; ++f) {
+        CHECK(appm__pixel_fields[f].offset == covered && !appm__pixel_fields[f].is_u64);
+        covered += appm__pixel_fields[f].count * sizeof(double);
+    }
+    CHECK_MSG(covered == sizeof(appm__pixel), "appm__pixel_fields cover %lu of %lu bytes", (unsigned long)covered,
+              (unsigned long)sizeof(appm__pixel));
+    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m) {
+        appm_config c = config((appm_method)m, 1);
+        appm_renderer *whole;
+        appm__ck_layout L;
+        c.photons = SPARSE;
+        whole = make(s, &c, 2 * NPASS);
+        if (!whole) continue;
+        appm__ck_layout_of(whole, &L);
+        for (t = 0; t < 2; ++t)
+            for (f = 0; f < L.n[t]; ++f) {
+                /* sppm keeps no spread of its per-pass estimates (no VARIANCE map) */
+                int unused = m == APPM_METHOD_SPPM && t == 0 && f > 0;
+                int same = resumes_same_without(s, (appm_method)m, t, f, whole);
+                CHECK_MSG(same == unused, "%s: a checkpoint without field '%s' resumes to %s render",
+                          appm_method_name((appm_method)m), L.f[t][f].name, same ? "the same" : "another");
+            }
+        appm_renderer_destroy(whole);
+    }
+}
+
+/* 3. Refusals.  `fresh` (0 passes) must stay untouched by a refused load. */
+static void expect_refused(appm_renderer *r, const unsigned char *buf, size_t n, appm_status want, const char *word,
+                           const char *what)
+{
+    appm_diag d;
+    appm_status st = appm_renderer_load(r, buf, n, &d);
+    CHECK_MSG(st == want, "%s: status %d (%s), expected %d", what, (int)st, d.message, (int)want);
+    CHECK_MSG(st == APPM_OK || (d.status == st && strstr(d.message, word) != NULL),
+              "%s: the message '%s' does not say '%s'", what, d.message, word);
+    CHECK_MSG(r->pass == 0 && r->stats.passes == 0, "%s: a refused load changed the renderer", what);
+}
+
+static void test_refusals(const appm_scene *s, const appm_scene *other)
+{
+    static const struct {
+        const char *word;
+        int field;
+    } opts[] = {{"method", 0}, {"seed", 1}, {"photons", 2}, {"alpha", 3}, {"radius", 4},
+                {"max depth", 5}, {"direct", 6}, {"image", 7}};
+    appm_config base = config(APPM_METHOD_APPM, 1);
+    appm_renderer *a = make(s, &base, 2), *r;
+    unsigned char *buf, *copy;
+    size_t n, k;
+    if (!a) return;
+    buf = save(a, &n);
+    copy = (unsigned char *)malloc(n + 1);
+    if (!buf || !copy) goto done;
+    for (k = 0; k < sizeof opts / sizeof opts[0]; ++k) {
+        appm_config c = base;
+        switch (opts[k].field) {
+        case 0: c.method = APPM_METHOD_PPM; break;
+        case 1: c.seed = 8; break;
+        case 2: c.photons = 3001; break;
+        case 3: c.alpha = 0.5; break;
+        case 4: c.radius = 0.05; break;
+        case 5: c.max_depth = 5; break;
+        case 6: c.direct = APPM_DIRECT_PHOTONS; break;
+        default: c.height = 11; break;
+        }
+        if ((r = make(s, &c, 0)) != NULL) expect_refused(r, buf, n, APPM_ERR_INVALID_ARG, opts[k].word, opts[k].word);
+        appm_renderer_destroy(r);
+    }
+    if ((r = make(other, &base, 0)) != NULL) expect_refused(r, buf, n, APPM_ERR_INVALID_ARG, "scene", "scene");
+    appm_renderer_destroy(r);
+    if ((r = make(s, &base, 0)) == NULL) goto done;
+    memcpy(copy, buf, n);
+    put_le(copy + OFF_FORMAT, APPM__CK_FORMAT + 1, 4);
+    fix_sum(copy, n);
+    expect_refused(r, copy, n, APPM_ERR_INVALID_ARG, "format version", "format version");
+    memcpy(copy, buf, n);
+    put_le(copy + OFF_VERSION + 4, APPM_VERSION_MINOR + 1, 4);
+    fix_sum(copy, n);
+    expect_refused(r, copy, n, APPM_ERR_INVALID_ARG, "this is appm", "library version");
+    memcpy(copy, buf, n);
+    copy[OFF_LAYOUT + 4 + 4 + 1] = 'x'; /* "ld" -> "lx": a build with other pixel fields */
+    fix_sum(copy, n);
+    expect_refused(r, copy, n, APPM_ERR_INVALID_ARG, "pixel state", "field list");
+    memcpy(copy, buf, n);
+    copy[n] = 0;
+    expect_refused(r, copy, n + 1, APPM_ERR_PARSE, "after its end", "trailing byte");
+    expect_refused(r, (const unsigned char *)"P6\n1 1\n255\n", 11, APPM_ERR_PARSE, "not an appm checkpoint",
+                   "another file");
+    CHECK_MSG(appm_renderer_load(r, buf, n, NULL) == APPM_OK, "the unaltered checkpoint is refused");
+    appm_renderer_destroy(r);
+done:
+    free(buf);
+    free(copy);
+    appm_renderer_destroy(a);
+}
+
+/* 4. Every truncation and every bit flip of a small checkpoint is an error. */
+static void test_damage(const appm_scene *s)
+{
+    appm_config c = config(APPM_METHOD_APPM, 1);
+    appm_renderer *a, *r;
+    unsigned char *buf, *copy, *after;
+    size_t n, i, n2;
+    long wrong_trunc = 0, wrong_flip = 0, changed = 0;
+    int b;
+    c.width = 3;
+    c.height = 2;
+    c.photons = 500;
+    a = make(s, &c, 3);
+    r = make(s, &c, 0);
+    if (!a || !r) goto out;
+    buf = save(a, &n);
+    copy = (unsigned char *)malloc(n);
+    if (!buf || !copy) goto done;
+    for (i = 0; i < n; ++i) {
+        memcpy(copy, buf, i);
+        if (appm_renderer_load(r, copy, i, NULL) != APPM_ERR_PARSE) wrong_trunc++;
+        changed += r->pass != 0;
+    }
+    CHECK_MSG(wrong_trunc == 0, "%ld of %lu truncations were not a parse error", wrong_trunc, (unsigned long)n);
+    memcpy(copy, buf, n);
+    for (i = 0; i < n; ++i)
+        for (b = 0; b < 8; ++b) {
+            appm_status st;
+            copy[i] ^= (unsigned char)(1u << b);
+            st = appm_renderer_load(r, copy, n, NULL);
+            /* the format version is read before the checksum (another format may hash otherwise) */
+            if (!(st == APPM_ERR_PARSE || (st == APPM_ERR_INVALID_ARG && i >= OFF_FORMAT && i < OFF_FORMAT + 4)))
+                wrong_flip++;
+            changed += r->pass != 0;
+            copy[i] ^= (unsigned char)(1u << b);
+        }
+    CHECK_MSG(wrong_flip == 0, "%ld of %lu bit flips were not refused", wrong_flip, (unsigned long)(8 * n));
+    CHECK_MSG(changed == 0, "%ld damaged checkpoints changed the renderer", changed);
+    after = save(r, &n2);
+    CHECK(after != NULL && r->pass == 0);
+    free(after);
+done:
+    free(buf);
+    free(copy);
+out:
+    appm_renderer_destroy(a);
+    appm_renderer_destroy(r);
+}
+
+/* 5. Hostile: well-formed bytes, valid checksum, impossible content. */
+static void hostile(appm_renderer *r, const unsigned char *buf, size_t n, size_t off, uint64_t v, int bytes,
+                    const char *what)
+{
+    unsigned char *copy = (unsigned char *)malloc(n);
+    appm_diag d;
+    appm_status st;
+    if (!copy) return;
+    memcpy(copy, buf, n);
+    put_le(copy + off, v, bytes);
+    fix_sum(copy, n);
+    st = appm_renderer_load(r, copy, n, &d);
+    CHECK_MSG(st == APPM_ERR_PARSE, "%s: status %d (%s), expected a parse error", what, (int)st, d.message);
+    CHECK(r->pass == 0);
+    free(copy);
+}
+
+static void test_hostile(const appm_scene *s)
+{
+    appm_config c = config(APPM_METHOD_SPPM, 1);
+    appm_renderer *a = make(s, &c, 2), *r = make(s, &c, 0);
+    unsigned char *buf;
+    size_t n, pix0;
+    double nan = 0.0, neg = -1.0, inf = HUGE_VAL;
+    uint64_t u;
+    if (!a || !r || !(buf = save(a, &n))) goto out;
+    nan = nan / nan;
+    hostile(r, buf, n, OFF_W, 0xFFFFFFFFu, 4, "width 2^32-1");
+    hostile(r, buf, n, OFF_W, 0, 4, "width 0");
+    hostile(r, buf, n, OFF_LAYOUT, 0xFFFFFFFFu, 4, "2^32-1 pixel fields");
+    hostile(r, buf, n, OFF_LAYOUT, 0, 4, "no pixel fields");
+    hostile(r, buf, n, OFF_LAYOUT + 4, 0x7FFFFFFFu, 4, "a field name of 2 GB");
+    hostile(r, buf, n, OFF_LAYOUT + 4 + 4 + 2, 0xFFFFFFFFu, 4, "a field of 2^32-1 values");
+    hostile(r, buf, n, OFF_LAYOUT + 4 + 4 + 2 + 4, 7, 4, "a field of type 7");
+    hostile(r, buf, n, OFF_PASS, (uint64_t)1 << 63, 8, "pass 2^63");
+    memcpy(&u, &neg, sizeof u);
+    hostile(r, buf, n, OFF_R1, u, 8, "negative r1");
+    memcpy(&u, &inf, sizeof u);
+    hostile(r, buf, n, OFF_SECONDS, u, 8, "infinite seconds");
+    hostile(r, buf, n, OFF_R1, 0, 8, "r1 = 0 after two passes");
+    /* the first value of pixel 0 (ld[0]) follows the field lists; then the last (sppm's R) */
+    pix0 = n - 8 - (size_t)r->w * r->h * 8 * (5 + 5);
+    memcpy(&u, &nan, sizeof u);
+    hostile(r, buf, n, pix0, u, 8, "NaN in a pixel");
+    hostile(r, buf, n, n - 16, u, 8, "NaN radius in the last pixel");
+    free(buf);
+out:
+    appm_renderer_destroy(a);
+    appm_renderer_destroy(r);
+}
+
+/* 6. Little-endian at the documented offsets, whatever the host. */
+static void test_byte_order(const appm_scene *s)
+{
+    appm_config c = config(APPM_METHOD_PPM, 1);
+    appm_renderer *a = make(s, &c, 3);
+    unsigned char *buf;
+    size_t n, pix0;
+    uint64_t u;
+    double r1, ld0;
+    if (!a || !(buf = save(a, &n))) {
+        appm_renderer_destroy(a);
+        return;
+    }
+    CHECK(memcmp(buf, "APPMCKPT", 8) == 0);
+    CHECK(buf[OFF_FORMAT] == APPM__CK_FORMAT && buf[OFF_FORMAT + 1] == 0 && buf[OFF_FORMAT + 3] == 0);
+    CHECK(get_le(buf + OFF_W, 4) == 12 && get_le(buf + OFF_W + 4, 4) == 10);
+    CHECK(get_le(buf + 44, 8) == 3000 && get_le(buf + 52, 8) == 7); /* photons, seed */
+    CHECK(get_le(buf + OFF_PASS, 8) == 3);
+    u = get_le(buf + OFF_R1, 8);
+    memcpy(&r1, &u, sizeof r1);
+    CHECK(r1 == a->r1 && r1 > 0.0);
+    pix0 = n - 8 - (size_t)a->w * a->h * 8 * (5 + 3); /* ppm: 5 pixel values + I[3] */
+    u = get_le(buf + pix0, 8);
+    memcpy(&ld0, &u, sizeof ld0);
+    CHECK(ld0 == a->pix[0].ld[0]);
+    CHECK(get_le(buf + pix0 - 13, 4) == 1); /* the last field, "I": u32 length 1, "I", count 3, is_u64 0 */
+    CHECK(get_le(buf + pix0 - 8, 4) == 3 && get_le(buf + pix0 - 4, 4) == 0);
+    free(buf);
+    appm_renderer_destroy(a);
+}
+
+static void test_arguments(const appm_scene *s)
+{
+    appm_config c = config(APPM_METHOD_PT, 1);
+    appm_renderer *a = make(s, &c, 1);
+    unsigned char small[16];
+    size_t need = 0;
+    appm_diag d;
+    if (!a) return;
+    CHECK(appm_renderer_save(a, small, sizeof small, &need, &d) == APPM_ERR_INVALID_ARG && need > sizeof small);
+    CHECK(strstr(d.message, "buffer") != NULL);
+    CHECK(appm_renderer_save(NULL, NULL, 0, &need, &d) == APPM_ERR_INVALID_ARG && need == 0);
+    CHECK(appm_renderer_load(a, NULL, 5, &d) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_renderer_load(NULL, small, 5, &d) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_renderer_load(a, small, 0, &d) == APPM_ERR_PARSE);
+    CHECK(appm_renderer_save_file(a, NULL, &d) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_renderer_load_file(a, NULL, &d) == APPM_ERR_INVALID_ARG);
+    appm_renderer_destroy(a);
+}
+
+int main(void)
+{
+    appm_scene *s = check_load_scene("scenes/cornell-sphere.scene");
+    appm_scene *other = check_load_scene("scenes/cornell-original.scene");
+    if (s && other) {
+        test_resume(s);
+        test_file(s);
+        test_fields_matter(s);
+        test_refusals(s, other);
+        test_damage(s);
+        test_hostile(s);
+        test_byte_order(s);
+        test_arguments(s);
+    }
+    appm_scene_destroy(s);
+    appm_scene_destroy(other);
+    return check_finish();
+}
