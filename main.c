@@ -120,6 +120,11 @@ static const char *const RENDER_HELP =
     "  --reference REF.pfm   compare with this image after every pass\n"
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
     "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
+    "  --checkpoint FILE     save the whole render state to FILE (atomically) every 10 s of\n"
+    "                        wall time, or every --checkpoint-every N passes, and at the end\n"
+    "  --checkpoint-every N  with --checkpoint: every N passes instead of every 10 s\n"
+    "  --resume FILE         continue from a checkpoint of the same scene and options (any\n"
+    "                        --threads); --passes counts the whole render, --time this run\n"
     "  -q, --quiet           no progress output and no warnings\n";
 
 /* "appm, ppm, sppm or pt": the library's method names, for messages. */
@@ -272,10 +277,10 @@ static int write_aux(const char *prefix, const char *name, const float *v, uint3
 /* ---- appm render ----------------------------------------------------------- */
 
 typedef struct render_opts {
-    const char *scene, *output, *reference, *log, *aux;
+    const char *scene, *output, *reference, *log, *aux, *checkpoint, *resume;
     appm_config cfg;
     double time_limit, until_error, exposure;
-    unsigned long long passes;
+    unsigned long long passes, checkpoint_every; /* 0: every CHECKPOINT_SECONDS */
     int quiet, have_time, have_passes, have_until;
 } render_opts;
 
@@ -308,6 +313,12 @@ static int parse_render(int argc, char **argv, render_opts *o)
         else if (strcmp(a, "--reference") == 0) o->reference = v;
         else if (strcmp(a, "--log") == 0) o->log = v;
         else if (strcmp(a, "--aux") == 0) o->aux = v;
+        else if (strcmp(a, "--checkpoint") == 0) o->checkpoint = v;
+        else if (strcmp(a, "--resume") == 0) o->resume = v;
+        else if (strcmp(a, "--checkpoint-every") == 0) {
+            if (!parse_u64(v, &u) || u == 0) return usage_error("--checkpoint-every needs passes >= 1, not '%s'", v);
+            o->checkpoint_every = u;
+        }
         else if (strcmp(a, "--method") == 0) {
             if (appm_method_parse(v, &o->cfg.method) != APPM_OK) {
                 char names[256];
@@ -365,6 +376,7 @@ static int parse_render(int argc, char **argv, render_opts *o)
         }
     }
     if (!o->scene) return usage_error("render needs a scene file");
+    if (o->checkpoint_every && !o->checkpoint) return usage_error("--checkpoint-every needs --checkpoint FILE");
     return -1;
 }
 
@@ -387,6 +399,31 @@ static void default_output(const char *scene, char *out, size_t cap)
     memcpy(out + n, ".png", 5);
 }
 
+/* Seconds of wall time between checkpoints without --checkpoint-every. */
+#define CHECKPOINT_SECONDS 10.0
+
+/* Whether a checkpoint is due after this pass (last: time and pass of the last one). */
+static int checkpoint_due(const render_opts *o, const appm_stats *st, double now, const double *last)
+{
+    if (!o->checkpoint) return 0;
+    if (o->checkpoint_every) return st->passes % o->checkpoint_every == 0;
+    return now - last[0] >= CHECKPOINT_SECONDS;
+}
+
+/* Saves the checkpoint; 0 (with a message) if it could not be written. */
+static int save_checkpoint(appm_renderer *r, const render_opts *o, double now, double *last)
+{
+    appm_diag d;
+    appm_stats st;
+    appm_status s = appm_renderer_save_file(r, o->checkpoint, &d);
+    appm_renderer_stats(r, &st);
+    last[0] = now;
+    last[1] = (double)st.passes;
+    if (s == APPM_OK) return 1;
+    lib_error(s, &d, o->checkpoint);
+    return 0;
+}
+
 static int cmd_render(int argc, char **argv)
 {
     render_opts o;
@@ -398,7 +435,8 @@ static int cmd_render(int argc, char **argv)
     appm_compare_result cmp;
     char outbuf[1024];
     FILE *logf = NULL;
-    double t0;
+    double t0, last_ck[2] = {0.0, -1.0}; /* time and pass of the last checkpoint */
+    unsigned long long resumed = 0;
     int rc = parse_render(argc, argv, &o), progress, have_cmp = 0;
     appm_status s;
     if (rc >= 0) return rc;
@@ -422,6 +460,15 @@ static int cmd_render(int argc, char **argv)
         rc = lib_error(s, &d, NULL);
         goto done;
     }
+    if (o.resume) {
+        if ((s = appm_renderer_load_file(r, o.resume, &d)) != APPM_OK) {
+            rc = lib_error(s, &d, o.resume);
+            goto done;
+        }
+        appm_renderer_stats(r, &st);
+        resumed = (unsigned long long)st.passes;
+        if (!o.quiet) fprintf(stderr, "appm: resuming %s after pass %llu\n", o.resume, resumed);
+    }
     if (ref.rgb) {
         appm_renderer_image(r, &img);
         if (ref.width != img.width || ref.height != img.height) {
@@ -433,19 +480,21 @@ static int cmd_render(int argc, char **argv)
         }
     }
     if (o.log) {
-        logf = fopen(o.log, "w");
+        logf = fopen(o.log, o.resume ? "a" : "w"); /* a resumed render continues its log */
         if (!logf) {
             fprintf(stderr, "appm: %s: cannot open the log for writing\n", o.log);
             rc = EXIT_INPUT;
             goto done;
         }
-        fprintf(logf, "pass,seconds,photons,rmse,relmse,est_relerr\n");
+        if (!o.resume || ftell(logf) == 0) fprintf(logf, "pass,seconds,photons,rmse,relmse,est_relerr\n");
     }
     progress = !o.quiet && appm_isatty(2);
     signal(SIGINT, on_sigint);
-    t0 = now_seconds();
+    t0 = last_ck[0] = now_seconds();
+    appm_renderer_stats(r, &st);
     for (;;) {
         double el;
+        if (o.have_passes && st.passes >= o.passes) break; /* also a checkpoint already past N */
         if ((s = appm_renderer_pass(r)) != APPM_OK) {
             fprintf(stderr, "appm: pass failed: %s\n", appm_renderer_last_error(r)[0]
                                                            ? appm_renderer_last_error(r)
@@ -473,7 +522,7 @@ static int cmd_render(int argc, char **argv)
         if (progress) {
             double remaining = o.have_time ? o.time_limit - el : -1.0;
             if (o.have_passes) {
-                double by_pass = el / (double)st.passes * (double)(o.passes - st.passes);
+                double by_pass = el / (double)(st.passes - resumed) * (double)(o.passes - st.passes);
                 if (remaining < 0 || by_pass < remaining) remaining = by_pass;
             }
             fprintf(stderr, "\rpass %llu  photons %.3g  elapsed %.1fs  remaining %.1fs   ",
@@ -481,13 +530,19 @@ static int cmd_render(int argc, char **argv)
                     remaining > 0 ? remaining : 0.0);
             fflush(stderr);
         }
+        if (checkpoint_due(&o, &st, now_seconds(), last_ck) && !save_checkpoint(r, &o, now_seconds(), last_ck)) {
+            rc = EXIT_RUNTIME;
+            break;
+        }
         if (g_interrupted) break;
-        if (o.have_passes && st.passes >= o.passes) break;
         if (o.have_time && el >= o.time_limit) break;
         if (o.have_until && st.est_relerr >= 0 && st.est_relerr < o.until_error) break;
     }
     if (progress) fprintf(stderr, "\n");
     appm_renderer_stats(r, &st); /* also after a failed pass, even the first */
+    /* the last state, also after Ctrl-C or a failed pass (which commits nothing) */
+    if (o.checkpoint && (double)st.passes != last_ck[1] && !save_checkpoint(r, &o, now_seconds(), last_ck))
+        rc = EXIT_RUNTIME;
     if (rc == 0 || st.passes > 0) {
         appm_renderer_image(r, &img);
         if ((s = appm_image_write(o.output, &img, o.exposure, &d)) != APPM_OK) {
@@ -517,6 +572,8 @@ static int cmd_render(int argc, char **argv)
                (unsigned long long)st.photons_stored);
         if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
         if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
+        if (o.resume) printf(" resumed=%llu", resumed);
+        if (o.checkpoint) printf(" checkpoint=%s", o.checkpoint);
         if (g_interrupted) printf(" interrupted=1");
         printf("\n");
     }

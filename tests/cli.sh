@@ -3,7 +3,7 @@
 # tests/cli.sh - the command line contract (docs/scene-format.md section 3):
 # help and version, info, render to every format, exit codes and messages for
 # bad options and bad files, compare, --log, --aux, failed writes, the embed
-# example and SIGINT.
+# example, checkpoint and resume, and SIGINT.
 #
 #   sh tests/cli.sh ./appm build/embed        (from the repository root)
 #
@@ -316,9 +316,65 @@ for bin in "$APPM" ${APPM_PATTERN:+"$(abspath "$APPM_PATTERN")"}; do
     check "first pass out of memory: no image" absent "$T/oom.pfm"
 done
 
+# ---- checkpoint and resume -------------------------------------------------------
+# N passes with --checkpoint, then --resume with --passes 2N: the image is the
+# one of 2N passes, byte for byte, for every method and another thread count;
+# a checkpoint of other options or another scene, or a damaged one, is refused.
+
+CK="--size 16x12 --photons 2000 --threads 2 -q"
+for m in appm ppm sppm pt; do
+    # shellcheck disable=SC2086 # $CK is a word list
+    run "$APPM" render "$SCENE" $CK --method $m --passes 6 -o "$T/ck-whole-$m.pfm"
+    # shellcheck disable=SC2086
+    run "$APPM" render "$SCENE" $CK --method $m --threads 1 --passes 3 --checkpoint "$T/ck-$m.ckpt" \
+        --checkpoint-every 2 -o "$T/ck-part-$m.pfm"
+    check "checkpoint $m: exit 0 (got $rc)" [ "$rc" -eq 0 ]
+    check "checkpoint $m: written" [ -s "$T/ck-$m.ckpt" ]
+    check "checkpoint $m: no temporary left" absent "$T/ck-$m.ckpt.tmp"
+    check "checkpoint $m: the summary names it" grep -q " checkpoint=$T/ck-$m.ckpt" "$T/out"
+    # shellcheck disable=SC2086
+    run "$APPM" render "$SCENE" $CK --method $m --passes 6 --resume "$T/ck-$m.ckpt" -o "$T/ck-res-$m.pfm"
+    check "resume $m: exit 0 (got $rc)" [ "$rc" -eq 0 ]
+    check "resume $m: the summary says passes=6 resumed=3" contains "$T/out" '^passes=6 ' ' resumed=3'
+    check "resume $m: byte-identical to 6 uninterrupted passes" cmp -s "$T/ck-whole-$m.pfm" "$T/ck-res-$m.pfm"
+done
+# shellcheck disable=SC2086
+run "$APPM" render "$SCENE" $CK --passes 2 --resume "$T/ck-appm.ckpt" -o "$T/ck-none.pfm"
+check "resume past --passes: no pass, exit 0 (got $rc)" [ "$rc" -eq 0 ]
+check "resume past --passes: the checkpoint's image" contains "$T/out" '^passes=3 ' ' resumed=3'
+# shellcheck disable=SC2086
+run "$APPM" render "$SCENE" $CK --method ppm --passes 6 --resume "$T/ck-appm.ckpt" -o "$T/ck-x.pfm"
+check "resume with another method: exit 1 (got $rc)" [ "$rc" -eq 1 ]
+check "resume with another method: says so" grep -q 'checkpoint of method appm; this render uses ppm' "$T/err"
+# shellcheck disable=SC2086
+run "$APPM" render "$SCENE" $CK --seed 3 --passes 6 --resume "$T/ck-appm.ckpt" -o "$T/ck-x.pfm"
+check "resume with another seed: exit 1 (got $rc)" [ "$rc" -eq 1 ]
+check "resume with another seed: says so" grep -q 'seed is 0 there, 3 in this render' "$T/err"
+# shellcheck disable=SC2086
+run "$APPM" render scenes/cornell-sphere.scene $CK --passes 6 --resume "$T/ck-appm.ckpt" -o "$T/ck-x.pfm"
+check "resume of another scene: exit 1 (got $rc)" [ "$rc" -eq 1 ]
+check "resume of another scene: says so" grep -q 'checkpoint of another scene' "$T/err"
+head -c 1000 "$T/ck-appm.ckpt" >"$T/ck-short.ckpt"
+# shellcheck disable=SC2086
+run "$APPM" render "$SCENE" $CK --passes 6 --resume "$T/ck-short.ckpt" -o "$T/ck-x.pfm"
+check "resume of a truncated checkpoint: exit 2 (got $rc)" [ "$rc" -eq 2 ]
+check "resume of a truncated checkpoint: says so" grep -q 'ck-short.ckpt: truncated checkpoint' "$T/err"
+check "a refused resume writes no image" absent "$T/ck-x.pfm"
+# shellcheck disable=SC2086
+run "$APPM" render "$SCENE" $CK --passes 6 --resume "$T/no-such.ckpt" -o "$T/ck-x.pfm"
+check "resume of a missing file: exit 2 (got $rc)" [ "$rc" -eq 2 ]
+run "$APPM" render "$SCENE" --checkpoint-every 2 --passes 1 -q -o "$T/ck-x.pfm"
+check "--checkpoint-every without --checkpoint: exit 1 (got $rc)" [ "$rc" -eq 1 ]
+mkdir -p "$T/ck-taken.ckpt"
+# shellcheck disable=SC2086
+run "$APPM" render "$SCENE" $CK --passes 2 --checkpoint "$T/ck-taken.ckpt" -o "$T/ck-y.pfm"
+check "a checkpoint that cannot be written: exit 3 (got $rc)" [ "$rc" -eq 3 ]
+check "a checkpoint that cannot be written: says so" grep -q 'cannot write the checkpoint' "$T/err"
+check "a checkpoint that cannot be written: the image is still written" [ -s "$T/ck-y.pfm" ]
+
 # ---- SIGINT: stop after the pass in flight, write, report ----------------------------
 
-"$APPM" render "$SCENE" --size 64x64 --time 30 -q -o "$T/int.pfm" >"$T/int.out" 2>"$T/int.err" &
+"$APPM" render "$SCENE" --size 64x64 --time 30 -q -o "$T/int.pfm" --checkpoint "$T/int.ckpt" >"$T/int.out" 2>"$T/int.err" &
 pid=$!
 sleep 1
 kill -INT "$pid" 2>/dev/null
@@ -336,6 +392,12 @@ rc=$?
 check "SIGINT: exit status 0 (got $rc)" [ "$rc" -eq 0 ]
 check "SIGINT: the summary line" grep -q '^passes=[0-9]* photons=.* output=' "$T/int.out"
 check "SIGINT: the image is written" [ -s "$T/int.pfm" ]
+check "SIGINT: the checkpoint is written" [ -s "$T/int.ckpt" ]
+done_passes=$(sed -n 's/^passes=\([0-9]*\) .*/\1/p' "$T/int.out")
+run "$APPM" render "$SCENE" --size 64x64 --passes $((${done_passes:-0} + 1)) -q --resume "$T/int.ckpt" \
+    -o "$T/int2.pfm"
+check "SIGINT: its checkpoint resumes (exit $rc)" contains "$T/out" "^passes=$((${done_passes:-0} + 1)) " \
+    " resumed=${done_passes:-x}"
 
 echo "$npass passed, $nfail failed"
 [ "$nfail" -eq 0 ]
