@@ -4869,7 +4869,7 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  * IEEE-754 bits), so a checkpoint moves between machines:
  *   "APPMCKPT", u32 format version, u32 x 3 library version,
  *   u32 method, direct, width, height, max_depth; u64 photons, seed;
- *   f64 alpha, radius option (0: automatic); u64 scene hash;
+ *   f64 alpha, radius option (0: automatic); u64 scene hash (below);
  *   u64 pass, photons emitted, photons stored, eye paths, dropped samples;
  *   f64 r1, r_auto, ppm R^2, ppm R, seconds (total, eye, photons, grid, gather);
  *   the field lists of appm__pixel and of the method's state (u32 count, then
@@ -4908,9 +4908,16 @@ static void appm__ck_layout_of(const appm_renderer *r, appm__ck_layout *L)
     L->n[1] = r->est->nfields;
 }
 
-/* The scene as the renderer sees it - geometry in BVH order, materials, lights,
- * camera, image size - hashed value by value (struct padding never enters), so
- * the same scene file gives the same hash on every machine. */
+/* The scene as the renderer sees it - triangles, materials, lights, camera,
+ * image size - hashed value by value (struct padding never enters).  The
+ * triangles enter as a set (a sum of their hashes), each with its material by
+ * value, and area lights through their triangles' Ke: the BVH's triangle
+ * order, which a build for another machine may choose otherwise, does not
+ * change the hash, so a checkpoint of the same scene file is recognised there.
+ * Values derived in floating point that differed in the last bit between an
+ * x86-64 and an s390x build are left out for the same reason: the shading
+ * normals (only whether a triangle has them enters), the lights' powers and
+ * picking probabilities (sums in BVH order). */
 static uint64_t appm__hash_u(uint64_t h, uint64_t v) { return appm__mix64(h ^ v) + 0x9E3779B97F4A7C15ull; }
 
 static uint64_t appm__hash_f(uint64_t h, float f)
@@ -4920,47 +4927,38 @@ static uint64_t appm__hash_f(uint64_t h, float f)
     return appm__hash_u(h, u);
 }
 
-static uint64_t appm__hash_d(uint64_t h, double d)
-{
-    uint64_t u;
-    memcpy(&u, &d, sizeof u);
-    return appm__hash_u(h, u);
-}
-
 static uint64_t appm__hash_v3(uint64_t h, appm__v3 v)
 {
     return appm__hash_f(appm__hash_f(appm__hash_f(h, v.x), v.y), v.z);
 }
 
+static uint64_t appm__hash_tri(const appm_scene *s, uint32_t i)
+{
+    const appm__tri_info *t = &s->info[i];
+    const appm__material *m = &s->mat[t->mat];
+    uint64_t h = appm__hash_v3(appm__hash_v3(appm__hash_v3(1, s->tri[i].p0), s->tri[i].p1), s->tri[i].p2);
+    h = appm__hash_f(appm__hash_v3(h, t->ng), t->area);
+    h = appm__hash_u(appm__hash_u(h, (uint32_t)m->kind), (uint32_t)m->emissive);
+    h = appm__hash_f(appm__hash_v3(appm__hash_v3(h, m->color), m->ke), m->ior);
+    return appm__mix64(appm__hash_u(h, t->n0 >= 0)); /* smooth or flat (see above) */
+}
+
 static uint64_t appm__scene_hash(const appm_scene *s)
 {
-    uint64_t h = appm__hash_u(appm__hash_u(appm__hash_u(0, s->ntri), s->nmat), s->nlight);
+    uint64_t h = appm__hash_u(appm__hash_u(0, s->ntri), s->nlight), set = 0;
     const appm__camera *c = &s->cam;
     uint32_t i;
-    int k;
-    for (i = 0; i < s->ntri; ++i) {
-        const appm__tri_info *t = &s->info[i];
-        h = appm__hash_v3(appm__hash_v3(appm__hash_v3(h, s->tri[i].p0), s->tri[i].p1), s->tri[i].p2);
-        h = appm__hash_f(appm__hash_v3(h, t->ng), t->area);
-        h = appm__hash_u(appm__hash_u(appm__hash_u(h, t->mat), (uint32_t)t->light), (uint32_t)t->n0);
-    }
-    for (i = 0; i < s->nnormals; ++i) h = appm__hash_v3(h, s->normals[i]);
-    for (i = 0; i < s->nmat; ++i) {
-        const appm__material *m = &s->mat[i];
-        h = appm__hash_u(appm__hash_u(h, (uint32_t)m->kind), (uint32_t)m->emissive);
-        h = appm__hash_f(appm__hash_v3(appm__hash_v3(h, m->color), m->ke), m->ior);
-    }
+    for (i = 0; i < s->ntri; ++i) set += appm__hash_tri(s, i);
+    h = appm__hash_u(h, set);
     for (i = 0; i < s->nlight; ++i) {
         const appm__light *l = &s->light[i];
-        h = appm__hash_u(appm__hash_u(h, (uint32_t)l->kind), l->tri);
-        h = appm__hash_v3(appm__hash_v3(appm__hash_v3(h, l->pos), l->axis), l->value);
+        if (l->kind == APPM__LIGHT_AREA) continue;
+        h = appm__hash_v3(appm__hash_v3(appm__hash_v3(appm__hash_u(h, (uint32_t)l->kind), l->pos), l->axis), l->value);
         h = appm__hash_f(appm__hash_f(h, l->cos_cone), l->cos_inner);
-        for (k = 0; k < 3; ++k) h = appm__hash_d(h, l->power[k]);
-        h = appm__hash_d(h, l->pick);
     }
     h = appm__hash_v3(appm__hash_v3(appm__hash_v3(appm__hash_v3(h, c->eye), c->forward), c->right), c->up);
     h = appm__hash_f(appm__hash_f(appm__hash_f(appm__hash_f(h, c->fov), c->tan_half), c->aperture), c->focus);
-    return appm__hash_u(appm__hash_u(appm__hash_u(h, (uint32_t)s->env), s->width), s->height);
+    return appm__hash_u(appm__hash_u(h, s->width), s->height);
 }
 
 /* -- Byte sinks and sources.  The writer fills the caller's buffer (counting

@@ -8,6 +8,9 @@
  * paths shows up as a non-zero count at exactly that N.  The run that succeeds
  * must then release everything on destroy.
  *
+ * Checkpoints: the file calls fail cleanly at each of their allocations; the
+ * buffer calls allocate nothing.
+ *
  * The allocation wrapper itself is tested for the overflow of count * size
  * (a classic way to turn a huge request into a tiny block) and for zeroing. */
 #include "../appm.c"
@@ -355,6 +358,71 @@ static void test_pass_growth(void)
     appm_scene_destroy(scene);
 }
 
+/* ---- checkpoints ------------------------------------------------------------------ */
+
+/* appm_renderer_save_file and appm_renderer_load_file with allocation k of the
+ * call failing, k = 1, 2, ...: NOMEM, nothing leaked, no file (or no change to
+ * the renderer) left behind; the buffer calls allocate nothing at all. */
+static void test_checkpoint(const appm_scene *scene)
+{
+    appm_config cfg;
+    check_alloc a;
+    appm_renderer *r = NULL, *fresh = NULL;
+    appm_diag d;
+    appm_status st = APPM_ERR_NOMEM;
+    const char *path = check_path("alloc", "oom.ckpt");
+    unsigned char *buf = NULL;
+    size_t n = 0;
+    long k, before, bad = 0, live;
+    render_cfg(&cfg, APPM_METHOD_APPM);
+    check_use_alloc(&cfg, &a, 0);
+    if (appm_renderer_create(scene, &cfg, &r, &d) != APPM_OK || appm_renderer_pass(r) != APPM_OK ||
+        appm_renderer_create(scene, &cfg, &fresh, &d) != APPM_OK) {
+        CHECK_MSG(0, "checkpoint: no renderer");
+        goto done;
+    }
+    before = a.count;
+    CHECK(appm_renderer_save(r, NULL, 0, &n, &d) == APPM_OK && n > 0);
+    buf = (unsigned char *)malloc(n);
+    CHECK(buf && appm_renderer_save(r, buf, n, &n, &d) == APPM_OK);
+    CHECK(buf && appm_renderer_load(fresh, buf, n, &d) == APPM_OK && fresh->pass == 1);
+    CHECK_MSG(a.count == before, "the buffer calls made %ld allocations", a.count - before);
+    appm_renderer_destroy(fresh);
+    fresh = NULL;
+    CHECK(appm_renderer_create(scene, &cfg, &fresh, &d) == APPM_OK);
+    remove(path);
+    for (k = 1, st = APPM_ERR_NOMEM; k < 100 && st != APPM_OK; ++k) {
+        FILE *f;
+        live = (long)a.live;
+        a.fail_at = a.count + k;
+        st = appm_renderer_save_file(r, path, &d);
+        a.fail_at = 0;
+        if (st == APPM_OK) break;
+        f = fopen(path, "rb");
+        if ((st != APPM_ERR_NOMEM || d.status != st || (long)a.live != live || f) && !bad++)
+            fprintf(stderr, "checkpoint: save_file, failing allocation %ld: status %d\n", k, (int)st);
+        if (f) fclose(f);
+    }
+    CHECK_MSG(st == APPM_OK && k > 1, "save_file: status %d after %ld tries", (int)st, k);
+    for (k = 1, st = APPM_ERR_NOMEM; k < 100 && st != APPM_OK && fresh; ++k) {
+        live = (long)a.live;
+        a.fail_at = a.count + k;
+        st = appm_renderer_load_file(fresh, path, &d);
+        a.fail_at = 0;
+        if (st == APPM_OK) break;
+        if ((st != APPM_ERR_NOMEM || d.status != st || (long)a.live != live || fresh->pass != 0) && !bad++)
+            fprintf(stderr, "checkpoint: load_file, failing allocation %ld: status %d\n", k, (int)st);
+    }
+    CHECK_MSG(st == APPM_OK && k > 1 && fresh && fresh->pass == 1, "load_file: status %d after %ld tries",
+              (int)st, k);
+    CHECK(bad == 0);
+done:
+    free(buf);
+    appm_renderer_destroy(r);
+    appm_renderer_destroy(fresh);
+    CHECK(a.live == 0);
+}
+
 /* ---- PFM reading ---------------------------------------------------------------- */
 
 static void test_read_pfm(void)
@@ -408,6 +476,7 @@ int main(void)
         test_renderer(scene, APPM_METHOD_SPPM, "sppm");
         test_renderer(scene, APPM_METHOD_PPM, "ppm");
         test_renderer(scene, APPM_METHOD_PT, "pt");
+        test_checkpoint(scene);
     }
     appm_scene_destroy(scene);
     test_pass_growth();

@@ -21,7 +21,10 @@
  *   5. Hostile input with a valid checksum (absurd sizes, field counts, name
  *      lengths, pass counts, NaN statistics, negative radii) is APPM_ERR_PARSE.
  *   6. Byte order: the file is little-endian whatever the host: values read
- *      back byte by byte at their documented offsets. */
+ *      back byte by byte at their documented offsets.
+ *   7. The scene hash ignores the triangles' order (a BVH built elsewhere may
+ *      order them otherwise) and sees a moved vertex, another albedo, another
+ *      camera, another point light. */
 #include "../appm.c"
 #include "check.h"
 
@@ -458,6 +461,63 @@ static void test_byte_order(const appm_scene *s)
     appm_renderer_destroy(a);
 }
 
+/* 7. (the scene is changed in place and restored; no renderer uses it meanwhile) */
+static void test_scene_hash(appm_scene *s)
+{
+    uint64_t h0 = appm__scene_hash(s);
+    appm__tri t;
+    appm__tri_info in;
+    float keep;
+    CHECK(s->ntri > 2);
+    t = s->tri[0];
+    in = s->info[0];
+    s->tri[0] = s->tri[s->ntri - 1];
+    s->info[0] = s->info[s->ntri - 1];
+    s->tri[s->ntri - 1] = t;
+    s->info[s->ntri - 1] = in;
+    CHECK_MSG(appm__scene_hash(s) == h0, "the scene hash depends on the triangle order");
+    s->tri[s->ntri - 1] = s->tri[0];
+    s->info[s->ntri - 1] = s->info[0];
+    s->tri[0] = t;
+    s->info[0] = in;
+    CHECK(appm__scene_hash(s) == h0);
+    keep = s->tri[1].p2.y;
+    s->tri[1].p2.y = nextafterf(keep, 1e30f);
+    CHECK_MSG(appm__scene_hash(s) != h0, "a vertex moved by one ulp: same hash");
+    s->tri[1].p2.y = keep;
+    keep = s->mat[s->info[1].mat].color.x;
+    s->mat[s->info[1].mat].color.x = keep * 0.5f;
+    CHECK_MSG(appm__scene_hash(s) != h0, "another albedo: same hash");
+    s->mat[s->info[1].mat].color.x = keep;
+    keep = s->cam.eye.z;
+    s->cam.eye.z = keep + 1.0f;
+    CHECK_MSG(appm__scene_hash(s) != h0, "another camera: same hash");
+    s->cam.eye.z = keep;
+    CHECK(appm__scene_hash(s) == h0);
+}
+
+static void test_point_light(void)
+{
+    static const char obj[] = "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 4 3 2 1\n";
+    static const char sc1[] = "mesh checkpoint-floor.obj\ncamera eye 0 3 3 target 0 0 0 up 0 1 0 fov 40\n"
+                              "light point position 0 1 0 intensity 5 5 5\n";
+    static const char sc2[] = "mesh checkpoint-floor.obj\ncamera eye 0 3 3 target 0 0 0 up 0 1 0 fov 40\n"
+                              "light point position 0 1.5 0 intensity 5 5 5\n";
+    appm_scene *a = NULL, *b = NULL;
+    appm_diag d;
+    if (!check_write_file(check_path("checkpoint", "floor.obj"), obj) ||
+        !check_write_file(check_path("checkpoint", "l1.scene"), sc1) ||
+        !check_write_file(check_path("checkpoint", "l2.scene"), sc2)) {
+        CHECK_MSG(0, "cannot write the light scenes");
+        return;
+    }
+    CHECK(appm_scene_load(check_path("checkpoint", "l1.scene"), NULL, &a, &d) == APPM_OK);
+    CHECK(appm_scene_load(check_path("checkpoint", "l2.scene"), NULL, &b, &d) == APPM_OK);
+    if (a && b) CHECK_MSG(appm__scene_hash(a) != appm__scene_hash(b), "a moved point light: same hash");
+    appm_scene_destroy(a);
+    appm_scene_destroy(b);
+}
+
 static void test_arguments(const appm_scene *s)
 {
     appm_config c = config(APPM_METHOD_PT, 1);
@@ -490,7 +550,9 @@ int main(void)
         test_hostile(s);
         test_byte_order(s);
         test_arguments(s);
+        test_scene_hash(s);
     }
+    test_point_light();
     appm_scene_destroy(s);
     appm_scene_destroy(other);
     return check_finish();

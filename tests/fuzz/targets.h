@@ -1,4 +1,4 @@
-/* tests/fuzz/targets.h - the four fuzz entry points of appm's readers, shared by
+/* tests/fuzz/targets.h - the five fuzz entry points of appm's readers, shared by
  * the libFuzzer programs (tests/fuzz/fuzz_*.c) and the regression replayer
  * (tests/t_fuzz_regress.c).  Include it after appm.c.
  *
@@ -11,6 +11,10 @@
  *                   (as appm__scene_load does) and rendered when it loads
  *   fuzz_pfm_one    appm__pfm_parse; a parsed image must survive a write/read
  *                   round trip bit for bit
+ *   fuzz_checkpoint_one  appm_renderer_load into a fresh renderer of a fixed
+ *                   scene, as given and with its checksum made right; a
+ *                   refused checkpoint leaves the renderer fresh, an accepted
+ *                   one saves back to the same bytes and renders a pass
  *
  * Each returns the status of its main call (>= 0) when everything the library
  * promises held, or FUZZ_BAD (-1) after printing what did not:
@@ -657,6 +661,114 @@ static int fuzz_pfm_one(const unsigned char *data, size_t size)
     return st;
 }
 
+/* ---- Checkpoints --------------------------------------------------------------- */
+
+/* The renderer checkpoints are loaded into: a lamp over a floor, 4x3 pixels, 64
+ * photons, one thread; the method is the one named at the checkpoint's method
+ * offset (24), so that a mutated checkpoint of any method meets its own kind
+ * of renderer.  tests/fuzz/gen_checkpoint.c writes the seed corpus with it. */
+#define FUZZ_CK_METHOD_AT 24
+
+static const char fuzz__ck_obj[] = "mtllib lamp.mtl\nv -2 0 -2\nv 2 0 -2\nv 2 0 2\nv -2 0 2\nf 4 3 2 1\n"
+                                   "usemtl lamp\nv -0.5 2 -0.5\nv 0.5 2 -0.5\nv 0 2 0.5\nf 7 6 5\n";
+static const char fuzz__ck_mtl[] = "newmtl lamp\nKd 0 0 0\nKe 5 5 5\n";
+
+static appm_status fuzz__ck_setup(fuzz_env *e, const unsigned char *data, size_t size, appm_scene **scene,
+                                  appm_renderer **r)
+{
+    appm_config c = e->cfg;
+    appm_status st;
+    *r = NULL;
+    st = appm_scene_load_obj_memory(fuzz__ck_obj, sizeof fuzz__ck_obj - 1, fuzz__ck_mtl, sizeof fuzz__ck_mtl - 1,
+                                    FUZZ_DIR "lamp.obj", &e->cfg, scene, &e->diag);
+    if (st != APPM_OK) return st;
+    c.width = 4;
+    c.height = 3;
+    c.photons = 64;
+    c.threads = 1;
+    c.max_depth = 6;
+    c.method = (appm_method)(size > FUZZ_CK_METHOD_AT ? data[FUZZ_CK_METHOD_AT] % 4u : 0u);
+    return appm_renderer_create(*scene, &c, r, &e->diag);
+}
+
+/* One load of `data` into a fresh renderer.  Refused: the renderer is still
+ * fresh.  Accepted: saving gives back exactly `data`, and a pass runs. */
+static int fuzz__ck_load_one(appm_renderer *r, const unsigned char *data, size_t size)
+{
+    appm_diag d;
+    appm_status st;
+    memset(&d, 0x5A, sizeof d);
+    st = appm_renderer_load(r, data, size, &d);
+    if (fuzz__check_diag("checkpoint", &d, st)) return FUZZ_BAD;
+    if (st != APPM_OK) {
+        if (r->pass != 0 || r->stats.passes != 0) return fuzz__bad("checkpoint", "a refused load changed the renderer");
+        return (int)st;
+    }
+    {
+        unsigned char *back = (unsigned char *)malloc(size ? size : 1);
+        size_t n = 0;
+        int same;
+        if (!back) abort();
+        same = appm_renderer_save(r, back, size, &n, &d) == APPM_OK && n == size && memcmp(back, data, size) == 0;
+        free(back);
+        if (!same) return fuzz__bad("checkpoint", "saving a loaded checkpoint gives other bytes");
+    }
+    st = appm_renderer_pass(r);
+    if (st != APPM_OK && st != APPM_ERR_NOMEM) return fuzz__bad("checkpoint", "a pass after a load failed");
+    return (int)st;
+}
+
+/* One variant: a fresh scene and renderer, the load, the checks. */
+static int fuzz__ck_variant(fuzz_env *e, const unsigned char *data, size_t size)
+{
+    appm_scene *scene = NULL;
+    appm_renderer *r = NULL;
+    appm_status st = fuzz__ck_setup(e, data, size, &scene, &r);
+    int res = (int)st;
+    if (st == APPM_OK) res = fuzz__ck_load_one(r, data, size);
+    appm_renderer_destroy(r);
+    appm_scene_destroy(scene);
+    return res;
+}
+
+/* The input as it is (mostly stopped by the checksum), then with its checksum
+ * made right, so that mutations reach the checks behind it.  Returns the
+ * status of the first, or APPM_ERR_NOMEM if either ran out of memory. */
+static int fuzz__ck_run(const void *ctx, fuzz_env *e)
+{
+    const fuzz__buf2 *in = (const fuzz__buf2 *)ctx;
+    const unsigned char *data = (const unsigned char *)in->a;
+    int raw = fuzz__ck_variant(e, data, in->alen), fixed = APPM_OK;
+    if (raw != FUZZ_BAD && in->alen >= 8) {
+        unsigned char *copy = (unsigned char *)fuzz__dup(data, in->alen);
+        uint64_t h = 14695981039346656037ull; /* FNV-1a of all bytes before the last 8 */
+        size_t i;
+        int k;
+        for (i = 0; i + 8 < in->alen; ++i) h = (h ^ copy[i]) * 1099511628211ull;
+        for (k = 0; k < 8; ++k) copy[in->alen - 8 + (size_t)k] = (unsigned char)(h >> (8 * k));
+        fixed = fuzz__ck_variant(e, copy, in->alen);
+        free(copy);
+    }
+    if (fuzz__check_env("checkpoint", e)) return FUZZ_BAD;
+    if (raw == FUZZ_BAD || fixed == FUZZ_BAD) return FUZZ_BAD;
+    return raw == APPM_ERR_NOMEM || fixed == APPM_ERR_NOMEM ? APPM_ERR_NOMEM : raw;
+}
+
+static int fuzz_checkpoint_one(const unsigned char *data, size_t size)
+{
+    char *buf = fuzz__dup(data, size);
+    fuzz__buf2 in;
+    int st;
+    in.a = buf;
+    in.alen = size;
+    in.b = NULL;
+    in.blen = 0;
+    in.h = fuzz__hash(data, size);
+    st = fuzz__twice("checkpoint", fuzz__ck_run, &in, in.h);
+    free(buf);
+    return st;
+}
+
 /* ---- Table ------------------------------------------------------------------- */
 
 typedef int (*fuzz_fn)(const unsigned char *data, size_t size);
@@ -665,7 +777,8 @@ static const struct fuzz_target {
     const char *name;
     fuzz_fn one;
 } fuzz_targets[] = {
-    {"obj", fuzz_obj_one}, {"mtl", fuzz_mtl_one}, {"scene", fuzz_scene_one}, {"pfm", fuzz_pfm_one}};
+    {"obj", fuzz_obj_one}, {"mtl", fuzz_mtl_one}, {"scene", fuzz_scene_one}, {"pfm", fuzz_pfm_one},
+    {"checkpoint", fuzz_checkpoint_one}};
 
 #define FUZZ_TARGET_COUNT (sizeof fuzz_targets / sizeof fuzz_targets[0])
 
