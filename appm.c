@@ -960,7 +960,7 @@ static unsigned appm__zrle(const unsigned char *lens, unsigned n, uint16_t *rle,
 
 /* A dynamic block's code tables, and what it and the fixed code would cost. */
 typedef struct appm__zplan {
-    unsigned char ll[286], dl[30], cl[19];
+    unsigned char ll[288], dl[30], cl[19]; /* 288: the fixed code's two unused symbols count too */
     uint16_t rle[316];
     unsigned hlit, hdist, hclen, nrle;
     uint64_t dyn_bits, fixed_bits;
@@ -1019,11 +1019,11 @@ static void appm__zplan_make(appm__zlib *z, appm__zplan *pl)
 }
 
 /* Sends the block's symbols and its end-of-block code. */
-static void appm__zsend(appm__zlib *z, const unsigned char *ll, const unsigned char *dl)
+static void appm__zsend(appm__zlib *z, const unsigned char *ll, unsigned nll, const unsigned char *dl)
 {
-    uint16_t lc[286], dc[30];
+    uint16_t lc[288], dc[30];
     size_t i;
-    appm__huff_codes(ll, 286, lc);
+    appm__huff_codes(ll, nll, lc);
     appm__huff_codes(dl, 30, dc);
     for (i = 0; i < z->nsym; ++i) {
         unsigned v = z->lit[i], d = z->dist[i], c;
@@ -1060,12 +1060,12 @@ static void appm__zblock(appm__zlib *z, int final)
             appm__zbits(z, cc[s], pl.cl[s]);
             if (s >= 16) appm__zbits(z, pl.rle[i] >> 5, s == 16 ? 2 : s == 17 ? 3 : 7);
         }
-        appm__zsend(z, pl.ll, pl.dl);
+        appm__zsend(z, pl.ll, 286, pl.dl);
     } else { /* RFC 1951, 3.2.6: 8, 9, 7, 8 bits for literal/length ranges, 5 for distances */
-        for (i = 0; i < 286; ++i) pl.ll[i] = (unsigned char)(i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8);
+        for (i = 0; i < 288; ++i) pl.ll[i] = (unsigned char)(i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8);
         for (i = 0; i < 30; ++i) pl.dl[i] = 5;
         appm__zbits(z, (uint32_t)final | 1u << 1, 3);
-        appm__zsend(z, pl.ll, pl.dl);
+        appm__zsend(z, pl.ll, 288, pl.dl);
     }
     z->nsym = 0;
     memset(z->fl, 0, sizeof z->fl);
