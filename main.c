@@ -276,6 +276,28 @@ typedef struct render_opts {
     int quiet, have_time, have_passes, have_until;
 } render_opts;
 
+/* --light point X Y Z R G B  or  --environment R G B, at argv[*i]; moves *i to
+ * the last value.  Returns -1 when fine, else the usage error's exit code. */
+static int parse_light(int argc, char **argv, int *i, render_opts *o)
+{
+    const char *a = argv[*i];
+    int env = a[2] == 'e', k, first = *i + (env ? 1 : 2), n = env ? 3 : 6;
+    double *dst = env ? o->env : o->lights[o->nlights];
+    if (!env && o->nlights == MAX_CLI_LIGHTS) return usage_error("more than %d --light options", MAX_CLI_LIGHTS);
+    if (!env && (*i + 1 >= argc || strcmp(argv[*i + 1], "point") != 0))
+        return usage_error("--light needs: point X Y Z R G B");
+    for (k = 0; k < n; ++k) {
+        if (first + k >= argc || !parse_double(argv[first + k], &dst[k]))
+            return usage_error(env ? "--environment needs three numbers R G B" : "--light needs: point X Y Z R G B");
+        if ((env || k >= 3) && dst[k] < 0)
+            return usage_error("%s: negative %s '%s'", a, env ? "radiance" : "intensity", argv[first + k]);
+    }
+    *i = first + n - 1;
+    if (env) o->have_env = 1;
+    else o->nlights++;
+    return -1;
+}
+
 static int parse_render(int argc, char **argv, render_opts *o)
 {
     int i;
@@ -295,22 +317,8 @@ static int parse_render(int argc, char **argv, render_opts *o)
             continue;
         }
         if (strcmp(a, "--light") == 0 || strcmp(a, "--environment") == 0) {
-            int env = a[2] == 'e', need = env ? 3 : 7, k;
-            double *dst = env ? o->env : o->lights[o->nlights];
-            if (!env && o->nlights == MAX_CLI_LIGHTS) return usage_error("more than %d --light options", MAX_CLI_LIGHTS);
-            if (!env && (i + 1 >= argc || strcmp(argv[i + 1], "point") != 0))
-                return usage_error("--light needs: point X Y Z R G B");
-            if (!env) i++;
-            for (k = 0; k < need - !env; ++k) {
-                if (i + 1 + k >= argc || !parse_double(argv[i + 1 + k], &dst[k]))
-                    return usage_error(env ? "--environment needs three numbers R G B"
-                                           : "--light needs: point X Y Z R G B");
-                if ((env || k >= 3) && dst[k] < 0)
-                    return usage_error("%s: negative %s '%s'", a, env ? "radiance" : "intensity", argv[i + 1 + k]);
-            }
-            i += need - !env;
-            if (env) o->have_env = 1;
-            else o->nlights++;
+            int rc = parse_light(argc, argv, &i, o);
+            if (rc >= 0) return rc;
             continue;
         }
         if (a[0] != '-' || a[1] == 0) {
