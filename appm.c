@@ -1099,20 +1099,24 @@ static void appm__zinsert(appm__zlib *z, size_t p)
     z->head[h] = (int32_t)p;
 }
 
-/* The longest match at p (already inserted) of more than `better` and at most
- * maxlen bytes, following at most max_chain links (a quarter of them when the
- * match to beat is already long, as zlib's good_length).  0 if none. */
+/* The longest match at p (already inserted) of more than `better` (and at
+ * least min_keep) and at most maxlen bytes, following at most max_chain links
+ * (a quarter of them when the match to beat is already long, as zlib's
+ * good_length).  0 if none.  A candidate is first tested at the two bytes that
+ * would make it longer than the best so far (zlib's scan_end), which rejects
+ * most of them at once. */
 static unsigned appm__zmatch(const appm__zlib *z, size_t p, unsigned maxlen, unsigned better,
                              unsigned *dist)
 {
     const unsigned char *s = z->win + p;
-    unsigned best = better < APPM__Z_MINM - 1 ? APPM__Z_MINM - 1 : better, found = 0;
+    unsigned least = z->min_keep > APPM__Z_MINM ? z->min_keep - 1 : APPM__Z_MINM - 1; /* shorter: dropped anyway */
+    unsigned best = better < least ? least : better, found = 0;
     unsigned chain = better >= 32 ? z->max_chain >> 2 : z->max_chain;
     int32_t c = z->prev[p & (APPM__Z_W - 1)];
     if (best >= maxlen) return 0;
     while (c >= 0 && p - (size_t)c <= APPM__Z_MAXDIST && chain-- > 0) {
         const unsigned char *q = z->win + c;
-        if (q[best] == s[best] && q[0] == s[0] && q[1] == s[1]) {
+        if (q[best] == s[best] && q[best - 1] == s[best - 1] && q[0] == s[0] && q[1] == s[1]) {
             unsigned n = 2;
             while (n < maxlen && q[n] == s[n]) n++;
             if (n > best) {
