@@ -5426,10 +5426,6 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
     else memset(&c, 0, sizeof c);
     if (c.width == 0) c.width = scene->width;
     if (c.height == 0) c.height = scene->height;
-    if (scene->env_auto && c.log) /* once per renderer: the stand-in light is worth a word */
-        c.log(c.log_user, scene->name, 0,
-              "nothing in the model emits light: it is lit by a constant white environment of "
-              "radiance 1 (add lights to choose others)");
     if (c.width > 32768 || c.height > 32768)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "image size %ux%u is above 32768",
                           (unsigned)c.width, (unsigned)c.height);
@@ -5455,6 +5451,10 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
+    if (scene->env_auto && c.log) /* once per renderer: the stand-in light is worth a word */
+        c.log(c.log_user, scene->name, 0,
+              "nothing in the model emits light: it is lit by a constant white environment of "
+              "radiance 1 (add lights to choose others)");
     *out = c;
     return APPM_OK;
 }
