@@ -3611,7 +3611,7 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 60 
 /* Per-pixel state every method keeps across passes (40 bytes).  What a method
  * keeps beyond this (PPM's I, SPPM's tau, N, R, APPM's S, dI, ...) is its own
  * struct in section 10, in a separate array sized by its estimator entry. */
-typedef struct appm__pixel {
+typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pixel_fields (12.2) */
     double ld[3];      /* sum over passes of emission + direct light (pt: of the whole path) */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
 } appm__pixel;

@@ -484,6 +484,19 @@ static int add_cli_lights(const render_opts *o, appm_scene *scene)
     return EXIT_OK;
 }
 
+/* --resume: the checkpoint into r, its pass count into *resumed; EXIT_OK or the exit code. */
+static int resume_render(appm_renderer *r, const render_opts *o, unsigned long long *resumed)
+{
+    appm_diag d;
+    appm_stats st;
+    appm_status s = appm_renderer_load_file(r, o->resume, &d);
+    if (s != APPM_OK) return lib_error(s, &d, o->resume);
+    appm_renderer_stats(r, &st);
+    *resumed = (unsigned long long)st.passes;
+    if (!o->quiet) fprintf(stderr, "appm: resuming %s after pass %llu\n", o->resume, *resumed);
+    return EXIT_OK;
+}
+
 static int cmd_render(int argc, char **argv)
 {
     render_opts o;
@@ -524,15 +537,7 @@ static int cmd_render(int argc, char **argv)
         rc = lib_error(s, &d, NULL);
         goto done;
     }
-    if (o.resume) {
-        if ((s = appm_renderer_load_file(r, o.resume, &d)) != APPM_OK) {
-            rc = lib_error(s, &d, o.resume);
-            goto done;
-        }
-        appm_renderer_stats(r, &st);
-        resumed = (unsigned long long)st.passes;
-        if (!o.quiet) fprintf(stderr, "appm: resuming %s after pass %llu\n", o.resume, resumed);
-    }
+    if (o.resume && (rc = resume_render(r, &o, &resumed)) != EXIT_OK) goto done;
     if (ref.rgb) {
         appm_renderer_image(r, &img);
         if (ref.width != img.width || ref.height != img.height) {
