@@ -178,6 +178,7 @@ static void hand_free(appm_scene *s)
     appm__free(&s->mem, s->tri);
     appm__free(&s->mem, s->info);
     appm__free(&s->mem, s->node);
+    appm__free(&s->mem, s->wnode_mem);
     CHECK(s->mem.live == 0); /* the build freed all its scratch memory */
     free(s);
 }
