@@ -46,6 +46,15 @@
 #if defined(__FAST_MATH__) && !defined(APPM_ALLOW_FAST_MATH)
 #error "appm must not be compiled with -ffast-math: it relies on NaN checks and IEEE sums"
 #endif
+/* No fused multiply-adds either: the watertight triangle test (section 5) needs
+ * its edge functions U = Cx By - Cy Bx, ... rounded the same way for both
+ * triangles of a shared edge, and an fma rounds one product and not the other,
+ * so rays from inside a closed mesh leak through its edges.  GCC does not
+ * contract in ISO C mode (-std=c99); clang does by default where the target has
+ * FMA (-march=native), unless told not to. */
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#endif
 
 #ifndef _POSIX_C_SOURCE
 #define _POSIX_C_SOURCE 200809L
@@ -2030,6 +2039,8 @@ typedef struct appm__ray {
     appm__v3 inv;
     int kx, ky, kz;
     float sx, sy, sz;
+    size_t off[3];  /* byte offsets of components kx, ky, kz in an appm__v3 */
+    float ok[3];    /* the origin's components kx, ky, kz */
     int valid;
 } appm__ray;
 
@@ -2057,16 +2068,29 @@ static void appm__ray_setup(appm__ray *r)
     r->sy = appm__comp(r->d, r->ky) / dz;
     r->sz = 1.0f / dz;
     r->inv = appm__v(1.0f / r->d.x, 1.0f / r->d.y, 1.0f / r->d.z); /* +-inf for 0 and -0 */
+    {
+        static const size_t off[3] = {offsetof(appm__v3, x), offsetof(appm__v3, y), offsetof(appm__v3, z)};
+        r->off[0] = off[r->kx];
+        r->off[1] = off[r->ky];
+        r->off[2] = off[r->kz];
+        r->ok[0] = appm__comp(r->o, r->kx);
+        r->ok[1] = appm__comp(r->o, r->ky);
+        r->ok[2] = appm__comp(r->o, r->kz);
+    }
 }
+
+/* Component kx, ky or kz of a vertex, read through the ray's offsets: no
+ * branch on the ray's axes in the triangle test. */
+#define APPM__VC(r, v, i) (*(const float *)((const char *)&(v) + (r)->off[i]) - (r)->ok[i])
 
 /* Woop-Benthin-Wald watertight test; on a hit in (tmin, tmax) fills h. */
 static int appm__tri_hit(const appm__ray *r, const appm__tri *tr, appm__hit *h)
 {
-    appm__v3 A = appm__sub(tr->p0, r->o), B = appm__sub(tr->p1, r->o), C = appm__sub(tr->p2, r->o);
-    float Akz = appm__comp(A, r->kz), Bkz = appm__comp(B, r->kz), Ckz = appm__comp(C, r->kz);
-    float Ax = appm__comp(A, r->kx) - r->sx * Akz, Ay = appm__comp(A, r->ky) - r->sy * Akz;
-    float Bx = appm__comp(B, r->kx) - r->sx * Bkz, By = appm__comp(B, r->ky) - r->sy * Bkz;
-    float Cx = appm__comp(C, r->kx) - r->sx * Ckz, Cy = appm__comp(C, r->ky) - r->sy * Ckz;
+    /* A = p0 - o etc., in the ray's axis order, then sheared to +z */
+    float Akz = APPM__VC(r, tr->p0, 2), Bkz = APPM__VC(r, tr->p1, 2), Ckz = APPM__VC(r, tr->p2, 2);
+    float Ax = APPM__VC(r, tr->p0, 0) - r->sx * Akz, Ay = APPM__VC(r, tr->p0, 1) - r->sy * Akz;
+    float Bx = APPM__VC(r, tr->p1, 0) - r->sx * Bkz, By = APPM__VC(r, tr->p1, 1) - r->sy * Bkz;
+    float Cx = APPM__VC(r, tr->p2, 0) - r->sx * Ckz, Cy = APPM__VC(r, tr->p2, 1) - r->sy * Ckz;
     float U = Cx * By - Cy * Bx, V = Ax * Cy - Ay * Cx, W = Bx * Ay - By * Ax;
     float det, T, t;
     if (U == 0.0f || V == 0.0f || W == 0.0f) { /* on an edge: decide in double */
@@ -2420,14 +2444,28 @@ typedef struct appm__wentry { /* a traversal stack entry */
     float tnear;              /* entry distance of its box */
 } appm__wentry;
 
-/* The children of n in mask m, nearest first (ties by slot: deterministic);
- * returns how many. */
+/* Lowest set bit of a nonzero mask. */
+#if (defined(__GNUC__) || defined(__clang__)) && !defined(__TINYC__)
+#define APPM__CTZ(m) __builtin_ctz(m)
+#else
+static int appm__ctz(unsigned m)
+{
+    int j = 0;
+    while (!(m >> j & 1u)) j++;
+    return j;
+}
+#define APPM__CTZ(m) appm__ctz(m)
+#endif
+
+/* The children of n in mask m, nearest first (ties by slot, as insertion sort
+ * is stable: deterministic); returns how many. */
 static int appm__order_children(const appm__wnode *n, unsigned m, const float *tnear, appm__wentry *out)
 {
-    int c = 0, j, i;
-    for (j = 0; j < APPM__BVH_W; ++j) {
+    int c = 0, i;
+    while (m) {
+        int j = APPM__CTZ(m);
         appm__wentry e;
-        if (!(m >> j & 1u)) continue;
+        m &= m - 1;
         e.first = n->first[j];
         e.count = n->count[j];
         e.tnear = tnear[j];
@@ -2437,6 +2475,13 @@ static int appm__order_children(const appm__wnode *n, unsigned m, const float *t
     }
     return c;
 }
+
+/* A hint to start loading memory needed soon; nothing where it is not known. */
+#if (defined(__GNUC__) || defined(__clang__)) && !defined(__TINYC__)
+#define APPM__PREFETCH(p) __builtin_prefetch(p)
+#else
+#define APPM__PREFETCH(p) ((void)(p))
+#endif
 
 #define APPM__WSTACK ((APPM__BVH_W - 1) * APPM__BVH_MAX_DEPTH + APPM__BVH_W)
 
@@ -2458,7 +2503,12 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
             unsigned m = APPM__BOXES(&b, &s->wnode[cur.first], tmax, tn, scalar);
             if (m) {
                 int c = appm__order_children(&s->wnode[cur.first], m, tn, kid);
-                while (c > 1) stack[sp++] = kid[--c]; /* farthest deepest */
+                while (c > 1) { /* farthest deepest; fetched while the nearest is searched */
+                    stack[sp] = kid[--c];
+                    APPM__PREFETCH(stack[sp].count == APPM__W_INNER ? (const void *)&s->wnode[stack[sp].first]
+                                                                     : (const void *)&s->tri[stack[sp].first]);
+                    sp++;
+                }
                 cur = kid[0];
                 continue;
             }
@@ -2488,7 +2538,7 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
 static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t skip0, uint32_t skip1,
                                int scalar)
 {
-    appm__wentry stack[APPM__WSTACK], cur;
+    appm__wentry stack[APPM__WSTACK], kid[APPM__BVH_W], cur;
     appm__bray b;
     float tn[APPM__BVH_W];
     appm__hit h;
@@ -2500,13 +2550,13 @@ static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t
         if (cur.count == APPM__W_INNER) {
             const appm__wnode *n = &s->wnode[cur.first];
             unsigned m = APPM__BOXES(&b, n, r->tmax, tn, scalar);
-            int j;
-            for (j = APPM__BVH_W - 1; j >= 0; --j)
-                if (m >> j & 1u) {
-                    stack[sp].first = n->first[j];
-                    stack[sp].count = n->count[j];
-                    stack[sp++].tnear = tn[j];
-                }
+            int c = appm__order_children(n, m, tn, kid);
+            while (c > 0) {
+                stack[sp] = kid[--c];
+                APPM__PREFETCH(stack[sp].count == APPM__W_INNER ? (const void *)&s->wnode[stack[sp].first]
+                                                                 : (const void *)&s->tri[stack[sp].first]);
+                sp++;
+            }
         } else {
             uint32_t i;
             for (i = cur.first; i < cur.first + cur.count; ++i)
