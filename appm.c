@@ -2128,6 +2128,31 @@ static int appm__tri_hit(const appm__ray *r, const appm__tri *tr, appm__hit *h)
     return 1;
 }
 
+/* The slack of a ray's box tests.  A triangle's t from the watertight test
+ * carries a rounding error that grows with the distance to its vertices, not
+ * with t (they are translated to the ray origin), so a triangle hit just below
+ * tmax, or lying on a face of its box, could be culled by an exact box test.
+ * Every vertex lies in the root box, so 64 epsilon times the farthest finite
+ * distance to a root-box plane bounds that error for the whole traversal.  A
+ * false hit costs a node visit; a false miss would be a hole. */
+static float appm__box_slack(const appm__ray *r, const appm__node *root)
+{
+    float v[6], m = 0.0f;
+    int k;
+    v[0] = (root->bmin[0] - r->o.x) * r->inv.x;
+    v[1] = (root->bmax[0] - r->o.x) * r->inv.x;
+    v[2] = (root->bmin[1] - r->o.y) * r->inv.y;
+    v[3] = (root->bmax[1] - r->o.y) * r->inv.y;
+    v[4] = (root->bmin[2] - r->o.z) * r->inv.z;
+    v[5] = (root->bmax[2] - r->o.z) * r->inv.z;
+    for (k = 0; k < 6; ++k) {
+        float a = fabsf(v[k]);
+        if (a > m && a <= FLT_MAX) m = a;
+    }
+    return 64.0f * FLT_EPSILON * m;
+}
+
+#if APPM_BVH_BINARY
 /* Slab test of a node against (tmin, tmax + slack).
  *
  * A direction component of 0 (or -0) makes inv infinite: a ray strictly inside
@@ -2166,31 +2191,6 @@ static inline int appm__box_hit(const appm__ray *r, const appm__node *n, float t
     return t0 <= t1 + slack;
 }
 
-/* The slack of a ray's box tests.  A triangle's t from the watertight test
- * carries a rounding error that grows with the distance to its vertices, not
- * with t (they are translated to the ray origin), so a triangle hit just below
- * tmax, or lying on a face of its box, could be culled by an exact box test.
- * Every vertex lies in the root box, so 64 epsilon times the farthest finite
- * distance to a root-box plane bounds that error for the whole traversal.  A
- * false hit costs a node visit; a false miss would be a hole. */
-static float appm__box_slack(const appm__ray *r, const appm__node *root)
-{
-    float v[6], m = 0.0f;
-    int k;
-    v[0] = (root->bmin[0] - r->o.x) * r->inv.x;
-    v[1] = (root->bmax[0] - r->o.x) * r->inv.x;
-    v[2] = (root->bmin[1] - r->o.y) * r->inv.y;
-    v[3] = (root->bmax[1] - r->o.y) * r->inv.y;
-    v[4] = (root->bmin[2] - r->o.z) * r->inv.z;
-    v[5] = (root->bmax[2] - r->o.z) * r->inv.z;
-    for (k = 0; k < 6; ++k) {
-        float a = fabsf(v[k]);
-        if (a > m && a <= FLT_MAX) m = a;
-    }
-    return 64.0f * FLT_EPSILON * m;
-}
-
-#if APPM_BVH_BINARY
 /* The binary traversal the wide one replaced, kept for benchmarks and tests
  * (APPM_BVH_BINARY=1 keeps the binary tree too).  Closest hit in (tmin, tmax),
  * ignoring triangle `skip`. */
