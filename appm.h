@@ -42,15 +42,13 @@
  *     Never build with -ffast-math: the renderer relies on NaN checks and on the
  *     order of floating-point sums (an #error says so).
  *     Unity build: #define APPM_API static, then #include "appm.c".
- *     SIMD: the BVH tests the child boxes of a node four at a time with SSE2 on
- *     every x86-64 build and with NEON on aarch64, eight at a time (an 8-wide
- *     tree) with AVX2 (-mavx2 or -march=native), as the compiler's own macros
- *     say; tcc, other targets and -DAPPM_SIMD=0 use a portable scalar test.  The
- *     scalar test computes the same floats, so a SIMD build and its -DAPPM_SIMD=0
- *     twin (same compiler, same other flags) render the same bytes.  A build
- *     with AVX2 traverses a wider tree: where a ray meets two triangles at
- *     exactly the same distance (a shared edge) it may pick the other one, so
- *     its images can differ from a default build's in such pixels.
+ *     SIMD: the BVH (8 children per node) tests a node's child boxes with SSE2
+ *     on every x86-64 build, with AVX2 given -mavx2 or -march=native, and with
+ *     NEON on aarch64, as the compiler's own macros say; tcc, other targets and
+ *     -DAPPM_SIMD=0 use a portable scalar test.  The scalar test computes the
+ *     same floats, so a SIMD build and its -DAPPM_SIMD=0 twin (same compiler,
+ *     same other flags) render the same bytes, and so do gcc's default and
+ *     -mavx2 builds (make portability checks both).
  *
  * CONVENTIONS
  *     Units are scene units; right-handed coordinates; angles in degrees at the

@@ -196,6 +196,15 @@ same_render() {
     if grep -q 'differ\|failed' "$log"; then bad "$name: SIMD and scalar renders"; else ok "$name: SIMD and scalar renders are the same bytes"; fi
 }
 
+# same_as_default NAME TAG: the SIMD renders of same_render NAME equal the default build's.
+same_as_default() {
+    : >"$log"
+    for m in ppm appm pt; do
+        cmp "$OUT/render-simd-gcc_SSE2-$m.pfm" "$OUT/render-simd-$2-$m.pfm" >>"$log" 2>&1 || echo "$m differs" >>"$log"
+    done
+    if grep -q 'differ' "$log"; then bad "$1: renders differ from the default build's"; else ok "$1: renders are the default build's bytes"; fi
+}
+
 # bvh_test NAME COMPILER FLAGS...: t_bvh built and run in quick mode
 bvh_test() {
     name=$1 cc=$2
@@ -216,6 +225,7 @@ if have gcc "SIMD paths"; then
         bvh_test "gcc -mavx2" gcc -mavx2
         bvh_test "gcc -mavx2 -DAPPM_SIMD=0" gcc -mavx2 -DAPPM_SIMD=0
         same_render "gcc -mavx2" -mavx2
+        same_as_default "gcc -mavx2" gcc__mavx2
     else
         echo "skip -mavx2: this CPU has no AVX2"
     fi
