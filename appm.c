@@ -2481,6 +2481,19 @@ static int appm__order_children(const appm__wnode *n, unsigned m, const float *t
 #define APPM__PREFETCH(p) ((void)(p))
 #endif
 
+/* Prefetch of what a stack entry will read: every cache line of a node, or
+ * the first of a leaf's triangles. */
+static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
+{
+    if (e->count == APPM__W_INNER) {
+        const char *p = (const char *)&s->wnode[e->first];
+        size_t k;
+        for (k = 0; k < sizeof(appm__wnode); k += 64) APPM__PREFETCH(p + k);
+    } else {
+        APPM__PREFETCH(&s->tri[e->first]);
+    }
+}
+
 #define APPM__WSTACK ((APPM__BVH_W - 1) * APPM__BVH_MAX_DEPTH + APPM__BVH_W)
 
 /* Closest hit in (tmin, tmax) through the wide tree, ignoring triangle `skip`.
@@ -2503,9 +2516,7 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
                 int c = appm__order_children(&s->wnode[cur.first], m, tn, kid);
                 while (c > 1) { /* farthest deepest; fetched while the nearest is searched */
                     stack[sp] = kid[--c];
-                    APPM__PREFETCH(stack[sp].count == APPM__W_INNER ? (const void *)&s->wnode[stack[sp].first]
-                                                                     : (const void *)&s->tri[stack[sp].first]);
-                    sp++;
+                    appm__prefetch_entry(s, &stack[sp++]);
                 }
                 cur = kid[0];
                 continue;
@@ -2551,9 +2562,7 @@ static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t
             int c = appm__order_children(n, m, tn, kid);
             while (c > 0) {
                 stack[sp] = kid[--c];
-                APPM__PREFETCH(stack[sp].count == APPM__W_INNER ? (const void *)&s->wnode[stack[sp].first]
-                                                                 : (const void *)&s->tri[stack[sp].first]);
-                sp++;
+                appm__prefetch_entry(s, &stack[sp++]);
             }
         } else {
             uint32_t i;

@@ -8,8 +8,9 @@
  *   (add -mavx2 or -march=native for the 8-wide AVX2 tree, -DAPPM_SIMD=0 for
  *   the scalar build)
  *
- * Every figure is the median of 3 runs, and the three traversals take turns
- * within each round, so a change in the machine's load hits all of them alike.
+ * Every figure is the median of 3 rounds; within a round the three traversals
+ * take turns every 10000 rays (photon passes: pass by pass), so a change in
+ * the machine's load hits all of them alike.
  * One line per traversal (path=binary|scalar|simd):
  *   closest_per_s   closest hits (appm__ray_init + appm__intersect) per second
  *                   for RAYS rays, origins uniform in the mesh's bounding box,
@@ -18,6 +19,7 @@
  *   photon_per_s_1t, photon_per_s_2t   photon paths per second of the photon
  *                   pass alone (appm_stats.seconds_photons) rendering
  *                   PHOTON-SCENE at SIZE^2 with ppm, 3 passes, 1 and 2 threads
+ *                   (SIZE^2 photon paths a pass)
  *   checksum        sum of the closest hits' t (equal for all paths up to ties)
  * Then one summary line:
  *   bvh_build_ms    median of 5 builds (binary SAH build + collapse) of the
@@ -138,60 +140,79 @@ static int time_builds(appm_scene *s, double *full_ms, double *binary_ms)
     return 1;
 }
 
-/* Closest-hit (anyhit = 0) or any-hit rays per second on `path`. */
-static double trace(appm_scene *s, int path, const appm__v3 *orig, const appm__v3 *dir, long nrays, int anyhit,
-                    long *hits, double *checksum)
+#define CHUNK 10000
+
+/* Seconds per path for closest hits (anyhit = 0) or any hits of all rays, the
+ * paths taking turns every CHUNK rays so that a change of load in the middle
+ * of the run is shared by all of them. */
+static void trace(appm_scene *s, const appm__v3 *orig, const appm__v3 *dir, long nrays, int anyhit,
+                  double *sec, long *hits, double *checksum)
 {
-    double t0, t1;
-    long i;
-    *hits = 0;
-    *checksum = 0.0;
-    s->bvh_path = path;
-    t0 = appm__seconds();
-    for (i = 0; i < nrays; ++i) {
-        appm__ray r;
-        appm__hit h;
-        appm__ray_init(&r, orig[i], dir[i], FLT_MAX);
-        if (anyhit) {
-            *hits += appm__occluded(s, &r, UINT32_MAX, UINT32_MAX);
-        } else if (appm__intersect(s, &r, UINT32_MAX, &h)) {
-            ++*hits;
-            *checksum += h.t;
+    long c, i;
+    int k;
+    for (k = 0; k < NPATH; ++k) {
+        sec[k] = checksum[k] = 0.0;
+        hits[k] = 0;
+    }
+    for (c = 0; c < nrays; c += CHUNK) {
+        long end = c + CHUNK < nrays ? c + CHUNK : nrays;
+        for (k = 0; k < NPATH; ++k) {
+            double t0 = appm__seconds();
+            s->bvh_path = path_id[k];
+            for (i = c; i < end; ++i) {
+                appm__ray r;
+                appm__hit h;
+                appm__ray_init(&r, orig[i], dir[i], FLT_MAX);
+                if (anyhit) {
+                    hits[k] += appm__occluded(s, &r, UINT32_MAX, UINT32_MAX);
+                } else if (appm__intersect(s, &r, UINT32_MAX, &h)) {
+                    hits[k]++;
+                    checksum[k] += h.t;
+                }
+            }
+            sec[k] += appm__seconds() - t0;
         }
     }
-    t1 = appm__seconds();
-    return (double)nrays / (t1 - t0);
 }
 
-/* Photon paths per second of the photon pass alone (3 ppm passes). */
-static double photon_rate(appm_scene *s, int path, unsigned threads, uint32_t size)
+/* Photon paths per second of the photon pass alone, per path: one renderer
+ * per path (each on its own copy of the scene), 3 ppm passes each, the
+ * renderers taking turns pass by pass. */
+static void photon_rates(appm_scene **ps, unsigned threads, uint32_t size, double *rate)
 {
+    appm_renderer *r[NPATH];
     appm_config cfg;
-    appm_renderer *r = NULL;
-    appm_stats st;
-    int p;
+    int k, p;
     appm_config_init(&cfg);
     cfg.method = APPM_METHOD_PPM;
     cfg.width = cfg.height = size;
     cfg.threads = threads;
-    s->bvh_path = path;
-    if (appm_renderer_create(s, &cfg, &r, NULL) != APPM_OK) return 0.0;
+    for (k = 0; k < NPATH; ++k) {
+        ps[k]->bvh_path = path_id[k];
+        r[k] = NULL;
+        if (appm_renderer_create(ps[k], &cfg, &r[k], NULL) != APPM_OK) r[k] = NULL;
+    }
     for (p = 0; p < 3; ++p)
-        if (appm_renderer_pass(r) != APPM_OK) break;
-    appm_renderer_stats(r, &st);
-    appm_renderer_destroy(r);
-    return st.seconds_photons > 0.0 ? (double)st.photons_emitted / st.seconds_photons : 0.0;
+        for (k = 0; k < NPATH; ++k)
+            if (r[k]) appm_renderer_pass(r[k]);
+    for (k = 0; k < NPATH; ++k) {
+        appm_stats st;
+        appm_renderer_stats(r[k], &st);
+        rate[k] = st.seconds_photons > 0.0 ? (double)st.photons_emitted / st.seconds_photons : 0.0;
+        appm_renderer_destroy(r[k]);
+    }
 }
 
 int main(int argc, char **argv)
 {
     const char *mesh = argc > 1 ? argv[1] : "scenes/stanford-bunny.obj";
-    long nrays = argc > 2 ? atol(argv[2]) : 1000000L, i, hits = 0, ahits = 0;
+    long nrays = argc > 2 ? atol(argv[2]) : 1000000L, i;
     const char *pscene = argc > 3 ? argv[3] : "scenes/cornell-sphere.scene";
     uint32_t size = argc > 4 ? (uint32_t)atol(argv[4]) : 512;
     double closest[NPATH][ROUNDS], anyhit[NPATH][ROUNDS], ph1[NPATH][ROUNDS], ph2[NPATH][ROUNDS];
-    double med[4][NPATH], checksum[NPATH], cs, full_ms, bin_ms;
-    appm_scene *s = load_mesh(mesh), *ps = NULL;
+    double med[4][NPATH], checksum[NPATH], cs[NPATH], sec[NPATH], rate[NPATH], full_ms, bin_ms;
+    long hits[NPATH], ahits[NPATH];
+    appm_scene *s = load_mesh(mesh), *ps[NPATH];
     appm__v3 *orig, *dir;
     appm_diag d;
     appm__rng rng;
@@ -201,10 +222,11 @@ int main(int argc, char **argv)
         fprintf(stderr, "bvh_bench: build failed\n");
         return 1;
     }
-    if (appm_scene_load(pscene, NULL, &ps, &d) != APPM_OK) {
-        fprintf(stderr, "bvh_bench: %s:%u: %s\n", d.file, d.line, d.message);
-        return 1;
-    }
+    for (k = 0; k < NPATH; ++k)
+        if (appm_scene_load(pscene, NULL, &ps[k], &d) != APPM_OK) {
+            fprintf(stderr, "bvh_bench: %s:%u: %s\n", d.file, d.line, d.message);
+            return 1;
+        }
 
     /* Rays, drawn up front, each draw in its own statement so that the ray
      * set does not depend on the compiler's order of evaluating arguments. */
@@ -222,13 +244,16 @@ int main(int argc, char **argv)
                           s->bmin.z + u3 * (s->bmax.z - s->bmin.z));
         dir[i] = appm__uniform_sphere(u4, u5);
     }
-    for (round = 0; round < ROUNDS; ++round)
-        for (k = 0; k < NPATH; ++k) {
-            closest[k][round] = trace(s, path_id[k], orig, dir, nrays, 0, &hits, &checksum[k]);
-            anyhit[k][round] = trace(s, path_id[k], orig, dir, nrays, 1, &ahits, &cs);
-            ph1[k][round] = photon_rate(ps, path_id[k], 1, size);
-            ph2[k][round] = photon_rate(ps, path_id[k], 2, size);
-        }
+    for (round = 0; round < ROUNDS; ++round) {
+        trace(s, orig, dir, nrays, 0, sec, hits, checksum);
+        for (k = 0; k < NPATH; ++k) closest[k][round] = (double)nrays / sec[k];
+        trace(s, orig, dir, nrays, 1, sec, ahits, cs);
+        for (k = 0; k < NPATH; ++k) anyhit[k][round] = (double)nrays / sec[k];
+        photon_rates(ps, 1, size, rate);
+        for (k = 0; k < NPATH; ++k) ph1[k][round] = rate[k];
+        photon_rates(ps, 2, size, rate);
+        for (k = 0; k < NPATH; ++k) ph2[k][round] = rate[k];
+    }
     for (k = 0; k < NPATH; ++k) {
         med[0][k] = median(closest[k], ROUNDS);
         med[1][k] = median(anyhit[k], ROUNDS);
@@ -244,11 +269,11 @@ int main(int argc, char **argv)
            "anyhit_fraction=%.4f sah_cost=%.2f\n",
            APPM__SIMD_NAME, APPM__BVH_W, full_ms, bin_ms, full_ms / bin_ms, med[0][2] / med[0][0],
            med[1][2] / med[1][0], med[2][2] / med[2][0], med[3][2] / med[3][0], med[0][1] / med[0][0],
-           med[1][1] / med[1][0], s->ntri, s->nnode, s->nwnode, s->depth, (double)hits / (double)nrays,
-           (double)ahits / (double)nrays, sah_cost(s));
+           med[1][1] / med[1][0], s->ntri, s->nnode, s->nwnode, s->depth, (double)hits[0] / (double)nrays,
+           (double)ahits[0] / (double)nrays, sah_cost(s));
     free(orig);
     free(dir);
-    appm_scene_destroy(ps);
+    for (k = 0; k < NPATH; ++k) appm_scene_destroy(ps[k]);
     appm_scene_destroy(s);
     return 0;
 }
