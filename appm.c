@@ -2349,12 +2349,15 @@ static void appm__bray_init(appm__bray *b, const appm__ray *r, float slack)
 #define APPM__PLANE(n, off) ((const float *)((const char *)(n) + (off)))
 
 /* The reference path: bit j of the result says child j is hit, tnear[j] its
- * entry distance (meaningful for hit children only). */
+ * entry distance (meaningful for hit children only).  The collapse puts a
+ * node's children in its first slots, so the loop stops at the first empty
+ * one; an empty slot's box is missed anyway, so the SIMD tests, which take
+ * all slots of a vector, give the same mask. */
 static unsigned appm__boxes_scalar(const appm__bray *b, const appm__wnode *n, float tmax, float *tnear)
 {
     unsigned m = 0;
     int j, k;
-    for (j = 0; j < APPM__BVH_W; ++j) {
+    for (j = 0; j < APPM__BVH_W && n->count[j]; ++j) { /* used slots come first */
         float t0 = b->tmin, t1 = tmax;
         for (k = 0; k < 3; ++k) {
             float tn = (APPM__PLANE(n, b->near_off[k])[j] - b->o[k]) * b->inv[k];
@@ -2390,7 +2393,7 @@ static unsigned appm__boxes_simd(const appm__bray *b, const appm__wnode *n, floa
 {
     unsigned m = 0;
     int j, k;
-    for (j = 0; j < APPM__BVH_W; j += 4) {
+    for (j = 0; j < APPM__BVH_W && n->count[j]; j += 4) { /* an empty half is skipped */
         __m128 t0 = b->vtmin, t1 = _mm_set1_ps(tmax);
         for (k = 0; k < 3; ++k) { /* _mm_max_ps(x, t0) is x > t0 ? x : t0, NaN x included */
             __m128 tn = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(APPM__PLANE(n, b->near_off[k]) + j), b->vo[k]),
@@ -2411,7 +2414,7 @@ static unsigned appm__boxes_simd(const appm__bray *b, const appm__wnode *n, floa
     static const uint32_t bit[4] = {1, 2, 4, 8};
     unsigned m = 0;
     int j, k;
-    for (j = 0; j < APPM__BVH_W; j += 4) {
+    for (j = 0; j < APPM__BVH_W && n->count[j]; j += 4) { /* an empty half is skipped */
         float32x4_t t0 = b->vtmin, t1 = vdupq_n_f32(tmax);
         uint32x4_t hit;
         for (k = 0; k < 3; ++k) { /* fmax would differ on NaN and on -0: select instead */
@@ -2476,11 +2479,6 @@ static int appm__order_children(const appm__wnode *n, unsigned m, const float *t
 
 /* A hint to start loading memory needed soon; nothing where it is not known. */
 #if (defined(__GNUC__) || defined(__clang__)) && !defined(__TINYC__)
-#define APPM__PREFETCH(p) __builtin_prefetch(p)
-#else
-#define APPM__PREFETCH(p) ((void)(p))
-#endif
-
 /* Prefetch of what a stack entry will read: every cache line of a node, or
  * the first of a leaf's triangles. */
 static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
@@ -2488,11 +2486,15 @@ static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
     if (e->count == APPM__W_INNER) {
         const char *p = (const char *)&s->wnode[e->first];
         size_t k;
-        for (k = 0; k < sizeof(appm__wnode); k += 64) APPM__PREFETCH(p + k);
+        for (k = 0; k < sizeof(appm__wnode); k += 64) __builtin_prefetch(p + k);
     } else {
-        APPM__PREFETCH(&s->tri[e->first]);
+        __builtin_prefetch(&s->tri[e->first]);
     }
 }
+#define APPM__PREFETCH_ENTRY(s, e) appm__prefetch_entry(s, e)
+#else
+#define APPM__PREFETCH_ENTRY(s, e) ((void)(s), (void)(e))
+#endif
 
 #define APPM__WSTACK ((APPM__BVH_W - 1) * APPM__BVH_MAX_DEPTH + APPM__BVH_W)
 
@@ -2516,7 +2518,8 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
                 int c = appm__order_children(&s->wnode[cur.first], m, tn, kid);
                 while (c > 1) { /* farthest deepest; fetched while the nearest is searched */
                     stack[sp] = kid[--c];
-                    appm__prefetch_entry(s, &stack[sp++]);
+                    APPM__PREFETCH_ENTRY(s, &stack[sp]);
+                    sp++;
                 }
                 cur = kid[0];
                 continue;
@@ -2541,13 +2544,11 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
     }
 }
 
-/* Any hit in (tmin, tmax), ignoring triangles skip0 and skip1: shadow rays.
- * Children are visited in slot order: any hit ends the search, so sorting
- * would buy nothing. */
+/* Any hit in (tmin, tmax), ignoring triangles skip0 and skip1: shadow rays. */
 static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t skip0, uint32_t skip1,
                                int scalar)
 {
-    appm__wentry stack[APPM__WSTACK], kid[APPM__BVH_W], cur;
+    appm__wentry stack[APPM__WSTACK], cur;
     appm__bray b;
     float tn[APPM__BVH_W];
     appm__hit h;
@@ -2559,10 +2560,14 @@ static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t
         if (cur.count == APPM__W_INNER) {
             const appm__wnode *n = &s->wnode[cur.first];
             unsigned m = APPM__BOXES(&b, n, r->tmax, tn, scalar);
-            int c = appm__order_children(n, m, tn, kid);
-            while (c > 0) {
-                stack[sp] = kid[--c];
-                appm__prefetch_entry(s, &stack[sp++]);
+            while (m) { /* slot order: any hit ends the search, so no sort */
+                int j = APPM__CTZ(m);
+                m &= m - 1;
+                stack[sp].first = n->first[j];
+                stack[sp].count = n->count[j];
+                stack[sp].tnear = tn[j];
+                APPM__PREFETCH_ENTRY(s, &stack[sp]);
+                sp++;
             }
         } else {
             uint32_t i;
