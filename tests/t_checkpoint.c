@@ -24,7 +24,9 @@
  *      back byte by byte at their documented offsets.
  *   7. The scene hash ignores the triangles' order (a BVH built elsewhere may
  *      order them otherwise) and sees a moved vertex, another albedo, another
- *      camera, another point light. */
+ *      camera, another point light.
+ *   8. A tripwire: appm_config has exactly the fields the checkpoint header
+ *      was written for, so a new option cannot slip past the comparison. */
 #include "../appm.c"
 #include "check.h"
 
@@ -518,6 +520,33 @@ static void test_point_light(void)
     appm_scene_destroy(b);
 }
 
+/* 8. The options as appm__ck_head_of knew them.  If this fails, appm_config has
+ * changed: an option that changes the image (a sampler, chains, ...) must go
+ * into appm__ck_head (written, read, compared with a message) and the layout
+ * comment of appm.c 12.2; one that does not (like threads) needs nothing.
+ * Then add it here. */
+typedef struct known_config {
+    appm_allocator allocator;
+    appm_log_fn log;
+    void *log_user;
+    appm_method method;  /* compared */
+    appm_direct direct;  /* compared */
+    uint32_t width, height; /* compared */
+    uint64_t photons;    /* compared */
+    double radius;       /* compared */
+    double alpha;        /* compared */
+    unsigned threads;    /* free: the image does not depend on it */
+    uint64_t seed;       /* compared */
+    unsigned max_depth;  /* compared */
+} known_config;
+
+static void test_config_tripwire(void)
+{
+    CHECK_MSG(sizeof(appm_config) == sizeof(known_config) &&
+                  offsetof(appm_config, max_depth) == offsetof(known_config, max_depth),
+              "appm_config has fields the checkpoint does not know: see the comment above test_config_tripwire");
+}
+
 static void test_arguments(const appm_scene *s)
 {
     appm_config c = config(APPM_METHOD_PT, 1);
@@ -553,6 +582,7 @@ int main(void)
         test_scene_hash(s);
     }
     test_point_light();
+    test_config_tripwire();
     appm_scene_destroy(s);
     appm_scene_destroy(other);
     return check_finish();
