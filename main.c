@@ -116,6 +116,8 @@ static const char *const RENDER_HELP =
     "  --size WxH            override the scene's image size\n"
     "  --max-depth N         longest light path counted, in segments from light to camera [32]\n"
     "  --direct MODE         nee (shadow rays, default) | photons (first-bounce photons)\n"
+    "  --sampler S           qmc (scrambled Sobol' in every path dimension, default) |\n"
+    "                        random (independent PCG streams, the earlier sampler)\n"
     "  --exposure X          multiply before the sRGB conversion of .png/.ppm [1]\n"
     "  --reference REF.pfm   compare with this image after every pass\n"
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
@@ -299,6 +301,10 @@ static int parse_render(int argc, char **argv, render_opts *o)
             else if (strcmp(v, "sppm") == 0) o->cfg.method = APPM_METHOD_SPPM;
             else if (strcmp(v, "pt") == 0) o->cfg.method = APPM_METHOD_PT;
             else return usage_error("unknown method '%s' (appm, ppm, sppm or pt)", v);
+        } else if (strcmp(a, "--sampler") == 0) {
+            if (strcmp(v, "qmc") == 0) o->cfg.sampler = APPM_SAMPLER_QMC;
+            else if (strcmp(v, "random") == 0) o->cfg.sampler = APPM_SAMPLER_RANDOM;
+            else return usage_error("--sampler must be qmc or random, not '%s'", v);
         } else if (strcmp(a, "--direct") == 0) {
             if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
             else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
@@ -502,6 +508,7 @@ static int cmd_render(int argc, char **argv)
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
                (unsigned long long)st.photons_stored);
         if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
+        printf(" sampler=%s", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
         if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
         if (g_interrupted) printf(" interrupted=1");
         printf("\n");
