@@ -3949,7 +3949,7 @@ static double appm__mean_var(const appm__pixel *p, uint64_t j, int qmc)
     double m = 0.0, ss = 0.0;
     uint64_t k, K = j < APPM__CHAINS ? j : APPM__CHAINS;
     if (j < 2) return 0.0;
-    if (!qmc) return p->wm2 / ((double)(j - 1) * (double)j);
+    if (!qmc || APPM__CHAINS < 2) return p->wm2 / ((double)(j - 1) * (double)j);
     for (k = 0; k < K; ++k) m += p->chain[k];
     m /= (double)j;
     for (k = 0; k < K; ++k) {
