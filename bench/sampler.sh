@@ -20,7 +20,7 @@
 # cannot render (a spot light seen through glass): there a long ppm render
 # (alpha 2/3, 32768 passes, two seeds), whose own bias is not subtracted.
 # SAMPLER_SCENES="name ..." restricts the run to some of the scenes below.
-# Results: bench/out/sampler/{results.csv,sampler.md}.
+# Results: bench/out/sampler/{results.csv,sampler.md} (or SAMPLER_OUT).
 set -u
 APPM=${APPM:-./appm}
 CC=${CC:-cc}
@@ -28,7 +28,7 @@ threads=${BENCH_THREADS:-2}
 secs=${SAMPLER_SECS:-6}
 passes=${SAMPLER_PASSES:-128}
 seeds=${SAMPLER_SEEDS:-"1 2 3"}
-out=bench/out/sampler
+out=${SAMPLER_OUT:-bench/out/sampler}
 mkdir -p "$out" bench/ref
 [ -x "$APPM" ] || { echo "bench: build ./appm first (make)"; exit 1; }
 $CC -std=c99 -O2 bench/refmix.c appm.c -o bench/refmix -lm -pthread || exit 1
