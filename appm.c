@@ -3046,8 +3046,10 @@ static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi
 
 /* ==== 7. EYE PASS =========================================================
  *
- * Every pass traces one eye path per pixel: a uniformly jittered point in the
- * pixel (box filter) and on the lens, then through mirrors and glass until the
+ * Every pass traces one eye path per pixel: a point in the pixel (box filter)
+ * and on the lens - of the pixel's own low-discrepancy sequence, so that its
+ * passes stratify the pixel (section 2.3), or uniformly jittered with
+ * --sampler random - then through mirrors and glass until the
  * first diffuse vertex x.  There the path stops and becomes the pixel's visible
  * point for this pass (stochastic PPM: a new x every pass, so anti-aliasing,
  * depth of field and glossy-free caustic paths all converge).  What the path
@@ -3185,7 +3187,7 @@ static int appm__quant(float v, float scale)
 
 /* ---- 7.2 Camera rays ---------------------------------------------------------- */
 
-/* Where in the pixel (and on the lens) pass j samples: the R2 sequence of
+/* --sampler random: where in the pixel (and on the lens) pass j samples: the R2 sequence of
  * Roberts (2018), x_j = frac(s + j g) with g = (1/phi2, 1/phi2^2), phi2 the
  * plastic number - or R4 with the lens, so that the lens and pixel coordinates
  * are not correlated.  Each pixel rotates the sequence by its own random offset
@@ -3346,8 +3348,9 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
 /* ==== 8. PHOTON PASS ======================================================
  *
  * M photon paths per pass, in chunks of APPM__CHUNK paths.  Path i of pass j
- * draws from its own random stream (seed, j, i), so its photons are the same
- * whatever thread traces it.  Chunk c is traced by task c % T into region
+ * draws its numbers from point i of the pass's block of a low-discrepancy
+ * sequence (section 2.3) or from its own random stream (seed, j, i), so its
+ * photons are the same whatever thread traces it.  Chunk c is traced by task c % T into region
  * c % T of the store; the grid build then reads the chunks in order c = 0, 1,
  * ..., which makes the photon order, and every sum over photons, independent
  * of the thread count.
@@ -4108,10 +4111,9 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         if (m->kind == APPM__MAT_DIFFUSE && segs + 1 <= r->max_depth) {
             float side = appm__dot(wo, sf.ng) >= 0.0f ? 1.0f : -1.0f, c;
             appm__v3 ns = appm__scale(sf.ns, side), ng = appm__scale(sf.ng, side);
-            float ul[3];
             appm__light_sample ls;
-            appm__smp_light(&smp, segs - 1, r->nee_dims, ul);
-            if (appm__sample_light(s, &sf, ns, ul[0], ul[1], ul[2], &ls)) {
+            appm__smp_light(&smp, segs - 1, r->nee_dims, u3);
+            if (appm__sample_light(s, &sf, ns, u3[0], u3[1], u3[2], &ls)) {
                 c = appm__dot(ls.wi, ns);
                 if (c > 0.0f && appm__dot(ls.wi, ng) > 0.0f &&
                     !appm__occluded(s, &ls.shadow, sf.tri, ls.skip)) {
