@@ -595,24 +595,28 @@ static void appm__rng_float3(appm__rng *r, float *u)
  *   d = 2: s = 1, a = 0, m = 1        d = 3: s = 2, a = 1, m = 1 3
  *   d = 4: s = 3, a = 1, m = 1 3 1
  * by m_k = 2 a_1 m_(k-1) ^ ... ^ 2^(s-1) a_(s-1) m_(k-s+1) ^ 2^s m_(k-s) ^ m_(k-s)
- * (Bratley & Fox 1988).  t_sampling recomputes them from these parameters. */
+ * (Bratley & Fox 1988).  t_sampler recomputes them from these parameters. */
 static const uint32_t appm__sobol_v[4][32] = {
-    {0x80000000u, 0x40000000u, 0x20000000u, 0x10000000u, 0x08000000u, 0x04000000u, 0x02000000u, 0x01000000u,
-     0x00800000u, 0x00400000u, 0x00200000u, 0x00100000u, 0x00080000u, 0x00040000u, 0x00020000u, 0x00010000u,
-     0x00008000u, 0x00004000u, 0x00002000u, 0x00001000u, 0x00000800u, 0x00000400u, 0x00000200u, 0x00000100u,
-     0x00000080u, 0x00000040u, 0x00000020u, 0x00000010u, 0x00000008u, 0x00000004u, 0x00000002u, 0x00000001u},
-    {0x80000000u, 0xc0000000u, 0xa0000000u, 0xf0000000u, 0x88000000u, 0xcc000000u, 0xaa000000u, 0xff000000u,
-     0x80800000u, 0xc0c00000u, 0xa0a00000u, 0xf0f00000u, 0x88880000u, 0xcccc0000u, 0xaaaa0000u, 0xffff0000u,
-     0x80008000u, 0xc000c000u, 0xa000a000u, 0xf000f000u, 0x88008800u, 0xcc00cc00u, 0xaa00aa00u, 0xff00ff00u,
-     0x80808080u, 0xc0c0c0c0u, 0xa0a0a0a0u, 0xf0f0f0f0u, 0x88888888u, 0xccccccccu, 0xaaaaaaaau, 0xffffffffu},
-    {0x80000000u, 0xc0000000u, 0x60000000u, 0x90000000u, 0xe8000000u, 0x5c000000u, 0x8e000000u, 0xc5000000u,
-     0x68800000u, 0x9cc00000u, 0xee600000u, 0x55900000u, 0x80680000u, 0xc09c0000u, 0x60ee0000u, 0x90550000u,
-     0xe8808000u, 0x5cc0c000u, 0x8e606000u, 0xc5909000u, 0x6868e800u, 0x9c9c5c00u, 0xeeee8e00u, 0x5555c500u,
-     0x8000e880u, 0xc0005cc0u, 0x60008e60u, 0x9000c590u, 0xe8006868u, 0x5c009c9cu, 0x8e00eeeeu, 0xc5005555u},
-    {0x80000000u, 0xc0000000u, 0x20000000u, 0x50000000u, 0xf8000000u, 0x74000000u, 0xa2000000u, 0x93000000u,
-     0xd8800000u, 0x25400000u, 0x59e00000u, 0xe6d00000u, 0x78080000u, 0xb40c0000u, 0x82020000u, 0xc3050000u,
-     0x208f8000u, 0x51474000u, 0xfbea2000u, 0x75d93000u, 0xa0858800u, 0x914e5400u, 0xdbe79e00u, 0x25db6d00u,
-     0x58800080u, 0xe54000c0u, 0x79e00020u, 0xb6d00050u, 0x800800f8u, 0xc00c0074u, 0x200200a2u, 0x50050093u}
+    {0x80000000u, 0x40000000u, 0x20000000u, 0x10000000u, 0x08000000u, 0x04000000u, 0x02000000u,
+     0x01000000u, 0x00800000u, 0x00400000u, 0x00200000u, 0x00100000u, 0x00080000u, 0x00040000u,
+     0x00020000u, 0x00010000u, 0x00008000u, 0x00004000u, 0x00002000u, 0x00001000u, 0x00000800u,
+     0x00000400u, 0x00000200u, 0x00000100u, 0x00000080u, 0x00000040u, 0x00000020u, 0x00000010u,
+     0x00000008u, 0x00000004u, 0x00000002u, 0x00000001u},
+    {0x80000000u, 0xc0000000u, 0xa0000000u, 0xf0000000u, 0x88000000u, 0xcc000000u, 0xaa000000u,
+     0xff000000u, 0x80800000u, 0xc0c00000u, 0xa0a00000u, 0xf0f00000u, 0x88880000u, 0xcccc0000u,
+     0xaaaa0000u, 0xffff0000u, 0x80008000u, 0xc000c000u, 0xa000a000u, 0xf000f000u, 0x88008800u,
+     0xcc00cc00u, 0xaa00aa00u, 0xff00ff00u, 0x80808080u, 0xc0c0c0c0u, 0xa0a0a0a0u, 0xf0f0f0f0u,
+     0x88888888u, 0xccccccccu, 0xaaaaaaaau, 0xffffffffu},
+    {0x80000000u, 0xc0000000u, 0x60000000u, 0x90000000u, 0xe8000000u, 0x5c000000u, 0x8e000000u,
+     0xc5000000u, 0x68800000u, 0x9cc00000u, 0xee600000u, 0x55900000u, 0x80680000u, 0xc09c0000u,
+     0x60ee0000u, 0x90550000u, 0xe8808000u, 0x5cc0c000u, 0x8e606000u, 0xc5909000u, 0x6868e800u,
+     0x9c9c5c00u, 0xeeee8e00u, 0x5555c500u, 0x8000e880u, 0xc0005cc0u, 0x60008e60u, 0x9000c590u,
+     0xe8006868u, 0x5c009c9cu, 0x8e00eeeeu, 0xc5005555u},
+    {0x80000000u, 0xc0000000u, 0x20000000u, 0x50000000u, 0xf8000000u, 0x74000000u, 0xa2000000u,
+     0x93000000u, 0xd8800000u, 0x25400000u, 0x59e00000u, 0xe6d00000u, 0x78080000u, 0xb40c0000u,
+     0x82020000u, 0xc3050000u, 0x208f8000u, 0x51474000u, 0xfbea2000u, 0x75d93000u, 0xa0858800u,
+     0x914e5400u, 0xdbe79e00u, 0x25db6d00u, 0x58800080u, 0xe54000c0u, 0x79e00020u, 0xb6d00050u,
+     0x800800f8u, 0xc00c0074u, 0x200200a2u, 0x50050093u}
 };
 
 /* Point i of Sobol' dimension d (0..3), 32 bits: x = XOR of v_k over the set
@@ -626,8 +630,8 @@ static uint32_t appm__sobol(uint32_t i, unsigned d)
     return x;
 }
 
-/* Owen scramble of a 32-bit fraction x / 2^32, most significant digit first:
- * owen(x, seed) = rev(appm__lk_permute(rev(x), seed)), rev the bit reversal. */
+/* Bit reversal, rev.  The Owen scramble of a 32-bit fraction x / 2^32 (most
+ * significant digit first) is owen(x, seed) = rev(appm__lk_permute(rev(x), seed)). */
 static inline uint32_t appm__reverse32(uint32_t x)
 {
     x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
@@ -686,8 +690,8 @@ static void appm__sobol_table(uint32_t *tab)
  * per group, one scramble seed per coordinate.  Equal to owen(sobol(owen(index,
  * s0), d), s_d) (t_sampling checks); only the coordinates a path will read are
  * computed (a mirror reads none, a point light no point on it). */
-static void appm__ld(const uint32_t *tab, uint64_t key, uint32_t rindex, unsigned group, unsigned mask,
-                     float *u)
+static void appm__ld(const uint32_t *tab, uint64_t key, uint32_t rindex, unsigned group,
+                     unsigned mask, float *u)
 {
     const uint32_t *rev8 = tab + APPM__SOBOL_REV8;
     uint64_t g = appm__mix64(key ^ ((uint64_t)(group + 1) * 0xD1B54A32D192ED03ull));
@@ -697,7 +701,8 @@ static void appm__ld(const uint32_t *tab, uint64_t key, uint32_t rindex, unsigne
         const uint32_t *t = tab + d * 1024;
         uint32_t y, z;
         if (!(mask >> d & 1u)) continue;
-        y = t[ir & 255] ^ t[256 + ((ir >> 8) & 255)] ^ t[512 + ((ir >> 16) & 255)] ^ t[768 + (ir >> 24)];
+        y = t[ir & 255] ^ t[256 + ((ir >> 8) & 255)] ^ t[512 + ((ir >> 16) & 255)] ^
+            t[768 + (ir >> 24)];
         z = appm__lk_permute(y, (uint32_t)(g >> 32) + d * 0x9E3779B9u);
         /* the top 24 bits of rev(z) are the low 24 of z, reversed */
         z = rev8[z & 255] << 16 | rev8[(z >> 8) & 255] << 8 | rev8[(z >> 16) & 255];
@@ -746,15 +751,16 @@ static void appm__sampler_eye(appm__sampler *s, const uint32_t *tab, uint64_t se
  * sequence, q the pass's place in the chain, so the photons of all passes
  * together fill the light's sample space as one low-discrepancy set (Keller et
  * al. 2011).  Past 2^32 points the sequence continues with a fresh key. */
-static void appm__sampler_photon(appm__sampler *s, const uint32_t *tab, uint64_t seed, uint64_t pass,
-                                 uint64_t M, uint64_t i)
+static void appm__sampler_photon(appm__sampler *s, const uint32_t *tab, uint64_t seed,
+                                 uint64_t pass, uint64_t M, uint64_t i)
 {
     uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = p0 % APPM__CHAINS;
     uint64_t n = (p0 / APPM__CHAINS) * M + i;
     appm__rng_seed(&s->rng, seed, pass, APPM__DOMAIN_PHOTON, i);
     s->tab = tab;
     s->qmc = tab != NULL;
-    s->key = appm__mix64(seed ^ appm__mix64(chain * 8 + APPM__DOMAIN_LD_PHOTON) ^ appm__mix64(n >> 32));
+    s->key = appm__mix64(seed ^ appm__mix64(chain * 8 + APPM__DOMAIN_LD_PHOTON) ^
+                         appm__mix64(n >> 32));
     s->rindex = appm__reverse32((uint32_t)n);
 }
 
@@ -781,7 +787,8 @@ static void appm__smp_light(appm__sampler *s, unsigned b, unsigned mask, float *
         appm__rng_float3(&s->rng, u);
         return;
     }
-    appm__ld(s->tab, s->key, s->rindex, APPM__G_LIGHT(b), (mask & 1u ? 4u : 0u) | (mask & 2u ? 3u : 0u), v);
+    appm__ld(s->tab, s->key, s->rindex, APPM__G_LIGHT(b), (mask & 1u ? 4u : 0u) | (mask & 2u ? 3u : 0u),
+             v);
     u[0] = v[2];
     u[1] = v[0];
     u[2] = v[1];
@@ -4551,7 +4558,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     if ((int)c.direct < 0 || c.direct > APPM_DIRECT_PHOTONS)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown direct-light mode");
     if ((int)c.sampler < 0 || c.sampler > APPM_SAMPLER_RANDOM)
-        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown sampler %d", (int)c.sampler);
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown sampler %d",
+                          (int)c.sampler);
     if (c.alpha == 0.0) c.alpha = 2.0 / 3.0;
     if (!(c.alpha > 0.0 && c.alpha <= 1.0))
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "alpha %g is not in (0, 1]", c.alpha);
