@@ -3,17 +3,21 @@
 # also part of make bench).
 #
 # On every committed scene (64x64) and on the caustic-glass scene (56x80), appm
-# with --sampler qmc (the default) against --sampler random:
-#   equal time    SAMPLER_SECS seconds each (default 6), RMSE and passes
-#   equal passes  SAMPLER_PASSES passes each (default 128): RMSE, seconds per
-#                 pass (the sampler's cost), and the error estimate est_relerr
-#                 against the true relative error sqrt(relmse)
-# for each seed of SAMPLER_SEEDS (default 1 2 3); the tables show medians over
-# the seeds.  A third build, qmc with one chain (-DAPPM__CHAINS=1), shows what
-# the four chains cost in accuracy and what the spread of correlated passes
-# would claim as the error.  On caustic-glass the equal-time error is also
-# given per region (bench/caustic-glass-regions.txt: directly lit floor, floor
-# lit by the environment only, the glass, the caustic).
+# with --sampler qmc (the default) against --sampler random, SAMPLER_PASSES
+# passes each (default 256) for each seed of SAMPLER_SEEDS (default 1 2 3),
+# logging the RMSE after every pass.  From the logs (bench/sampler_report.sh):
+#   equal passes  the RMSE after the last pass, the seconds per pass (the
+#                 sampler's cost), and the error estimate est_relerr against
+#                 the true relative error sqrt(relmse)
+#   equal time    per seed, the RMSE of each sampler after the last pass that
+#                 ended within the shorter of the two runs' times
+# as medians over the seeds.  Wall time on a shared machine is noisy (the
+# seeds of one scene run back to back, qmc and random interleaved).  A third
+# build, qmc with one chain (-DAPPM__CHAINS=1), shows what the four chains cost
+# in accuracy and what the spread of correlated passes would claim as the
+# error.  On caustic-glass the error after the last pass is also given per
+# region (bench/caustic-glass-regions.txt: directly lit floor, floor lit by the
+# environment only, the glass, the caustic).
 #
 # References: path-traced (mean of two seeds, the reference's own noise
 # subtracted, as in bench/run.sh), except caustic-glass, which a path tracer
@@ -25,8 +29,7 @@ set -u
 APPM=${APPM:-./appm}
 CC=${CC:-cc}
 threads=${BENCH_THREADS:-2}
-secs=${SAMPLER_SECS:-6}
-passes=${SAMPLER_PASSES:-128}
+passes=${SAMPLER_PASSES:-256}
 seeds=${SAMPLER_SEEDS:-"1 2 3"}
 out=${SAMPLER_OUT:-bench/out/sampler}
 mkdir -p "$out" bench/ref
@@ -55,44 +58,38 @@ reference() {
     printf '%s\n' "$want" > "bench/ref/$1.cmd"
 }
 
-# one NAME SCENE SIZE LABEL MODE SEED BINARY OPTIONS...: one render, one csv row
+# one NAME SCENE SIZE LABEL SEED BINARY OPTIONS...: one render, its log, one csv row
 one() {
-    name=$1 scene=$2 size=$3 label=$4 mode=$5 seed=$6 bin=$7
-    shift 7
-    img="$out/$name-$label-$mode-$seed.pfm"
-    line=$($bin render "$scene" --size "$size" --threads "$threads" --seed "$seed" -q \
-        --reference "bench/ref/$name.pfm" -o "$img" "$@" | tail -n 1)
-    refmse=$(sed -n 's/^ref_mse=//p' "bench/ref/$name.mse")
-    rmse=$(awk -v r="$(kv "$line" rmse)" -v n="$refmse" 'BEGIN { m = r * r - n; printf "%.6g", (m > 0 ? sqrt(m) : 0) }')
-    p=$(kv "$line" passes) s=$(kv "$line" seconds)
-    printf '%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$name" "$label" "$mode" "$seed" "$p" "$s" "$rmse" \
-        "$(kv "$line" relmse)" "$(kv "$line" est_relerr)" >> "$out/results.csv"
-    if [ "$name" = caustic-glass-56x80 ] && [ "$mode" = time ]; then
-        printf '%s,%s,%s' "$label" "$seed" "$("$out/regions" "$img" "bench/ref/$name.pfm" \
+    name=$1 scene=$2 size=$3 label=$4 seed=$5 bin=$6
+    shift 6
+    img="$out/$name-$label-$seed.pfm" log="$out/log-$name-$label-$seed.csv"
+    line=$($bin render "$scene" --size "$size" --threads "$threads" --seed "$seed" -q --passes "$passes" \
+        --reference "bench/ref/$name.pfm" --log "$log" -o "$img" "$@" | tail -n 1)
+    printf '%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$name" "$label" "$seed" "$(kv "$line" passes)" \
+        "$(kv "$line" seconds)" "$(kv "$line" relmse)" "$(kv "$line" est_relerr)" \
+        "$(sed -n 's/^ref_mse=//p' "bench/ref/$name.mse")" "$log" >> "$out/results.csv"
+    if [ "$name" = caustic-glass-56x80 ]; then
+        printf '%s,%s,%s\n' "$label" "$seed" "$("$out/regions" "$img" "bench/ref/$name.pfm" \
             bench/caustic-glass-regions.txt | tr '\n' ',')" >> "$out/regions.csv"
-        echo >> "$out/regions.csv"
     fi
 }
 
 scene() { # NAME SCENE SIZE
     echo "scene $1"
     for seed in $seeds; do
-        for smp in qmc random; do
-            one "$1" "$2" "$3" "$smp" time "$seed" "$APPM" --time "$secs" --sampler "$smp"
-            one "$1" "$2" "$3" "$smp" passes "$seed" "$APPM" --passes "$passes" --sampler "$smp"
-        done
-        one "$1" "$2" "$3" qmc-1chain passes "$seed" "$out/appm-1chain" --passes "$passes"
-        one "$1" "$2" "$3" qmc-1chain time "$seed" "$out/appm-1chain" --time "$secs"
+        one "$1" "$2" "$3" qmc "$seed" "$APPM" --sampler qmc
+        one "$1" "$2" "$3" random "$seed" "$APPM" --sampler random
+        one "$1" "$2" "$3" qmc-1chain "$seed" "$out/appm-1chain"
     done
 }
 
-echo "scene,sampler,mode,seed,passes,seconds,rmse,relmse,est_relerr" > "$out/results.csv"
+echo "scene,sampler,seed,passes,seconds,relmse,est_relerr,ref_mse,log" > "$out/results.csv"
 rm -f "$out/regions.csv"
 {
     echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
     echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
     echo "machine: $(uname -sm), $(nproc 2>/dev/null) cores; threads: $threads"
-    echo "equal time: $secs s; equal passes: $passes; seeds: $seeds"
+    echo "passes: $passes; seeds: $seeds"
 } > "$out/meta.txt"
 cat "$out/meta.txt"
 
