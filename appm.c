@@ -4179,6 +4179,7 @@ APPM_API void appm_config_init(appm_config *cfg)
     cfg->direct = APPM_DIRECT_NEE;
     cfg->alpha = 2.0 / 3.0;
     cfg->max_depth = 32;
+    cfg->sampler = APPM_SAMPLER_QMC;
 }
 
 static void appm__loader_free(appm__loader *L)

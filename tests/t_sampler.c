@@ -23,6 +23,9 @@
  *   6. The variance of a pixel mean from the chains (one-way analysis of
  *      variance) on exact inputs, and its expectation on independent passes,
  *      both samplers.
+ *   7. Renders: both samplers give the same bytes on 1, 2 and 3 threads (5000
+ *      photons a pass: not a power of two, a partial last chunk), different
+ *      images from each other, and an invalid sampler is refused.
  */
 #include "../appm.c"
 #include "check.h"
@@ -406,6 +409,60 @@ static void test_mean_var(void)
     }
 }
 
+/* ---- 7. Renders -------------------------------------------------------------------- */
+
+static int render32(const appm_scene *sc, appm_sampler smp, appm_method m, unsigned threads, float *out)
+{
+    appm_config cfg;
+    appm_renderer *r;
+    appm_image img;
+    int ok = 0;
+    appm_config_init(&cfg);
+    cfg.method = m;
+    cfg.sampler = smp;
+    cfg.width = cfg.height = 32;
+    cfg.photons = 5000;
+    cfg.threads = threads;
+    cfg.seed = 5;
+    r = check_renderer(sc, &cfg);
+    if (r && check_passes(r, 6)) {
+        appm_renderer_image(r, &img);
+        memcpy(out, img.rgb, sizeof(float) * 3 * 32 * 32);
+        ok = 1;
+    }
+    appm_renderer_destroy(r);
+    return ok;
+}
+
+static void test_renders(void)
+{
+    static float img[2][3][3 * 32 * 32];
+    static const appm_method methods[2] = {APPM_METHOD_APPM, APPM_METHOD_PT};
+    appm_scene *sc = check_load_scene("scenes/cornell-sphere-dof.scene");
+    appm_config cfg;
+    appm_renderer *r = NULL;
+    appm_diag d;
+    int smp, t, mi;
+    if (!sc) return;
+    for (mi = 0; mi < 2; ++mi) {
+        for (smp = 0; smp < 2; ++smp)
+            for (t = 0; t < 3; ++t)
+                CHECK(render32(sc, smp ? APPM_SAMPLER_RANDOM : APPM_SAMPLER_QMC, methods[mi], (unsigned)t + 1,
+                               img[smp][t]));
+        for (smp = 0; smp < 2; ++smp) {
+            CHECK_MSG(memcmp(img[smp][0], img[smp][1], sizeof img[0][0]) == 0, "%s, method %d: 1 and 2 threads differ",
+                      smp ? "random" : "qmc", mi);
+            CHECK_MSG(memcmp(img[smp][0], img[smp][2], sizeof img[0][0]) == 0, "%s, method %d: 1 and 3 threads differ",
+                      smp ? "random" : "qmc", mi);
+        }
+        CHECK_MSG(memcmp(img[0][0], img[1][0], sizeof img[0][0]) != 0, "method %d: qmc and random agree", mi);
+    }
+    appm_config_init(&cfg);
+    cfg.sampler = (appm_sampler)7;
+    CHECK(appm_renderer_create(sc, &cfg, &r, &d) == APPM_ERR_INVALID_ARG && r == NULL && strstr(d.message, "sampler"));
+    appm_scene_destroy(sc);
+}
+
 int main(void)
 {
     appm__sobol_table(g_tab);
@@ -416,5 +473,6 @@ int main(void)
     test_randomization();
     test_streams();
     test_mean_var();
+    test_renders();
     return check_finish();
 }
