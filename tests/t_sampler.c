@@ -130,10 +130,11 @@ static void test_sobol(void)
     for (i = 0; i < 8; ++i)
         for (d = 0; d < 4; ++d) {
             double x = appm__sobol(i ^ (i >> 1), d) / 4294967296.0;
-            CHECK_MSG(x == first[i][d], "Sobol' point %u (Gray code) dim %u: %.9g, published %.9g", i, d + 1, x,
-                      first[i][d]);
+            CHECK_MSG(x == first[i][d], "Sobol' point %u (Gray code) dim %u: %.9g, published %.9g", i, d + 1,
+                      x, first[i][d]);
         }
-    for (bad = 0, i = 0; i < 100000; ++i) bad += appm__sobol(i * 2654435761u, 0) != radical_inverse2(i * 2654435761u);
+    for (bad = 0, i = 0; i < 100000; ++i)
+        bad += appm__sobol(i * 2654435761u, 0) != radical_inverse2(i * 2654435761u);
     CHECK_MSG(bad == 0, "dimension 1 differs from the radical inverse %u times", bad);
     CHECK(appm__reverse32(1u) == 0x80000000u && appm__reverse32(0x12345678u) == 0x1E6A2C48u);
 }
@@ -221,11 +222,13 @@ static void test_stratification(void)
                 }
                 nets++;
                 if (!is_net(g_x[0], g_x[1], k) || !is_strat1(g_x[2], k) || !is_strat1(g_x[3], k)) {
-                    if (bad++ < 5) fprintf(stderr, "  key %u, block of 2^%u at %u: not stratified\n", key, k, starts[s]);
+                    if (bad++ < 5)
+                        fprintf(stderr, "  key %u, block of 2^%u at %u: not stratified\n", key, k, starts[s]);
                 }
             }
     CHECK_MSG(bad == 0, "%u of %u aligned blocks not stratified", bad, nets);
-    printf("  %u aligned blocks of 2^0 .. 2^13 points: (0,k,2)-nets in (0, 1), stratified in 2 and 3\n", nets);
+    printf("  %u aligned blocks of 2^0 .. 2^13 points: (0,k,2)-nets in (0, 1), stratified in 2 and 3\n",
+           nets);
 }
 
 /* Photon emission through the path sampler: pass j's M = 2^k photons, and the
@@ -296,7 +299,8 @@ static void test_randomization(void)
     p1 = chi2_uniform(h1, NB, NK);
     p2 = chi2_uniform(h2, NB * NB, 4L * NK);
     p3 = chi2_uniform(h3, NB * NB, 4L * NK);
-    printf("  chi-square p: first coordinate over keys %.4f; groups 2 x 3, dim 0 %.4f, dim 1 %.4f\n", p1, p2, p3);
+    printf("  chi-square p: first coordinate over keys %.4f; groups 2 x 3, dim 0 %.4f, dim 1 %.4f\n", p1, p2,
+           p3);
     CHECK_MSG(p1 > 0.001, "point 0 over %d keys is not uniform: p = %.3g", NK, p1);
     CHECK_MSG(p2 > 0.001, "groups 2 and 3 are dependent in dim 0: p = %.3g", p2);
     CHECK_MSG(p3 > 0.001, "groups 2 and 3 are dependent in dim 1: p = %.3g", p3);
@@ -404,8 +408,10 @@ static void test_mean_var(void)
             feed(&p, w, 13);
             for (mode = 0; mode < 2; ++mode) sum[mode] += appm__mean_var(&p, 13, mode) / 20000;
         }
-        CHECK_MSG(fabs(sum[0] * 12 * 13 - 1) < 0.03, "random: mean estimate %.4f of the truth", sum[0] * 12 * 13);
-        CHECK_MSG(fabs(sum[1] * 12 * 13 - 1) < 0.03, "chains: mean estimate %.4f of the truth", sum[1] * 12 * 13);
+        CHECK_MSG(fabs(sum[0] * 12 * 13 - 1) < 0.03, "random: mean estimate %.4f of the truth",
+                  sum[0] * 12 * 13);
+        CHECK_MSG(fabs(sum[1] * 12 * 13 - 1) < 0.03, "chains: mean estimate %.4f of the truth",
+                  sum[1] * 12 * 13);
     }
 }
 
@@ -450,16 +456,17 @@ static void test_renders(void)
                 CHECK(render32(sc, smp ? APPM_SAMPLER_RANDOM : APPM_SAMPLER_QMC, methods[mi], (unsigned)t + 1,
                                img[smp][t]));
         for (smp = 0; smp < 2; ++smp) {
-            CHECK_MSG(memcmp(img[smp][0], img[smp][1], sizeof img[0][0]) == 0, "%s, method %d: 1 and 2 threads differ",
-                      smp ? "random" : "qmc", mi);
-            CHECK_MSG(memcmp(img[smp][0], img[smp][2], sizeof img[0][0]) == 0, "%s, method %d: 1 and 3 threads differ",
-                      smp ? "random" : "qmc", mi);
+            CHECK_MSG(memcmp(img[smp][0], img[smp][1], sizeof img[0][0]) == 0,
+                      "%s, method %d: 1 and 2 threads differ", smp ? "random" : "qmc", mi);
+            CHECK_MSG(memcmp(img[smp][0], img[smp][2], sizeof img[0][0]) == 0,
+                      "%s, method %d: 1 and 3 threads differ", smp ? "random" : "qmc", mi);
         }
         CHECK_MSG(memcmp(img[0][0], img[1][0], sizeof img[0][0]) != 0, "method %d: qmc and random agree", mi);
     }
     appm_config_init(&cfg);
     cfg.sampler = (appm_sampler)7;
-    CHECK(appm_renderer_create(sc, &cfg, &r, &d) == APPM_ERR_INVALID_ARG && r == NULL && strstr(d.message, "sampler"));
+    CHECK(appm_renderer_create(sc, &cfg, &r, &d) == APPM_ERR_INVALID_ARG && r == NULL &&
+          strstr(d.message, "sampler"));
     appm_scene_destroy(sc);
 }
 
