@@ -391,6 +391,7 @@ static int cmd_render(int argc, char **argv)
     char outbuf[1024];
     FILE *logf = NULL;
     double t0;
+    clock_t c0; /* processor time of the render loop: the cost on a shared machine */
     int rc = parse_render(argc, argv, &o), progress, have_cmp = 0;
     appm_status s;
     if (rc >= 0) return rc;
@@ -436,6 +437,7 @@ static int cmd_render(int argc, char **argv)
     progress = !o.quiet && appm_isatty(2);
     signal(SIGINT, on_sigint);
     t0 = now_seconds();
+    c0 = clock();
     for (;;) {
         double el;
         if ((s = appm_renderer_pass(r)) != APPM_OK) {
@@ -508,7 +510,8 @@ static int cmd_render(int argc, char **argv)
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
                (unsigned long long)st.photons_stored);
         if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
-        printf(" sampler=%s", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
+        printf(" sampler=%s cpu_s=%.3f", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc",
+               (double)(clock() - c0) / CLOCKS_PER_SEC);
         if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
         if (g_interrupted) printf(" interrupted=1");
         printf("\n");

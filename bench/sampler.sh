@@ -6,13 +6,16 @@
 # with --sampler qmc (the default) against --sampler random, SAMPLER_PASSES
 # passes each (default 256) for each seed of SAMPLER_SEEDS (default 1 2 3),
 # logging the RMSE after every pass.  From the logs (bench/sampler_report.sh):
-#   equal passes  the RMSE after the last pass, the seconds per pass (the
-#                 sampler's cost), and the error estimate est_relerr against
-#                 the true relative error sqrt(relmse)
-#   equal time    per seed, the RMSE of each sampler after the last pass that
-#                 ended within the shorter of the two runs' times
-# as medians over the seeds.  Wall time on a shared machine is noisy (the
-# seeds of one scene run back to back, qmc and random interleaved).  A third
+#   equal passes  the RMSE after the last pass, and the error estimate
+#                 est_relerr against the true relative error sqrt(relmse)
+#   cost          processor seconds per pass (cpu_s of the summary), 1 thread,
+#                 SAMPLER_COST_PASSES passes (default 48), 3 rounds of qmc and
+#                 random interleaved: on a shared machine wall time measures
+#                 the other users too
+#   equal time    equal processor time: the sampler that costs more per pass is
+#                 read from its log at the pass where it has spent what the
+#                 other spent on all of its passes
+# as medians over the seeds (and rounds).  A third
 # build, qmc with one chain (-DAPPM__CHAINS=1), shows what the four chains cost
 # in accuracy and what the spread of correlated passes would claim as the
 # error.  On caustic-glass the error after the last pass is also given per
@@ -30,6 +33,7 @@ APPM=${APPM:-./appm}
 CC=${CC:-cc}
 threads=${BENCH_THREADS:-2}
 passes=${SAMPLER_PASSES:-256}
+cpasses=${SAMPLER_COST_PASSES:-48}
 seeds=${SAMPLER_SEEDS:-"1 2 3"}
 out=${SAMPLER_OUT:-bench/out/sampler}
 mkdir -p "$out" bench/ref
@@ -65,17 +69,30 @@ one() {
     img="$out/$name-$label-$seed.pfm" log="$out/log-$name-$label-$seed.csv"
     line=$($bin render "$scene" --size "$size" --threads "$threads" --seed "$seed" -q --passes "$passes" \
         --reference "bench/ref/$name.pfm" --log "$log" -o "$img" "$@" | tail -n 1)
-    printf '%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$name" "$label" "$seed" "$(kv "$line" passes)" \
+    printf '%s,%s,%s,%s,%s,%s,%s,%s,%s,%s\n' "$name" "$label" "$seed" "$(kv "$line" passes)" \
         "$(kv "$line" seconds)" "$(kv "$line" relmse)" "$(kv "$line" est_relerr)" \
-        "$(sed -n 's/^ref_mse=//p' "bench/ref/$name.mse")" "$log" >> "$out/results.csv"
+        "$(sed -n 's/^ref_mse=//p' "bench/ref/$name.mse")" "$log" "$(kv "$line" cpu_s)" >> "$out/results.csv"
     if [ "$name" = caustic-glass-56x80 ]; then
         printf '%s,%s,%s\n' "$label" "$seed" "$("$out/regions" "$img" "bench/ref/$name.pfm" \
             bench/caustic-glass-regions.txt | tr '\n' ',')" >> "$out/regions.csv"
     fi
 }
 
+# cost NAME SCENE SIZE: processor seconds per pass on 1 thread, 3 interleaved rounds
+cost() {
+    for round in 1 2 3; do
+        for smp in qmc random; do
+            line=$($APPM render "$2" --size "$3" --threads 1 --passes "$cpasses" --sampler "$smp" -q \
+                -o "$out/cost.pfm" | tail -n 1)
+            printf '%s,%s,%s,%s,%s\n' "$1" "$smp" "$round" "$(kv "$line" passes)" "$(kv "$line" cpu_s)" \
+                >> "$out/cost.csv"
+        done
+    done
+}
+
 scene() { # NAME SCENE SIZE
     echo "scene $1"
+    cost "$1" "$2" "$3"
     for seed in $seeds; do
         one "$1" "$2" "$3" qmc "$seed" "$APPM" --sampler qmc
         one "$1" "$2" "$3" random "$seed" "$APPM" --sampler random
@@ -83,13 +100,14 @@ scene() { # NAME SCENE SIZE
     done
 }
 
-echo "scene,sampler,seed,passes,seconds,relmse,est_relerr,ref_mse,log" > "$out/results.csv"
+echo "scene,sampler,seed,passes,seconds,relmse,est_relerr,ref_mse,log,cpu_s" > "$out/results.csv"
+echo "scene,sampler,round,passes,cpu_s" > "$out/cost.csv"
 rm -f "$out/regions.csv"
 {
     echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
     echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
     echo "machine: $(uname -sm), $(nproc 2>/dev/null) cores; threads: $threads"
-    echo "passes: $passes; seeds: $seeds"
+    echo "passes: $passes; seeds: $seeds; cost: $cpasses passes, 1 thread, 3 rounds"
 } > "$out/meta.txt"
 cat "$out/meta.txt"
 

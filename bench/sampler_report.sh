@@ -1,6 +1,6 @@
 #!/bin/sh
 # bench/sampler_report.sh DIR - the tables of bench/sampler.sh (markdown on
-# stdout) from DIR/results.csv, the per-pass logs it names, and
+# stdout) from DIR/cost.csv, DIR/results.csv, the per-pass logs it names, and
 # DIR/regions.csv: medians over the seeds.  RMSE is against the reference with
 # the reference's own noise (ref_mse) subtracted.
 set -u
@@ -17,14 +17,17 @@ function med(s,   n, a, i, j, t) {
 function add(k, v) { val[k] = (k in val) ? val[k] " " v : v }
 function m(sc, smp, f) { return med(val[sc SUBSEP smp SUBSEP f]) }
 function truth(r, n,   x) { x = r * r - n; return x > 0 ? sqrt(x) : 0 }
-# the RMSE of run k after the last pass that ended by time t (and that pass)
-function at_time(k, t,   i, best) {
-    best = 1
-    for (i = 1; i <= N[k]; ++i) if (E[k, i] <= t) best = i
-    atpass = best
-    return truth(R[k, best], RM[k])
+# the RMSE of run k after pass p
+function at_pass(k, p) {
+    if (p < 1) p = 1
+    if (p > N[k]) p = N[k]
+    return truth(R[k, p], RM[k])
 }
-NR > 1 {
+FNR == NR {
+    if (FNR > 1) add($1 SUBSEP $2 SUBSEP "cpu", $5 / $4)
+    next
+}
+FNR > 1 {
     sc = $1; smp = $2; seed = $3; k = sc SUBSEP smp SUBSEP seed
     if (!(sc in seen)) { seen[sc] = 1; order[++ns] = sc }
     if (!((sc SUBSEP seed) in sd)) { sd[sc SUBSEP seed] = 1; seeds[sc] = seeds[sc] " " seed }
@@ -43,46 +46,34 @@ NR > 1 {
 END {
     for (i = 1; i <= ns; ++i) {
         sc = order[i]; ns2 = split(seeds[sc], sl, " ")
+        a = m(sc, "random", "cpu"); b = m(sc, "qmc", "cpu"); c = a > 0 ? b / a : 1; cr[sc] = c
         for (j = 1; j <= ns2; ++j) {
-            q = sc SUBSEP "qmc" SUBSEP sl[j]; r = sc SUBSEP "random" SUBSEP sl[j]; o = sc SUBSEP "qmc-1chain" SUBSEP sl[j]
-            t = E[q, N[q]] < E[r, N[r]] ? E[q, N[q]] : E[r, N[r]]
-            add(sc SUBSEP "qmc" SUBSEP "trmse", at_time(q, t)); add(sc SUBSEP "qmc" SUBSEP "tpass", atpass)
-            add(sc SUBSEP "random" SUBSEP "trmse", at_time(r, t)); add(sc SUBSEP "random" SUBSEP "tpass", atpass)
-            add(sc SUBSEP "time", t)
-            t = E[q, N[q]] < E[o, N[o]] ? E[q, N[q]] : E[o, N[o]]
-            add(sc SUBSEP "qmc" SUBSEP "trmse1", at_time(q, t)); add(sc SUBSEP "qmc-1chain" SUBSEP "trmse1", at_time(o, t))
+            q = sc SUBSEP "qmc" SUBSEP sl[j]; r = sc SUBSEP "random" SUBSEP sl[j]
+            pq = c > 1 ? int(N[q] / c) : N[q]; pr = c > 1 ? N[r] : int(N[r] * c)
+            add(sc SUBSEP "qmc" SUBSEP "trmse", at_pass(q, pq)); add(sc SUBSEP "qmc" SUBSEP "tpass", pq)
+            add(sc SUBSEP "random" SUBSEP "trmse", at_pass(r, pr)); add(sc SUBSEP "random" SUBSEP "tpass", pr)
         }
     }
-    print "**Equal time** (per seed, both samplers stopped at the shorter run'"'"'s time; medians over the"
-    print "seeds; ratio < 1: qmc better):"
+    print "**Cost and equal time.** Processor milliseconds per pass (1 thread, median of 3 rounds), and"
+    print "the RMSE at equal processor time: the dearer sampler read at the pass where it has spent what"
+    print "the other spent on all its passes (medians over the seeds; ratio < 1: qmc better):"
     print ""
-    print "| scene | seconds | random | qmc | qmc / random | passes random / qmc |"
-    print "|---|---|---|---|---|---|"
+    print "| scene | ms/pass random | ms/pass qmc | cost qmc / random | passes random / qmc | RMSE random | RMSE qmc | qmc / random |"
+    print "|---|---|---|---|---|---|---|---|"
     for (i = 1; i <= ns; ++i) {
         s = order[i]; r = m(s, "random", "trmse"); q = m(s, "qmc", "trmse")
-        printf "| %s | %.1f | %.5f | %.5f | **%.3f** | %d / %d |\n", s, med(val[s SUBSEP "time"]), r, q,
-            (r > 0 ? q / r : 0), m(s, "random", "tpass"), m(s, "qmc", "tpass")
+        printf "| %s | %.2f | %.2f | %.3f | %d / %d | %.5f | %.5f | **%.3f** |\n", s, 1000 * m(s, "random", "cpu"),
+            1000 * m(s, "qmc", "cpu"), cr[s], m(s, "random", "tpass"), m(s, "qmc", "tpass"), r, q, (r > 0 ? q / r : 0)
     }
     print ""
-    printf "**Equal passes** (%d; RMSE, and wall milliseconds per pass, the cost of the sampler):\n", passes
+    printf "**Equal passes** (%d; RMSE; ratio < 1: qmc better), and qmc with one chain (built with\n", passes
+    print "-DAPPM__CHAINS=1: one sequence over all passes, the same cost):"
     print ""
-    print "| scene | random | qmc | qmc / random | ms/pass random | ms/pass qmc | cost qmc / random |"
-    print "|---|---|---|---|---|---|---|"
+    print "| scene | random | qmc | qmc / random | qmc, 1 chain | 4 chains / 1 chain |"
+    print "|---|---|---|---|---|---|"
     for (i = 1; i <= ns; ++i) {
-        s = order[i]; r = m(s, "random", "rmse"); q = m(s, "qmc", "rmse")
-        a = m(s, "random", "spp"); b = m(s, "qmc", "spp")
-        printf "| %s | %.5f | %.5f | **%.3f** | %.1f | %.1f | %.3f |\n", s, r, q, (r > 0 ? q / r : 0), 1000 * a, 1000 * b, (a > 0 ? b / a : 0)
-    }
-    print ""
-    print "**Four chains against one** (qmc built with -DAPPM__CHAINS=1: one sequence over all passes):"
-    print "RMSE at equal passes and at equal time."
-    print ""
-    print "| scene | 4 chains, passes | 1 chain, passes | 4 / 1 | 4 chains, time | 1 chain, time | 4 / 1 |"
-    print "|---|---|---|---|---|---|---|"
-    for (i = 1; i <= ns; ++i) {
-        s = order[i]; q = m(s, "qmc", "rmse"); o = m(s, "qmc-1chain", "rmse")
-        a = m(s, "qmc", "trmse1"); b = m(s, "qmc-1chain", "trmse1")
-        printf "| %s | %.5f | %.5f | %.3f | %.5f | %.5f | %.3f |\n", s, q, o, (o > 0 ? q / o : 0), a, b, (b > 0 ? a / b : 0)
+        s = order[i]; r = m(s, "random", "rmse"); q = m(s, "qmc", "rmse"); o = m(s, "qmc-1chain", "rmse")
+        printf "| %s | %.5f | %.5f | **%.3f** | %.5f | %.3f |\n", s, r, q, (r > 0 ? q / r : 0), o, (o > 0 ? q / o : 0)
     }
     print ""
     printf "**Error estimate after %d passes**: est_relerr against the true relative error\n", passes
@@ -100,7 +91,7 @@ END {
         }
         print line " |"
     }
-}' "$dir/results.csv"
+}' "$dir/cost.csv" "$dir/results.csv"
 if [ -f "$dir/regions.csv" ]; then
     echo
     echo "**caustic-glass per region, equal passes** (RMSE, median over the seeds; the reference's"
