@@ -710,15 +710,16 @@ static void appm__ld(const uint32_t *tab, uint64_t key, uint32_t rindex, unsigne
     }
 }
 
-/* Independently scrambled chains of passes: pass j (1-based) belongs to chain
- * (j - 1) mod APPM__CHAINS and is point (j - 1) / APPM__CHAINS of that chain's
+/* Independently scrambled chains of passes (cfg.chains = K): pass j (1-based)
+ * belongs to chain (j - 1) mod K and is point (j - 1) / K of that chain's
  * sequences.  The chains are independent randomizations of one integral, so the
- * spread of their means is an honest error estimate (section 12), which the
- * spread of correlated successive passes is not.  The price: each chain is a
- * quarter as long, so its nets are a quarter as fine. */
-#ifndef APPM__CHAINS
-#define APPM__CHAINS 4
-#endif
+ * spread of their means is an honest error estimate (section 10), which the
+ * spread of correlated successive passes is not.  The price: each chain is K
+ * times shorter, its nets K times coarser, and a scrambled net's advantage
+ * grows with its size: measured at 256 passes, 4 chains lost most of what the
+ * sequence gains on the diffuse boxes.  So the default is one chain (the best
+ * image), and K >= 2 is asked for when an honest estimate matters. */
+#define APPM__MAX_CHAINS 64
 #define APPM__LD_VERTICES 8 /* path vertices with low-discrepancy numbers */
 
 enum { APPM__DOMAIN_LD_EYE = 5, APPM__DOMAIN_LD_PHOTON = 6 };
@@ -734,28 +735,28 @@ typedef struct appm__sampler {
 } appm__sampler;
 
 /* Eye path of pixel `pixel` in pass `pass` (or the path tracer's path); qmc
- * when tab (appm__sobol_table) is given.  The PCG stream is the one every
+ * when tab (appm__sobol_table) is given, with `chains` chains (>= 1).  The PCG stream is the one every
  * earlier version used, so --sampler random renders the same bytes as before. */
-static void appm__sampler_eye(appm__sampler *s, const uint32_t *tab, uint64_t seed, uint64_t pass,
-                              uint64_t pixel)
+static void appm__sampler_eye(appm__sampler *s, const uint32_t *tab, unsigned chains, uint64_t seed,
+                              uint64_t pass, uint64_t pixel)
 {
-    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = p0 % APPM__CHAINS;
+    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = p0 % chains;
     appm__rng_seed(&s->rng, seed, pass, APPM__DOMAIN_EYE, pixel);
     s->tab = tab;
     s->qmc = tab != NULL;
     s->key = appm__mix64(seed ^ appm__mix64(chain * 8 + APPM__DOMAIN_LD_EYE) ^ appm__mix64(~pixel));
-    s->rindex = appm__reverse32((uint32_t)(p0 / APPM__CHAINS));
+    s->rindex = appm__reverse32((uint32_t)(p0 / chains));
 }
 
 /* Photon path i of pass `pass`, M paths a pass: point q M + i of its chain's
  * sequence, q the pass's place in the chain, so the photons of all passes
  * together fill the light's sample space as one low-discrepancy set (Keller et
  * al. 2011).  Past 2^32 points the sequence continues with a fresh key. */
-static void appm__sampler_photon(appm__sampler *s, const uint32_t *tab, uint64_t seed,
-                                 uint64_t pass, uint64_t M, uint64_t i)
+static void appm__sampler_photon(appm__sampler *s, const uint32_t *tab, unsigned chains,
+                                 uint64_t seed, uint64_t pass, uint64_t M, uint64_t i)
 {
-    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = p0 % APPM__CHAINS;
-    uint64_t n = (p0 / APPM__CHAINS) * M + i;
+    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = p0 % chains;
+    uint64_t n = (p0 / chains) * M + i;
     appm__rng_seed(&s->rng, seed, pass, APPM__DOMAIN_PHOTON, i);
     s->tab = tab;
     s->qmc = tab != NULL;
@@ -3088,7 +3089,7 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 60 
     uint8_t pad[3];
 } appm__vp;
 
-typedef struct appm__pixel { /* per-pixel state kept across passes: 152 bytes */
+typedef struct appm__pixel { /* per-pixel state kept across passes: 120 bytes */
     double ld[3];   /* sum over passes of emission + direct light (pt: of the whole path) */
     double acc[3];  /* ppm, appm: running mean I of the photon term; sppm: tau */
     double n;       /* sppm: accumulated photon count N; appm: photons found so far */
@@ -3099,7 +3100,6 @@ typedef struct appm__pixel { /* per-pixel state kept across passes: 152 bytes */
     double dI_m2;   /* appm: weighted Welford M2 of the per-pass Laplacians (their spread) */
     double r2sum;   /* appm: sum of r_j^2, for the bias estimate */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
-    double chain[APPM__CHAINS]; /* sum of the per-pass luminances of each chain (2.3) */
 } appm__pixel;
 
 typedef struct appm__photon { /* 32 bytes */
@@ -3137,6 +3137,8 @@ struct appm_renderer {
     uint64_t seed, pass;
     uint32_t *sobol;     /* --sampler qmc: appm__sobol_table (section 2.3); NULL: random */
     unsigned nee_dims, emit_dims; /* appm__light_dims of the scene */
+    unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
+    double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
     appm__pixel *pix;
@@ -3287,7 +3289,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
     uint32_t skip = UINT32_MAX;
     unsigned segs = 0;
     float travelled = 0.0f;
-    appm__sampler_eye(&smp, r->sobol, r->seed, r->pass, pi);
+    appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
     appm__camera_ray(r, &smp, px, py, &ray);
     vp->segs = 0;
     for (;;) {
@@ -3407,7 +3409,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     unsigned segs = 0;
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
     float ue[5];
-    appm__sampler_photon(&smp, r->sobol, r->seed, r->pass, r->M, index);
+    appm__sampler_photon(&smp, r->sobol, r->chains, r->seed, r->pass, r->M, index);
     appm__smp_emit(&smp, r->emit_dims, ue);
     if (!appm__emit(s, ue, &ps)) {
         if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
@@ -3934,36 +3936,42 @@ static double appm__lap_h(double rb, uint64_t j)
     return APPM__KAPPA * rb * pow((double)j, -1.0 / 8.0);
 }
 
-/* Welford update of the per-pass estimate's luminance, and the sum of its chain
- * (section 2.3), for the noise estimate. */
+/* Welford update of the per-pass estimate's luminance (for the noise estimate). */
 static void appm__welford(appm__pixel *p, uint64_t j, double v)
 {
     double d = v - p->wmean;
     p->wmean += d / (double)j;
     p->wm2 += d * (v - p->wmean);
-    p->chain[(j - 1) % APPM__CHAINS] += v;
+}
+
+/* With K >= 2 chains (section 2.3): the sum of a pixel's per-pass luminances in
+ * each chain, sums[0 .. K-1]. */
+static void appm__chain_add(double *sums, unsigned K, uint64_t j, double v)
+{
+    if (sums) sums[(j - 1) % K] += v;
 }
 
 /* The variance of a pixel's mean over j passes (luminance).
- *   random: passes are independent, Var = s^2 / j with s^2 = M2 / (j - 1).
- *   qmc:    successive passes are points of one sequence, negatively correlated
- *           (that is the point of it), so s^2 / j overstates the error - by a
- *           factor that grows with j.  The K chains are independent
- *           randomizations: with n_c passes and mean m_c in chain c and the
- *           overall mean m, sum_c n_c (m_c - m)^2 has expectation (K - 1) sigma^2
- *           where sigma^2 / n_c is the variance of a chain mean (one-way
- *           analysis of variance), so Var(m) = sum_c n_c (m_c - m)^2 / ((K-1) j).
- *           Few degrees of freedom per pixel (K - 1 = 3), many over an image. */
-static double appm__mean_var(const appm__pixel *p, uint64_t j, int qmc)
+ *   independent passes (random): Var = s^2 / j with s^2 = M2 / (j - 1).
+ *   one sequence (qmc, 1 chain): the same formula.  Successive passes are then
+ *           negatively correlated (that is the point of the sequence), so it
+ *           overstates the error where the sequence helps: an upper bound.
+ *   K >= 2 chains (sums, section 2.3): independent randomizations.  With n_c
+ *           passes and mean m_c in chain c and the overall mean m,
+ *           sum_c n_c (m_c - m)^2 has expectation (K - 1) sigma^2, sigma^2 / n_c
+ *           the variance of a chain mean (one-way analysis of variance), so
+ *           Var(m) = sum_c n_c (m_c - m)^2 / ((K - 1) j).  K - 1 degrees of
+ *           freedom per pixel, many over an image. */
+static double appm__mean_var(const appm__pixel *p, const double *sums, unsigned chains, uint64_t j)
 {
     double m = 0.0, ss = 0.0;
-    uint64_t k, K = j < APPM__CHAINS ? j : APPM__CHAINS;
+    uint64_t k, K = j < chains ? j : chains;
     if (j < 2) return 0.0;
-    if (!qmc || APPM__CHAINS < 2) return p->wm2 / ((double)(j - 1) * (double)j);
-    for (k = 0; k < K; ++k) m += p->chain[k];
+    if (!sums || chains < 2) return p->wm2 / ((double)(j - 1) * (double)j);
+    for (k = 0; k < K; ++k) m += sums[k];
     m /= (double)j;
     for (k = 0; k < K; ++k) {
-        double n = (double)(j / APPM__CHAINS + (k < j % APPM__CHAINS)), d = p->chain[k] / n - m;
+        double n = (double)(j / chains + (k < j % chains)), d = sums[k] / n - m;
         ss += n * d * d;
     }
     return ss / ((double)(K - 1) * (double)j);
@@ -4054,6 +4062,8 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl,
                                g.h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g.count,
                                (double)appm__lum(vp->ld));
+            appm__chain_add(r->chain_sum ? r->chain_sum + pi * r->chains : NULL, r->chains, r->pass,
+                            (double)appm__lum(vp->ld) + appm__lumd(e));
         }
     }
 }
@@ -4086,7 +4096,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
     int prev_specular = 1;
     uint32_t skip = UINT32_MAX;
     unsigned segs = 0;
-    appm__sampler_eye(&smp, r->sobol, r->seed, r->pass, pi);
+    appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
     appm__camera_ray(r, &smp, px, py, &ray);
     for (;;) {
         appm__hit h;
@@ -4147,13 +4157,14 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
         skip = sf.tri;
     }
-    if (appm__finite3(L)) {
-        appm__add3(r->pix[pi].ld, L);
-        appm__welford(&r->pix[pi], r->pass, (double)appm__lum(L));
-    } else {
+    if (!appm__finite3(L)) {
         r->dropped[worker]++;
-        appm__welford(&r->pix[pi], r->pass, 0.0);
+        L = appm__v(0, 0, 0);
     }
+    appm__add3(r->pix[pi].ld, L);
+    appm__welford(&r->pix[pi], r->pass, (double)appm__lum(L));
+    appm__chain_add(r->chain_sum ? r->chain_sum + pi * r->chains : NULL, r->chains, r->pass,
+                    (double)appm__lum(L));
 }
 
 static void appm__pt_task(void *arg, uint32_t row, unsigned worker)
@@ -4180,6 +4191,7 @@ APPM_API void appm_config_init(appm_config *cfg)
     cfg->alpha = 2.0 / 3.0;
     cfg->max_depth = 32;
     cfg->sampler = APPM_SAMPLER_QMC;
+    cfg->chains = 1;
 }
 
 static void appm__loader_free(appm__loader *L)
@@ -4532,6 +4544,7 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->dest);
     appm__free(&r->mem, r->cell);
     appm__free(&r->mem, r->sobol);
+    appm__free(&r->mem, r->chain_sum);
 }
 
 APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
@@ -4561,6 +4574,10 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     if ((int)c.sampler < 0 || c.sampler > APPM_SAMPLER_RANDOM)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown sampler %d",
                           (int)c.sampler);
+    if (c.chains > APPM__MAX_CHAINS)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "%u chains is above %d", c.chains,
+                          APPM__MAX_CHAINS);
+    if (c.chains == 0 || c.sampler == APPM_SAMPLER_RANDOM) c.chains = 1;
     if (c.alpha == 0.0) c.alpha = 2.0 / 3.0;
     if (!(c.alpha > 0.0 && c.alpha <= 1.0))
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "alpha %g is not in (0, 1]", c.alpha);
@@ -4615,11 +4632,14 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     }
     r->nee_dims = appm__light_dims(scene, 0);
     r->emit_dims = appm__light_dims(scene, 1);
+    r->chains = c.chains;
     if (c.sampler == APPM_SAMPLER_QMC) {
         r->sobol = (uint32_t *)appm__alloc(&r->mem, APPM__SOBOL_TAB_SIZE, sizeof *r->sobol);
         if (r->sobol) appm__sobol_table(r->sobol);
     }
+    if (c.chains >= 2) r->chain_sum = (double *)appm__alloc(&r->mem, npix * c.chains, sizeof(double));
     if (!r->vp || !r->pix || !r->image || (c.sampler == APPM_SAMPLER_QMC && !r->sobol) ||
+        (c.chains >= 2 && !r->chain_sum) ||
         (r->method != APPM_METHOD_PT && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
@@ -4708,7 +4728,9 @@ static void appm__estimate_error(appm_renderer *r)
     }
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = appm__mean_var(p, r->pass, r->sobol != NULL), bias = 0.0, I;
+        double var = appm__mean_var(p, r->chain_sum ? r->chain_sum + i * r->chains : NULL, r->chains,
+                                    r->pass),
+               bias = 0.0, I;
         if (r->method == APPM_METHOD_APPM) {
             bias = 0.5 * APPM__MU2 * p->dI * (p->r2sum / j);
             I = appm__lumd(p->ld) / j + appm__lumd(p->acc);
@@ -4837,7 +4859,9 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
     a = r->aux[which];
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = appm__mean_var(p, r->pass, r->sobol != NULL), v;
+        double var = appm__mean_var(p, r->chain_sum ? r->chain_sum + i * r->chains : NULL, r->chains,
+                                    r->pass),
+               v;
         switch (which) {
         case APPM_AUX_RADIUS:
             v = r->method == APPM_METHOD_PPM

@@ -185,12 +185,10 @@ typedef enum appm_direct {
  *     in every dimension: pixel, lens, light choice, point on the light, BSDF
  *     direction, Fresnel choice, Russian roulette, photon emission and every
  *     photon bounce (the first 8 vertices of a path; PCG beyond).  The photons
- *     of all passes form one low-discrepancy set.  Passes are split into 4
- *     interleaved, independently scrambled chains, so that est_relerr (the
- *     spread between the chains) stays honest although successive passes are
- *     correlated.  Stateless: a sample is a function of (seed, pass, pixel or
- *     photon index, dimension) only, so the state of a render is its pixel
- *     statistics and the pass counter - nothing else would need saving.
+ *     of all passes form one low-discrepancy set.  Stateless: a sample is a
+ *     function of (seed, pass, pixel or photon index, dimension) only, so the
+ *     state of a render is its pixel statistics and the pass counter - nothing
+ *     else would need saving.  See `chains` for the error estimate.
  *   RANDOM: independent PCG streams (and the rotated R2 sequence for the pixel
  *     and lens), the sampler of earlier versions, bit for bit; kept to compare
  *     and to teach what the sequence buys. */
@@ -215,6 +213,14 @@ typedef struct appm_config {
     uint64_t seed;            /* 0 is a valid seed and the default                   */
     unsigned max_depth;       /* longest counted path, in segments: 32               */
     appm_sampler sampler;     /* APPM_SAMPLER_QMC                                    */
+    /* qmc: passes dealt to this many independently scrambled, interleaved chains
+     * (at most 64).  1 (default): one sequence, the best image; est_relerr is
+     * then the spread of the per-pass estimates, which successive points of one
+     * sequence make an overestimate (2-2.5x measured where the sequence helps
+     * most).  K >= 2: est_relerr from the spread between the chains, honest, at
+     * a price in accuracy (each chain's nets are K times coarser; 4 chains lost
+     * most of the gain on diffuse boxes at 256 passes) and 8 K bytes a pixel. */
+    unsigned chains;
 } appm_config;
 
 /* The defaults spelled out (every field set to the value 0 stands for, where that
@@ -317,7 +323,7 @@ typedef struct appm_stats {
     double est_relerr;              /* appm, pt: estimated image relative error, the     */
                                     /* root mean over pixels of (bias^2 + var) /         */
                                     /* (I^2 + 0.01); var from the spread between the     */
-                                    /* chains (qmc) or between passes (random); < 0: none */
+                                    /* chains (chains >= 2) or the passes; < 0: none      */
     unsigned threads;
 } appm_stats;
 

@@ -118,6 +118,8 @@ static const char *const RENDER_HELP =
     "  --direct MODE         nee (shadow rays, default) | photons (first-bounce photons)\n"
     "  --sampler S           qmc (scrambled Sobol' in every path dimension, default) |\n"
     "                        random (independent PCG streams, the earlier sampler)\n"
+    "  --chains K            qmc: K independently scrambled chains of passes, so that\n"
+    "                        est_relerr is honest (K >= 2) at a price in accuracy [1]\n"
     "  --exposure X          multiply before the sRGB conversion of .png/.ppm [1]\n"
     "  --reference REF.pfm   compare with this image after every pass\n"
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
@@ -341,6 +343,9 @@ static int parse_render(int argc, char **argv, render_opts *o)
         } else if (strcmp(a, "--seed") == 0) {
             if (!parse_u64(v, &u)) return usage_error("--seed needs a non-negative integer, not '%s'", v);
             o->cfg.seed = u;
+        } else if (strcmp(a, "--chains") == 0) {
+            if (!parse_u64(v, &u) || u == 0 || u > 64) return usage_error("--chains needs 1..64, not '%s'", v);
+            o->cfg.chains = (unsigned)u;
         } else if (strcmp(a, "--max-depth") == 0) {
             if (!parse_u64(v, &u) || u == 0 || u > 254) return usage_error("--max-depth needs 1..254, not '%s'", v);
             o->cfg.max_depth = (unsigned)u;
@@ -510,8 +515,9 @@ static int cmd_render(int argc, char **argv)
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
                (unsigned long long)st.photons_stored);
         if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
-        printf(" sampler=%s cpu_s=%.3f", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc",
-               (double)(clock() - c0) / CLOCKS_PER_SEC);
+        printf(" sampler=%s", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
+        if (o.cfg.sampler == APPM_SAMPLER_QMC) printf(" chains=%u", o.cfg.chains ? o.cfg.chains : 1u);
+        printf(" cpu_s=%.3f", (double)(clock() - c0) / CLOCKS_PER_SEC);
         if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
         if (g_interrupted) printf(" interrupted=1");
         printf("\n");

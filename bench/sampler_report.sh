@@ -66,25 +66,25 @@ END {
             1000 * m(s, "qmc", "cpu"), cr[s], m(s, "random", "tpass"), m(s, "qmc", "tpass"), r, q, (r > 0 ? q / r : 0)
     }
     print ""
-    printf "**Equal passes** (%d; RMSE; ratio < 1: qmc better), and qmc with one chain (built with\n", passes
-    print "-DAPPM__CHAINS=1: one sequence over all passes, the same cost):"
+    printf "**Equal passes** (%d; RMSE; ratio < 1: qmc better), and qmc with 4 chains (--chains 4,\n", passes
+    print "the same cost per pass):"
     print ""
-    print "| scene | random | qmc | qmc / random | qmc, 1 chain | 4 chains / 1 chain |"
+    print "| scene | random | qmc | qmc / random | qmc, 4 chains | 4 chains / random |"
     print "|---|---|---|---|---|---|"
     for (i = 1; i <= ns; ++i) {
-        s = order[i]; r = m(s, "random", "rmse"); q = m(s, "qmc", "rmse"); o = m(s, "qmc-1chain", "rmse")
-        printf "| %s | %.5f | %.5f | **%.3f** | %.5f | %.3f |\n", s, r, q, (r > 0 ? q / r : 0), o, (o > 0 ? q / o : 0)
+        s = order[i]; r = m(s, "random", "rmse"); q = m(s, "qmc", "rmse"); o = m(s, "qmc-4chains", "rmse")
+        printf "| %s | %.5f | %.5f | **%.3f** | %.5f | %.3f |\n", s, r, q, (r > 0 ? q / r : 0), o, (r > 0 ? o / r : 0)
     }
     print ""
     printf "**Error estimate after %d passes**: est_relerr against the true relative error\n", passes
-    print "sqrt(relmse) (est / true = 1 is honest). random: the spread of the passes; qmc: the spread"
-    print "between the 4 chains; qmc with 1 chain: the spread of its correlated passes."
+    print "sqrt(relmse) (est / true = 1 is honest). random: the spread of the passes; qmc (one chain):"
+    print "the spread of its correlated passes; qmc, 4 chains: the spread between the chains."
     print ""
-    print "| scene | random: true | est / true | qmc: true | est / true | 1 chain: true | est / true |"
+    print "| scene | random: true | est / true | qmc: true | est / true | 4 chains: true | est / true |"
     print "|---|---|---|---|---|---|---|"
     for (i = 1; i <= ns; ++i) {
         s = order[i]; line = "| " s
-        split("random qmc qmc-1chain", smps, " ")
+        split("random qmc qmc-4chains", smps, " ")
         for (k = 1; k <= 3; ++k) {
             t = m(s, smps[k], "rel"); e = m(s, smps[k], "est")
             line = line sprintf(" | %.4f | %.2f", t, (t > 0 ? e / t : 0))
@@ -113,10 +113,10 @@ if [ -f "$dir/regions.csv" ]; then
         }
     }
     END {
-        print "| region | random | qmc | qmc / random | qmc, 1 chain |"
+        print "| region | random | qmc | qmc / random | qmc, 4 chains |"
         print "|---|---|---|---|---|"
         for (i = 1; i <= nr; ++i) {
-            g = order[i]; r = med(v["random" SUBSEP g]); q = med(v["qmc" SUBSEP g]); o = med(v["qmc-1chain" SUBSEP g])
+            g = order[i]; r = med(v["random" SUBSEP g]); q = med(v["qmc" SUBSEP g]); o = med(v["qmc-4chains" SUBSEP g])
             printf "| %s | %.5f | %.5f | **%.3f** | %.5f |\n", g, r, q, (r > 0 ? q / r : 0), o
         }
     }' "$dir/regions.csv"

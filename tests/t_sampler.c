@@ -14,7 +14,8 @@
  *      stratified.  Through the path samplers: the photons of one pass (M a
  *      power of two) are such a net in their emission position, and so are the
  *      2M photons of two passes of one chain (Keller et al. 2011); a pixel's
- *      first 2^k passes of one chain are a net in the pixel.
+ *      first 2^k passes of one chain are a net in the pixel - with one chain
+ *      (the default) and with four.
  *   4. Randomization: over many keys one coordinate of one point is uniform, and
  *      coordinates of different groups (padding) are independent (chi-square
  *      tests, p > 0.001 each); chains differ.
@@ -22,10 +23,11 @@
  *      qmc past the last low-discrepancy vertex.
  *   6. The variance of a pixel mean from the chains (one-way analysis of
  *      variance) on exact inputs, and its expectation on independent passes,
- *      both samplers.
- *   7. Renders: both samplers give the same bytes on 1, 2 and 3 threads (5000
- *      photons a pass: not a power of two, a partial last chunk), different
- *      images from each other, and an invalid sampler is refused.
+ *      with the chains and with the spread of the passes.
+ *   7. Renders: both samplers, and qmc with 4 chains, give the same bytes on 1,
+ *      2 and 3 threads (5000 photons a pass: not a power of two, a partial last
+ *      chunk), different images from each other; an invalid sampler and too
+ *      many chains are refused.
  */
 #include "../appm.c"
 #include "check.h"
@@ -232,42 +234,51 @@ static void test_stratification(void)
 }
 
 /* Photon emission through the path sampler: pass j's M = 2^k photons, and the
- * 2M of passes j and j + APPM__CHAINS (one chain; places 2q and 2q + 1 in it,
- * an aligned block), are nets in (u1, u2). */
-static void test_photon_nets(void)
+ * 2M of passes j and j + K (one chain of K; places 2q and 2q + 1 in it, an
+ * aligned block), are nets in (u1, u2). */
+static void photon_nets(unsigned K)
 {
     static const unsigned js[] = {1, 2, 3, 4, 9, 12, 17};
     const unsigned k = 10, M = 1u << k;
     unsigned jj, i, pass2;
     for (jj = 0; jj < sizeof js / sizeof js[0]; ++jj) {
         unsigned j = js[jj];
+        if ((j - 1) / K % 2) continue; /* place 2q + 1: its pair is the pass before */
         for (pass2 = 0; pass2 < 2; ++pass2)
             for (i = 0; i < M; ++i) {
                 appm__sampler smp;
                 float u[5];
-                appm__sampler_photon(&smp, g_tab, 42, j + pass2 * APPM__CHAINS, M, i);
+                appm__sampler_photon(&smp, g_tab, K, 42, j + pass2 * K, M, i);
                 appm__smp_emit(&smp, 7u, u);
                 g_x[0][pass2 * M + i] = u[1];
                 g_x[1][pass2 * M + i] = u[2];
                 g_x[2][pass2 * M + i] = u[3];
             }
-        CHECK_MSG(is_net(g_x[0], g_x[1], k), "pass %u: its %u photons are not a net", j, M);
-        CHECK_MSG(is_net(g_x[0], g_x[1], k + 1), "passes %u and %u: their photons are not a net", j,
-                  j + APPM__CHAINS);
-        CHECK_MSG(is_strat1(g_x[2], k + 1), "passes %u and %u: u3 is not stratified", j, j + APPM__CHAINS);
+        CHECK_MSG(is_net(g_x[0], g_x[1], k), "K = %u, pass %u: its %u photons are not a net", K, j, M);
+        CHECK_MSG(is_net(g_x[0], g_x[1], k + 1), "K = %u, passes %u and %u: their photons are not a net", K,
+                  j, j + K);
+        CHECK_MSG(is_strat1(g_x[2], k + 1), "K = %u, passes %u and %u: u3 is not stratified", K, j, j + K);
     }
     /* and a pixel's passes 1, 1 + K, 1 + 2K, ... (chain 0) in the pixel */
     for (i = 0; i < 256; ++i) {
         appm__sampler smp;
         float u[4];
-        appm__sampler_eye(&smp, g_tab, 3, 1 + (uint64_t)i * APPM__CHAINS, 1234);
+        appm__sampler_eye(&smp, g_tab, K, 3, 1 + (uint64_t)i * K, 1234);
         appm__smp_camera(&smp, 1, u);
         g_x[0][i] = u[0];
         g_x[1][i] = u[1];
         g_x[2][i] = u[2];
     }
-    CHECK_MSG(is_net(g_x[0], g_x[1], 8), "a pixel's 256 passes of one chain are not a net in the pixel");
-    CHECK_MSG(is_strat1(g_x[2], 8), "a pixel's 256 passes of one chain are not stratified on the lens");
+    CHECK_MSG(is_net(g_x[0], g_x[1], 8),
+              "K = %u: a pixel's 256 passes of one chain are not a net in the pixel", K);
+    CHECK_MSG(is_strat1(g_x[2], 8),
+              "K = %u: a pixel's 256 passes of one chain are not stratified on the lens", K);
+}
+
+static void test_photon_nets(void)
+{
+    photon_nets(1);
+    photon_nets(4);
 }
 
 /* ---- 4. Randomization -------------------------------------------------------------- */
@@ -304,13 +315,13 @@ static void test_randomization(void)
     CHECK_MSG(p1 > 0.001, "point 0 over %d keys is not uniform: p = %.3g", NK, p1);
     CHECK_MSG(p2 > 0.001, "groups 2 and 3 are dependent in dim 0: p = %.3g", p2);
     CHECK_MSG(p3 > 0.001, "groups 2 and 3 are dependent in dim 1: p = %.3g", p3);
-    /* chains: passes 1 and 2 of a pixel are points 0 of two independent
+    /* 4 chains: passes 1 and 2 of a pixel are points 0 of two independent
      * sequences, never the same numbers */
     for (i = 0; i < 1000; ++i) {
         appm__sampler s1, s2;
         float u1[2], u2[2];
-        appm__sampler_eye(&s1, g_tab, 9, 1, i);
-        appm__sampler_eye(&s2, g_tab, 9, 2, i);
+        appm__sampler_eye(&s1, g_tab, 4, 9, 1, i);
+        appm__sampler_eye(&s2, g_tab, 4, 9, 2, i);
         appm__smp_camera(&s1, 0, u1);
         appm__smp_camera(&s2, 0, u2);
         same += u1[0] == u2[0] && u1[1] == u2[1];
@@ -327,21 +338,21 @@ static void test_streams(void)
     float u[4], w[5], e;
     unsigned bad = 0, k;
     /* random: every call draws from the earlier stream (seed, pass, domain, index) in order */
-    appm__sampler_eye(&smp, NULL, 17, 5, 99);
+    appm__sampler_eye(&smp, NULL, 1, 17, 5, 99);
     appm__rng_seed(&ref, 17, 5, APPM__DOMAIN_EYE, 99);
     appm__smp_light(&smp, 0, 3u, u);
     for (k = 0; k < 3; ++k) bad += u[k] != appm__rng_float(&ref);
     appm__smp_bsdf(&smp, 1, 15u, u);
     for (k = 0; k < 3; ++k) bad += u[k] != appm__rng_float(&ref);
     bad += appm__smp_rr(&smp, 1, 15u, u) != appm__rng_float(&ref);
-    appm__sampler_photon(&smp, NULL, 17, 5, 1000, 321);
+    appm__sampler_photon(&smp, NULL, 1, 17, 5, 1000, 321);
     appm__rng_seed(&ref, 17, 5, APPM__DOMAIN_PHOTON, 321);
     appm__smp_emit(&smp, 0u, w);
     for (k = 0; k < 5; ++k) bad += w[k] != appm__rng_float(&ref);
     CHECK_MSG(bad == 0, "random mode: %u numbers differ from the PCG stream", bad);
     /* qmc past the layout: the same stream */
     bad = 0;
-    appm__sampler_eye(&smp, g_tab, 17, 5, 99);
+    appm__sampler_eye(&smp, g_tab, 1, 17, 5, 99);
     appm__rng_seed(&ref, 17, 5, APPM__DOMAIN_EYE, 99);
     appm__smp_bsdf(&smp, APPM__LD_VERTICES, 15u, u);
     for (k = 0; k < 3; ++k) bad += u[k] != appm__rng_float(&ref);
@@ -356,11 +367,17 @@ static void test_streams(void)
 
 /* ---- 6. The variance of a pixel mean ----------------------------------------------- */
 
+static double g_sums[4];
+
 static void feed(appm__pixel *p, const double *v, uint64_t n)
 {
     uint64_t j;
     memset(p, 0, sizeof *p);
-    for (j = 1; j <= n; ++j) appm__welford(p, j, v[j - 1]);
+    memset(g_sums, 0, sizeof g_sums);
+    for (j = 1; j <= n; ++j) {
+        appm__welford(p, j, v[j - 1]);
+        appm__chain_add(g_sums, 4, j, v[j - 1]);
+    }
 }
 
 static void test_mean_var(void)
@@ -373,14 +390,15 @@ static void test_mean_var(void)
     feed(&p, v, 10);
     for (j = 0; j < 10; ++j) m += v[j] / 10;
     for (j = 0; j < 10; ++j) ss += (v[j] - m) * (v[j] - m);
-    CHECK_NEAR(appm__mean_var(&p, 10, 0), ss / 9 / 10, 1e-12);
+    CHECK_NEAR(appm__mean_var(&p, NULL, 1, 10), ss / 9 / 10, 1e-12);
+    CHECK_NEAR(appm__mean_var(&p, g_sums, 1, 10), ss / 9 / 10, 1e-12); /* one chain: the same */
     /* qmc, 8 passes: chains {1,3}, {2,5}, {4,7}, {8,9} (pass j in chain (j-1) mod 4) */
     feed(&p, v, 8);
     for (c = 0; c < 4; ++c) cm[c] = (v[c] + v[c + 4]) / 2;
     m = (cm[0] + cm[1] + cm[2] + cm[3]) / 4;
     for (ss = 0, c = 0; c < 4; ++c) ss += (cm[c] - m) * (cm[c] - m);
     want = ss / (4 * 3);
-    CHECK_NEAR(appm__mean_var(&p, 8, 1), want, 1e-12);
+    CHECK_NEAR(appm__mean_var(&p, g_sums, 4, 8), want, 1e-12);
     /* qmc, 10 passes: chains of 3, 3, 2, 2; sum n_c (m_c - m)^2 / ((K - 1) j) */
     feed(&p, v, 10);
     {
@@ -388,12 +406,12 @@ static void test_mean_var(void)
         double n[4] = {3, 3, 2, 2}, mm = 0, q = 0;
         for (c = 0; c < 4; ++c) mm += s[c] / 10;
         for (c = 0; c < 4; ++c) q += n[c] * (s[c] / n[c] - mm) * (s[c] / n[c] - mm);
-        CHECK_NEAR(appm__mean_var(&p, 10, 1), q / (3 * 10), 1e-12);
+        CHECK_NEAR(appm__mean_var(&p, g_sums, 4, 10), q / (3 * 10), 1e-12);
     }
     /* 2 and 3 passes: as many chains as passes */
     feed(&p, v, 2);
-    CHECK_NEAR(appm__mean_var(&p, 2, 1), (v[0] - v[1]) * (v[0] - v[1]) / 4, 1e-12);
-    CHECK(appm__mean_var(&p, 1, 1) == 0.0);
+    CHECK_NEAR(appm__mean_var(&p, g_sums, 4, 2), (v[0] - v[1]) * (v[0] - v[1]) / 4, 1e-12);
+    CHECK(appm__mean_var(&p, g_sums, 4, 1) == 0.0);
     /* independent passes (uniform, variance 1/12): both estimates average to
      * 1 / (12 j) over many pixels; 20000 pixels of 3 degrees of freedom give a
      * relative standard error of 0.6 %, so 3 % is 5 sigma */
@@ -406,7 +424,8 @@ static void test_mean_var(void)
         for (px = 0; px < 20000; ++px) {
             for (j = 0; j < 13; ++j) w[j] = appm__rng_float(&rng);
             feed(&p, w, 13);
-            for (mode = 0; mode < 2; ++mode) sum[mode] += appm__mean_var(&p, 13, mode) / 20000;
+            for (mode = 0; mode < 2; ++mode)
+                sum[mode] += appm__mean_var(&p, mode ? g_sums : NULL, mode ? 4 : 1, 13) / 20000;
         }
         CHECK_MSG(fabs(sum[0] * 12 * 13 - 1) < 0.03, "random: mean estimate %.4f of the truth",
                   sum[0] * 12 * 13);
@@ -417,7 +436,8 @@ static void test_mean_var(void)
 
 /* ---- 7. Renders -------------------------------------------------------------------- */
 
-static int render32(const appm_scene *sc, appm_sampler smp, appm_method m, unsigned threads, float *out)
+static int render32(const appm_scene *sc, appm_sampler smp, unsigned chains, appm_method m, unsigned threads,
+                    float *out)
 {
     appm_config cfg;
     appm_renderer *r;
@@ -426,6 +446,7 @@ static int render32(const appm_scene *sc, appm_sampler smp, appm_method m, unsig
     appm_config_init(&cfg);
     cfg.method = m;
     cfg.sampler = smp;
+    cfg.chains = chains;
     cfg.width = cfg.height = 32;
     cfg.photons = 5000;
     cfg.threads = threads;
@@ -442,7 +463,8 @@ static int render32(const appm_scene *sc, appm_sampler smp, appm_method m, unsig
 
 static void test_renders(void)
 {
-    static float img[2][3][3 * 32 * 32];
+    static float img[3][3][3 * 32 * 32];
+    static const char *const label[3] = {"qmc", "random", "qmc, 4 chains"};
     static const appm_method methods[2] = {APPM_METHOD_APPM, APPM_METHOD_PT};
     appm_scene *sc = check_load_scene("scenes/cornell-sphere-dof.scene");
     appm_config cfg;
@@ -451,22 +473,27 @@ static void test_renders(void)
     int smp, t, mi;
     if (!sc) return;
     for (mi = 0; mi < 2; ++mi) {
-        for (smp = 0; smp < 2; ++smp)
+        for (smp = 0; smp < 3; ++smp)
             for (t = 0; t < 3; ++t)
-                CHECK(render32(sc, smp ? APPM_SAMPLER_RANDOM : APPM_SAMPLER_QMC, methods[mi], (unsigned)t + 1,
-                               img[smp][t]));
-        for (smp = 0; smp < 2; ++smp) {
+                CHECK(render32(sc, smp == 1 ? APPM_SAMPLER_RANDOM : APPM_SAMPLER_QMC, smp == 2 ? 4 : 1,
+                               methods[mi], (unsigned)t + 1, img[smp][t]));
+        for (smp = 0; smp < 3; ++smp) {
             CHECK_MSG(memcmp(img[smp][0], img[smp][1], sizeof img[0][0]) == 0,
-                      "%s, method %d: 1 and 2 threads differ", smp ? "random" : "qmc", mi);
+                      "%s, method %d: 1 and 2 threads differ", label[smp], mi);
             CHECK_MSG(memcmp(img[smp][0], img[smp][2], sizeof img[0][0]) == 0,
-                      "%s, method %d: 1 and 3 threads differ", smp ? "random" : "qmc", mi);
+                      "%s, method %d: 1 and 3 threads differ", label[smp], mi);
         }
         CHECK_MSG(memcmp(img[0][0], img[1][0], sizeof img[0][0]) != 0, "method %d: qmc and random agree", mi);
+        CHECK_MSG(memcmp(img[0][0], img[2][0], sizeof img[0][0]) != 0, "method %d: 1 and 4 chains agree", mi);
     }
     appm_config_init(&cfg);
     cfg.sampler = (appm_sampler)7;
     CHECK(appm_renderer_create(sc, &cfg, &r, &d) == APPM_ERR_INVALID_ARG && r == NULL &&
           strstr(d.message, "sampler"));
+    appm_config_init(&cfg);
+    cfg.chains = 65;
+    CHECK(appm_renderer_create(sc, &cfg, &r, &d) == APPM_ERR_INVALID_ARG && r == NULL &&
+          strstr(d.message, "chains"));
     appm_scene_destroy(sc);
 }
 
