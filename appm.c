@@ -716,8 +716,8 @@ static void appm__ld(const uint32_t *tab, uint64_t key, uint32_t rindex, unsigne
  * spread of their means is an honest error estimate (section 10), which the
  * spread of correlated successive passes is not.  The price: each chain is K
  * times shorter, its nets K times coarser, and a scrambled net's advantage
- * grows with its size: measured at 256 passes, 4 chains lost most of what the
- * sequence gains on the diffuse boxes.  So the default is one chain (the best
+ * grows with its size: measured at 256 passes, 4 chains lost half or more of
+ * what the sequence gains on the diffuse boxes (bench/sampler.sh).  So the default is one chain (the best
  * image), and K >= 2 is asked for when an honest estimate matters. */
 #define APPM__MAX_CHAINS 64
 #define APPM__LD_VERTICES 8 /* path vertices with low-discrepancy numbers */

@@ -219,7 +219,7 @@ typedef struct appm_config {
      * sequence make an overestimate (2-2.5x measured where the sequence helps
      * most).  K >= 2: est_relerr from the spread between the chains, honest, at
      * a price in accuracy (each chain's nets are K times coarser; 4 chains lost
-     * most of the gain on diffuse boxes at 256 passes) and 8 K bytes a pixel. */
+     * half or more of the gain on diffuse boxes at 256 passes), 8 K bytes a pixel. */
     unsigned chains;
 } appm_config;
 

@@ -7,7 +7,7 @@ set -u
 dir=$1
 sed 's/^/    /' "$dir/meta.txt"
 echo
-awk -F, '
+awk -F, -v W="${SAMPLER_WINDOW:-32}" '
 function med(s,   n, a, i, j, t) {
     n = split(s, a, " ")
     for (i = 1; i <= n; ++i) for (j = i + 1; j <= n; ++j) if (a[j] + 0 < a[i] + 0) { t = a[i]; a[i] = a[j]; a[j] = t }
@@ -17,11 +17,15 @@ function med(s,   n, a, i, j, t) {
 function add(k, v) { val[k] = (k in val) ? val[k] " " v : v }
 function m(sc, smp, f) { return med(val[sc SUBSEP smp SUBSEP f]) }
 function truth(r, n,   x) { x = r * r - n; return x > 0 ? sqrt(x) : 0 }
-# the RMSE of run k after pass p
-function at_pass(k, p) {
+# the RMSE of run k around pass p: the root mean square over passes p-W+1 .. p
+# (one pass'"'"'s RMSE moves by some 10 % from pass to pass, which would decide a
+# comparison read at two different passes)
+function at_pass(k, p,   i, sum, n, x) {
     if (p < 1) p = 1
     if (p > N[k]) p = N[k]
-    return truth(R[k, p], RM[k])
+    sum = n = 0
+    for (i = p - W + 1; i <= p; ++i) if (i >= 1) { x = truth(R[k, i], RM[k]); sum += x * x; ++n }
+    return sqrt(sum / n)
 }
 FNR == NR {
     if (FNR > 1) add($1 SUBSEP $2 SUBSEP "cpu", $5 / $4)
@@ -38,7 +42,7 @@ FNR > 1 {
         ++n; E[k, n] = f[2]; R[k, n] = f[4]
     }
     close($9); N[k] = n
-    add(sc SUBSEP smp SUBSEP "rmse", truth(R[k, n], RM[k]))
+    add(sc SUBSEP smp SUBSEP "rmse", truth(R[k, n], RM[k])); add(sc SUBSEP smp SUBSEP "wrmse", at_pass(k, n))
     add(sc SUBSEP smp SUBSEP "spp", E[k, n] / n)
     add(sc SUBSEP smp SUBSEP "rel", sqrt($6)); add(sc SUBSEP smp SUBSEP "est", $7)
     passes = n
@@ -56,7 +60,8 @@ END {
     }
     print "**Cost and equal time.** Processor milliseconds per pass (1 thread, median of 3 rounds), and"
     print "the RMSE at equal processor time: the dearer sampler read at the pass where it has spent what"
-    print "the other spent on all its passes (medians over the seeds; ratio < 1: qmc better):"
+    printf "the other spent on all its passes (RMS over the %d passes up to there; medians over the\n", W
+    print "seeds; ratio < 1: qmc better):"
     print ""
     print "| scene | ms/pass random | ms/pass qmc | cost qmc / random | passes random / qmc | RMSE random | RMSE qmc | qmc / random |"
     print "|---|---|---|---|---|---|---|---|"
@@ -66,14 +71,16 @@ END {
             1000 * m(s, "qmc", "cpu"), cr[s], m(s, "random", "tpass"), m(s, "qmc", "tpass"), r, q, (r > 0 ? q / r : 0)
     }
     print ""
-    printf "**Equal passes** (%d; RMSE; ratio < 1: qmc better), and qmc with 4 chains (--chains 4,\n", passes
-    print "the same cost per pass):"
+    printf "**Equal passes**: RMSE after pass %d, and (window) the RMS over passes %d-%d; qmc with 4\n", passes, passes - W + 1, passes
+    print "chains (--chains 4) costs the same per pass (medians over the seeds; ratio < 1: qmc better):"
     print ""
-    print "| scene | random | qmc | qmc / random | qmc, 4 chains | 4 chains / random |"
-    print "|---|---|---|---|---|---|"
+    print "| scene | random | qmc | qmc / random | window: random | qmc | qmc / random | qmc, 4 chains | 4 chains / random |"
+    print "|---|---|---|---|---|---|---|---|---|"
     for (i = 1; i <= ns; ++i) {
-        s = order[i]; r = m(s, "random", "rmse"); q = m(s, "qmc", "rmse"); o = m(s, "qmc-4chains", "rmse")
-        printf "| %s | %.5f | %.5f | **%.3f** | %.5f | %.3f |\n", s, r, q, (r > 0 ? q / r : 0), o, (r > 0 ? o / r : 0)
+        s = order[i]; r = m(s, "random", "rmse"); q = m(s, "qmc", "rmse")
+        wr = m(s, "random", "wrmse"); wq = m(s, "qmc", "wrmse"); o = m(s, "qmc-4chains", "wrmse")
+        printf "| %s | %.5f | %.5f | %.3f | %.5f | %.5f | **%.3f** | %.5f | %.3f |\n", s, r, q, (r > 0 ? q / r : 0),
+            wr, wq, (wr > 0 ? wq / wr : 0), o, (wr > 0 ? o / wr : 0)
     }
     print ""
     printf "**Error estimate after %d passes**: est_relerr against the true relative error\n", passes
