@@ -718,8 +718,9 @@ static void appm__ld(const uint32_t *tab, uint64_t key, uint32_t rindex, unsigne
  * spread of correlated successive passes is not.  The price: each chain is K
  * times shorter, its nets K times coarser, and a scrambled net's advantage
  * grows with its size: measured at 256 passes, 4 chains lost half or more of
- * what the sequence gains on the diffuse boxes (bench/sampler.sh).  So the default is one chain (the best
- * image), and K >= 2 is asked for when an honest estimate matters. */
+ * what the sequence gains on the diffuse boxes (bench/sampler.sh).  So the
+ * default is one chain (the best image), and K >= 2 is asked for when an
+ * honest estimate matters. */
 #define APPM__MAX_CHAINS 64
 #define APPM__LD_VERTICES 8 /* path vertices with low-discrepancy numbers */
 
@@ -736,8 +737,9 @@ typedef struct appm__sampler {
 } appm__sampler;
 
 /* Eye path of pixel `pixel` in pass `pass` (or the path tracer's path); qmc
- * when tab (appm__sobol_table) is given, with `chains` chains (>= 1).  The PCG stream is the one every
- * earlier version used, so --sampler random renders the same bytes as before. */
+ * when tab (appm__sobol_table) is given, with `chains` chains (>= 1).  The PCG
+ * stream is the one every earlier version used, so --sampler random renders the
+ * same bytes as before. */
 static void appm__sampler_eye(appm__sampler *s, const uint32_t *tab, unsigned chains, uint64_t seed,
                               uint64_t pass, uint64_t pixel)
 {
