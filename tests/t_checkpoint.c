@@ -1,7 +1,8 @@
 /* tests/t_checkpoint.c - checkpoint and resume (appm.c section 12.2).
  *
  * What is checked, and against what:
- *   1. Resume is exact: for every method and thread counts 1 and 2, N passes,
+ *   1. Resume is exact: for every method and thread counts 1 and 2 (and with
+ *      3 chains of the sampler for appm and pt), N passes,
  *      save, load into a new renderer (with the other thread count), N more
  *      passes give the render of 2N uninterrupted passes bit for bit: the
  *      image, every aux map the method has, est_relerr and the counters of
@@ -13,9 +14,10 @@
  *      would fail if the estimator table missed a field).  And the pixel list
  *      tiles appm__pixel as the estimator entries tile their states.
  *   3. Refusals: a checkpoint of another method, seed, photon count, alpha,
- *      radius, depth, direct mode, image size, scene, format version, library
- *      version or field list is refused with APPM_ERR_INVALID_ARG and a message
- *      that names it; the renderer is left as it was.
+ *      radius, depth, direct mode, image size, sampler, chain count, scene,
+ *      format version, library version or field list is refused with
+ *      APPM_ERR_INVALID_ARG and a message that names it; the renderer is left
+ *      as it was.
  *   4. Damage: every truncation and every single-bit flip of a checkpoint is
  *      an error (never APPM_OK), and the renderer is left as it was.
  *   5. Hostile input with a valid checksum (absurd sizes, field counts, name
@@ -41,10 +43,10 @@
 #define OFF_FORMAT 8
 #define OFF_VERSION 12
 #define OFF_W 32
-#define OFF_PASS 84
-#define OFF_R1 124
-#define OFF_SECONDS 156
-#define OFF_LAYOUT 196
+#define OFF_PASS 92
+#define OFF_R1 132
+#define OFF_SECONDS 164
+#define OFF_LAYOUT 204
 
 static appm_config config(appm_method m, unsigned threads)
 {
@@ -175,6 +177,47 @@ static void test_resume(const appm_scene *s)
     }
 }
 
+/* With chains (section 2.3) the chains' sums are state too (est_relerr reads
+ * them): the resume is exact with them and differs without them. */
+static void test_chains(const appm_scene *s)
+{
+    int k;
+    static const appm_method ms[2] = {APPM_METHOD_APPM, APPM_METHOD_PT};
+    for (k = 0; k < 2; ++k) {
+        appm_config ca = config(ms[k], 1), cb;
+        appm_renderer *whole, *a, *b, *c;
+        appm__ck_layout L;
+        unsigned char *buf;
+        size_t n = 0;
+        ca.chains = 3;
+        cb = ca;
+        cb.threads = 2;
+        whole = make(s, &ca, 2 * NPASS);
+        a = make(s, &ca, NPASS);
+        b = make(s, &cb, 0);
+        c = make(s, &cb, 0);
+        if (whole && a && b && c && (buf = save(a, &n)) != NULL) {
+            CHECK(appm_renderer_load(b, buf, n, NULL) == APPM_OK);
+            if (check_passes(b, NPASS))
+                CHECK_MSG(same_render(whole, b), "%s, 3 chains: the resume differs", appm_method_name(ms[k]));
+            free(buf);
+            appm__ck_layout_of(a, &L);
+            CHECK(L.n[2] == 1 && L.chain.count == 3);
+            L.n[2] = 0; /* leave the chains' sums out */
+            buf = (unsigned char *)malloc(n);
+            if (buf && appm__ck_save_mem(a, &L, buf, n, &n, NULL) == APPM_OK &&
+                appm__ck_load_mem(c, &L, buf, n, NULL) == APPM_OK && check_passes(c, NPASS))
+                CHECK_MSG(!same_render(whole, c), "%s: without the chains' sums the resume is the same",
+                          appm_method_name(ms[k]));
+            free(buf);
+        }
+        appm_renderer_destroy(whole);
+        appm_renderer_destroy(a);
+        appm_renderer_destroy(b);
+        appm_renderer_destroy(c);
+    }
+}
+
 /* The file calls: atomic (no temporary left), and the same resume. */
 static void test_file(const appm_scene *s)
 {
@@ -280,7 +323,7 @@ static void test_refusals(const appm_scene *s, const appm_scene *other)
         const char *word;
         int field;
     } opts[] = {{"method", 0}, {"seed", 1}, {"photons", 2}, {"alpha", 3}, {"radius", 4},
-                {"max depth", 5}, {"direct", 6}, {"image", 7}};
+                {"max depth", 5}, {"direct", 6}, {"image", 7}, {"sampler", 8}, {"chains", 9}};
     appm_config base = config(APPM_METHOD_APPM, 1);
     appm_renderer *a = make(s, &base, 2), *r;
     unsigned char *buf, *copy;
@@ -299,7 +342,9 @@ static void test_refusals(const appm_scene *s, const appm_scene *other)
         case 4: c.radius = 0.05; break;
         case 5: c.max_depth = 5; break;
         case 6: c.direct = APPM_DIRECT_PHOTONS; break;
-        default: c.height = 11; break;
+        case 7: c.height = 11; break;
+        case 8: c.sampler = APPM_SAMPLER_RANDOM; break;
+        default: c.chains = 2; break;
         }
         if ((r = make(s, &c, 0)) != NULL) expect_refused(r, buf, n, APPM_ERR_INVALID_ARG, opts[k].word, opts[k].word);
         appm_renderer_destroy(r);
@@ -448,7 +493,8 @@ static void test_byte_order(const appm_scene *s)
     CHECK(memcmp(buf, "APPMCKPT", 8) == 0);
     CHECK(buf[OFF_FORMAT] == APPM__CK_FORMAT && buf[OFF_FORMAT + 1] == 0 && buf[OFF_FORMAT + 3] == 0);
     CHECK(get_le(buf + OFF_W, 4) == 12 && get_le(buf + OFF_W + 4, 4) == 10);
-    CHECK(get_le(buf + 44, 8) == 3000 && get_le(buf + 52, 8) == 7); /* photons, seed */
+    CHECK(get_le(buf + 44, 4) == APPM_SAMPLER_QMC && get_le(buf + 48, 4) == 1); /* sampler, chains */
+    CHECK(get_le(buf + 52, 8) == 3000 && get_le(buf + 60, 8) == 7);              /* photons, seed */
     CHECK(get_le(buf + OFF_PASS, 8) == 3);
     u = get_le(buf + OFF_R1, 8);
     memcpy(&r1, &u, sizeof r1);
@@ -457,8 +503,9 @@ static void test_byte_order(const appm_scene *s)
     u = get_le(buf + pix0, 8);
     memcpy(&ld0, &u, sizeof ld0);
     CHECK(ld0 == a->pix[0].ld[0]);
-    CHECK(get_le(buf + pix0 - 13, 4) == 1); /* the last field, "I": u32 length 1, "I", count 3, is_u64 0 */
-    CHECK(get_le(buf + pix0 - 8, 4) == 3 && get_le(buf + pix0 - 4, 4) == 0);
+    /* the state's last field, "I": u32 length 1, "I", count 3, is_u64 0; then no chain field */
+    CHECK(get_le(buf + pix0 - 17, 4) == 1 && buf[pix0 - 13] == 'I');
+    CHECK(get_le(buf + pix0 - 12, 4) == 3 && get_le(buf + pix0 - 8, 4) == 0 && get_le(buf + pix0 - 4, 4) == 0);
     free(buf);
     appm_renderer_destroy(a);
 }
@@ -538,12 +585,14 @@ typedef struct known_config {
     unsigned threads;    /* free: the image does not depend on it */
     uint64_t seed;       /* compared */
     unsigned max_depth;  /* compared */
+    appm_sampler sampler; /* compared */
+    unsigned chains;     /* compared */
 } known_config;
 
 static void test_config_tripwire(void)
 {
     CHECK_MSG(sizeof(appm_config) == sizeof(known_config) &&
-                  offsetof(appm_config, max_depth) == offsetof(known_config, max_depth),
+                  offsetof(appm_config, chains) == offsetof(known_config, chains),
               "appm_config has fields the checkpoint does not know: see the comment above test_config_tripwire");
 }
 
@@ -573,6 +622,7 @@ int main(void)
     if (s && other) {
         test_resume(s);
         test_file(s);
+        test_chains(s);
         test_fields_matter(s);
         test_refusals(s, other);
         test_damage(s);
