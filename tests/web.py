@@ -97,7 +97,7 @@ class Browser:
 
         args = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
                 "--no-default-browser-check", "--disable-extensions", "--mute-audio",
-                "--disable-background-networking", "--hide-scrollbars",
+                "--disable-background-networking", "--hide-scrollbars", "--disable-dev-shm-usage",
                 "--user-data-dir=" + profile, "--remote-debugging-pipe", "about:blank"]
         self.log = open(os.path.join(OUT, "chromium.log"), "w")
         self.proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=self.log,
@@ -325,9 +325,51 @@ def run_test(browser, base):
         f.write(base64.b64decode(shot["data"]))
     check(os.path.getsize(path) > 10000, "screenshot %s (%d bytes)" % (os.path.relpath(path, ROOT),
                                                                   os.path.getsize(path)))
-    errors = page_errors(browser.events)
-    check(not errors, "no exception or console error in the page and its workers%s"
-          % "".join("\n     | " + e for e in errors))
+
+
+def state(browser, sid):
+    r = browser.send("Runtime.evaluate", {"expression": "JSON.stringify(window.appmState())",
+                                          "returnByValue": True}, session=sid)
+    return json.loads(r["result"]["value"])
+
+
+def key(browser, sid, k, code):
+    for kind in ("keyDown", "keyUp"):
+        browser.send("Input.dispatchKeyEvent", {"type": kind, "key": k, "code": code,
+                                                "text": k if kind == "keyDown" else ""}, session=sid)
+
+
+def run_default_page(browser, base):
+    """The page as a student opens it: the first preset (ppm with a quarter of the
+    automatic radius against appm, at equal time) starts by itself; Space pauses,
+    N runs one more pass of each setting."""
+    sid = open_page(browser, base + "/index.html")
+    time.sleep(4)
+    s = state(browser, sid)
+    if not check(s is not None and len(s["sides"]) == 2 and all(x["passes"] >= 3 for x in s["sides"]),
+                 "index.html starts rendering by itself (%s)" % s):
+        return
+    secs = [x["seconds"] for x in s["sides"]]
+    slack = max(x["lastPass"] for x in s["sides"]) + 0.05
+    check(s["equal"] == "time" and abs(secs[0] - secs[1]) <= 2 * slack,
+          "equal time: %.2f s and %.2f s inside passes, apart by at most about a pass (%.2f s)"
+          % (secs[0], secs[1], slack))
+    browser.send("Runtime.evaluate", {"expression": "document.activeElement.blur()"}, session=sid)
+    key(browser, sid, " ", "Space")
+    time.sleep(1.0)
+    a = state(browser, sid)
+    time.sleep(0.6)
+    b = state(browser, sid)
+    check(not a["running"] and [x["passes"] for x in a["sides"]] == [x["passes"] for x in b["sides"]],
+          "Space pauses (passes stay at %s)" % [x["passes"] for x in b["sides"]])
+    key(browser, sid, "n", "KeyN")
+    time.sleep(1.5)
+    c = state(browser, sid)
+    want = [1 + x["passes"] for x in b["sides"]]
+    check([x["passes"] for x in c["sides"]] == want,
+          "N runs one more pass of each setting (%s, want %s)" % ([x["passes"] for x in c["sides"]], want))
+    browser.send("Target.closeTarget", {"targetId": browser.send("Target.getTargetInfo", session=sid)
+                                        ["targetInfo"]["targetId"]})
 
 
 def run_bench(browser, base, size=128, passes=64):
@@ -368,6 +410,10 @@ def main():
             run_bench(browser, base)
         else:
             run_test(browser, base)
+            run_default_page(browser, base)
+            errors = page_errors(browser.events)
+            check(not errors, "no exception or console error in the pages and their workers%s"
+                  % "".join("\n     | " + e for e in errors))
     except Exception as e:  # a protocol failure is a failed test, with its reason
         check(False, "the browser session: %s" % e)
     finally:

@@ -233,14 +233,14 @@ function schedule(r) {
     if (s.busy) return;
     var ok = r.settings.equal === 'passes' ? s.stats.passes <= minPasses
                                            : s.stats.seconds <= minSeconds + s.lastPass;
-    if (r.stepping) ok = s.stats.passes < r.stepTarget;
+    if (r.stepping) ok = s.stats.passes < s.stepTarget;
     if (!ok) return;
     var pics = now - s.lastPictures > 150 || r.stepping;
     if (pics) s.lastPictures = now;
     s.busy = true;
     s.worker.postMessage({ type: 'pass', pictures: pics, exposure: exposure() });
   });
-  if (r.stepping && live.every(function (s) { return !s.busy && s.stats.passes >= r.stepTarget; }))
+  if (r.stepping && live.every(function (s) { return !s.busy && s.stats.passes >= s.stepTarget; }))
     r.stepping = false;
 }
 
@@ -264,7 +264,8 @@ function togglePause() {
 
 function stepOnce() {
   if (!run || run.running || !run.sides.length) return;
-  run.stepTarget = 1 + Math.max.apply(null, run.sides.map(function (s) { return s.stats ? s.stats.passes : 0; }));
+  if (run.stepping || !run.sides.every(function (s) { return s.started; })) return;
+  run.sides.forEach(function (s) { s.stepTarget = s.stats.passes + (s.done ? 0 : 1); });
   run.stepping = true;
   schedule(run);
 }
@@ -476,6 +477,15 @@ function testResult(r) {
              map_colours: s.view.maps.map(colours), history: s.history.length };
   }) };
 }
+
+// The state of the run, for tests/web.py: per setting its passes, seconds and busy flag.
+window.appmState = function () {
+  if (!run) return null;
+  return { running: run.running, equal: run.settings.equal, sides: run.sides.map(function (s) {
+    return { method: s.settings.method, passes: s.stats ? s.stats.passes : 0,
+             seconds: s.stats ? s.stats.seconds : 0, lastPass: s.lastPass, busy: s.busy };
+  }) };
+};
 
 function applyTestParams() {
   if (params.get('scene')) $('scene').value = params.get('scene');
