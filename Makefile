@@ -2,7 +2,8 @@
 #   make              the command line tool ./appm
 #   make test         every test, normal build and ASan+UBSan build, plus the CLI
 #   make test-long    the slow statistical tests (more samples)
-#   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
+#   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), wasm32-wasi,
+#                     C89/C++ header
 #   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads

@@ -18,7 +18,7 @@ number of passes.  Then it checks:
   * the maps: appm's radius, variance and Laplacian maps drawn, ppm's Laplacian
     absent (it keeps none);
   * no exception and no console error in the page or its workers;
-and saves a screenshot, build/web/classroom.png (the README's picture).
+and saves a screenshot, build/web/classroom.png and .jpg (the README's picture).
 
   python3 tests/web.py [--bench]     --bench: passes/s of the wasm build in Chromium
                                      against the native build on 1 thread (medians of 3)
@@ -319,12 +319,13 @@ def run_test(browser, base):
                                                         "deviceScaleFactor": 1, "mobile": False},
                  session=sid)
     time.sleep(0.3)
-    shot = browser.send("Page.captureScreenshot", {"format": "png"}, session=sid)
-    path = os.path.join(OUT, "classroom.png")
-    with open(path, "wb") as f:
-        f.write(base64.b64decode(shot["data"]))
-    check(os.path.getsize(path) > 10000, "screenshot %s (%d bytes)" % (os.path.relpath(path, ROOT),
-                                                                  os.path.getsize(path)))
+    for fmt, extra in (("png", {}), ("jpeg", {"quality": 85})):  # the README shows the JPEG
+        shot = browser.send("Page.captureScreenshot", dict(format=fmt, **extra), session=sid)
+        path = os.path.join(OUT, "classroom." + fmt.replace("jpeg", "jpg"))
+        with open(path, "wb") as f:
+            f.write(base64.b64decode(shot["data"]))
+        check(os.path.getsize(path) > 10000, "screenshot %s (%d bytes)"
+              % (os.path.relpath(path, ROOT), os.path.getsize(path)))
 
 
 def state(browser, sid):

@@ -159,6 +159,7 @@ function startRun() {
   stopRun();
   $('plot').getContext('2d').clearRect(0, 0, $('plot').width, $('plot').height);
   var r = run = { settings: settings, sides: [], running: true, t0: performance.now() };
+  $('pausebtn').firstChild.textContent = 'Pause ';
   buildSideViews(settings);
   status('Loading ' + settings.scene + ' ...');
   loadScene(settings.scene).then(function (scene) {
@@ -249,7 +250,6 @@ function finishRun(r) {
   status('Done: ' + r.sides.map(function (s) {
     return describe(s.settings) + ' ' + s.stats.passes + ' passes in ' + s.stats.seconds.toFixed(2) + ' s';
   }).join('; ') + '.');
-  $('pausebtn').firstChild.textContent = 'Resume ';
   if (testMode) window.appmTest = testResult(r);
 }
 
