@@ -35,6 +35,7 @@ static struct {
     unsigned char *rgba;    /* width * height * 4 bytes, rebuilt on each request */
     float *tmp;             /* width * height floats: the percentile's scratch   */
     size_t npix;
+    int method;             /* the renderer's appm_method                         */
     char error[600];
 } W;
 
@@ -116,6 +117,7 @@ int web_create(int method, int width, int height, double photons, double radius,
         W.r = NULL;
         return (int)s;
     }
+    W.method = method;
     W.npix = (size_t)width * (size_t)height;
     if (W.npix <= (size_t)-1 / 4) { /* 32768^2 x 4 bytes overflows wasm32's size_t */
         W.rgba = (unsigned char *)malloc(W.npix * 4);
@@ -172,12 +174,12 @@ WEB_EXPORT(web_stat) double web_stat(int which)
     case 0: return (double)st.passes;
     case 1: return (double)st.photons_emitted;
     case 2: return st.seconds;
-    case 3: return st.est_relerr >= 0 || st.passes < 2 ? st.est_relerr : web_ppm_noise();
+    case 3: return W.method == APPM_METHOD_PPM && st.passes >= 2 ? web_ppm_noise() : st.est_relerr;
     case 4: return st.initial_radius;
     case 5: return (double)st.memory_bytes;
     case 6: return (double)st.photons_stored;
     case 7: return (double)st.eye_paths;
-    case 8: return st.est_relerr < 0 && st.passes >= 2 && web_ppm_noise() >= 0 ? 1.0 : 0.0;
+    case 8: return W.method == APPM_METHOD_PPM && st.passes >= 2 ? 1.0 : 0.0;
     default: return -1.0;
     }
 }
