@@ -20,8 +20,9 @@ number of passes.  Then it checks:
   * no exception and no console error in the page or its workers;
 and saves a screenshot, build/web/classroom.png and .jpg (the README's picture).
 
-  python3 tests/web.py [--bench]     --bench: passes/s of the wasm build in Chromium
-                                     against the native build on 1 thread (medians of 3)
+  python3 tests/web.py [--bench [SIZE [PASSES]]]
+                     --bench: passes/s of appm, wasm in Chromium against the native build
+                     on 1 thread, SIZE x SIZE (128) for PASSES passes (64), medians of 3
 Environment: CHROMIUM (the browser; default: chromium, chromium-browser, google-chrome).
 The last line is "N passed, N failed"; the exit status is non-zero on failure.
 """
@@ -392,7 +393,7 @@ def run_bench(browser, base, size=128, passes=64):
 
 
 def main():
-    bench = "--bench" in sys.argv[1:]
+    bench = sys.argv[1:2] == ["--bench"]
     os.makedirs(OUT, exist_ok=True)
     exe = browser_exe()
     if not check(exe is not None, "a Chromium is installed (CHROMIUM, chromium, google-chrome)"):
@@ -408,7 +409,8 @@ def main():
     browser = Browser(exe, profile)
     try:
         if bench:
-            run_bench(browser, base)
+            n = [int(a) for a in sys.argv[2:4]]
+            run_bench(browser, base, *n)
         else:
             run_test(browser, base)
             run_default_page(browser, base)
