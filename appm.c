@@ -282,7 +282,7 @@ static void appm__parallel_for(unsigned threads, uint32_t count, appm__task_fn f
 
 static const char *const appm__status_text[APPM_STATUS_COUNT] = {
     "ok", "out of memory", "input/output error", "malformed input",
-    "invalid argument", "not supported by this build", "cancelled"};
+    "invalid argument"};
 
 APPM_API const char *appm_status_string(appm_status s)
 {
@@ -1126,10 +1126,15 @@ typedef struct appm__lines {
     unsigned line;
 } appm__lines;
 
-/* Next line as [*s, *e) without its terminator; comments (#...) stripped. */
+/* Next line as [*s, *e) without its terminator; comments (#...) stripped.
+ * A UTF-8 byte order mark before the first line (Windows editors write one)
+ * is skipped, in every format read line by line (.scene, .obj, .mtl). */
 static int appm__next_line(appm__lines *it, const char **s, const char **e)
 {
     const char *p = it->p, *q;
+    if (it->line == 0 && it->end - p >= 3 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB &&
+        (unsigned char)p[2] == 0xBF)
+        p += 3;
     if (p >= it->end) return 0;
     q = p;
     while (q < it->end && *q != '\n' && *q != '\r') q++;
@@ -2630,6 +2635,33 @@ typedef struct appm__photon_start {
     uint32_t skip;      /* the emitting triangle, or UINT32_MAX */
 } appm__photon_start;
 
+/* The power Phi (W, RGB) light l emits: what appm__emit's photon weight gamma
+ * carries on average, E[gamma] = Phi / pick, so the two must agree (lights are
+ * picked by power: pick = mean(Phi) / sum of mean(Phi)).
+ *   area         Phi = pi A Le               (a Lambertian emitter)
+ *   point        Phi = 4 pi I
+ *   spot         Phi = 2 pi I [(1 - cos_inner) + (cos_inner - cos_cone) / 5]
+ *                (the d^4 ramp integrates to a fifth of its width in cos theta)
+ *   environment  Phi = 4 pi^2 R^2 L          (L through the disk of the bounding
+ *                sphere, radius R, from every direction) */
+static void appm__light_power(const appm_scene *s, const appm__light *l, double *power)
+{
+    double f;
+    if (l->kind == APPM__LIGHT_AREA) {
+        double a = (double)s->info[l->tri].area;
+        power[0] = APPM__PI * a * l->value.x;
+        power[1] = APPM__PI * a * l->value.y;
+        power[2] = APPM__PI * a * l->value.z;
+        return;
+    }
+    if (l->kind == APPM__LIGHT_POINT) f = 4.0 * APPM__PI;
+    else if (l->kind == APPM__LIGHT_SPOT) f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
+    else f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
+    power[0] = f * l->value.x;
+    power[1] = f * l->value.y;
+    power[2] = f * l->value.z;
+}
+
 /* Samples the start of a photon path: light by power, then position and direction. */
 static int appm__emit(const appm_scene *s, appm__rng *rng, appm__photon_start *ps)
 {
@@ -2792,16 +2824,11 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 60 
     uint8_t pad[3];
 } appm__vp;
 
-typedef struct appm__pixel { /* per-pixel state kept across passes: 120 bytes */
-    double ld[3];   /* sum over passes of emission + direct light (pt: of the whole path) */
-    double acc[3];  /* ppm, appm: running mean I of the photon term; sppm: tau */
-    double n;       /* sppm: accumulated photon count N; appm: photons found so far */
-    double r;       /* sppm, appm: radius of the next gather */
-    double S;       /* appm: running mean of the kernel second moment s_j */
-    double dI;      /* appm: weighted running mean of the per-pass pixel Laplacians */
-    double dI_w;    /* appm: sum of their weights (h_j / r_1)^6 */
-    double dI_m2;   /* appm: weighted Welford M2 of the per-pass Laplacians (their spread) */
-    double r2sum;   /* appm: sum of r_j^2, for the bias estimate */
+/* Per-pixel state every method keeps across passes (40 bytes).  What a method
+ * keeps beyond this (PPM's I, SPPM's tau, N, R, APPM's S, dI, ...) is its own
+ * struct in section 10, in a separate array sized by its estimator entry. */
+typedef struct appm__pixel {
+    double ld[3];      /* sum over passes of emission + direct light (pt: of the whole path) */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
 } appm__pixel;
 
@@ -2818,47 +2845,60 @@ typedef struct appm__chunk_rec { /* where one chunk of photon paths left its pho
     uint32_t start, count;
 } appm__chunk_rec;
 
-#ifndef APPM__CELL_SCALE
-#define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius */
-#endif
+/* The photon map of one pass (section 9): the photons sorted by hash bucket
+ * and the table of bucket starts.  It borrows the photons (the renderer's
+ * store, or any array) and owns only its table, so it can be built and
+ * queried without a renderer. */
+typedef struct appm__pmap {
+    appm__photon *ph;  /* borrowed; photons [cell[b], cell[b+1]) lie in bucket b */
+    size_t n;          /* photons in the map */
+    uint32_t *cell;    /* 2^bits + 1 bucket starts */
+    size_t cell_cap;   /* entries allocated (the largest table so far: memory stays flat) */
+    uint32_t bits;     /* log2 of the number of buckets */
+    float cell_size, inv_cell;
+    appm__v3 lo;       /* the grid's origin: the photons' bounding-box corner */
+} appm__pmap;
+
+#define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius (speed only) */
 #define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
+
+struct appm__estimator; /* a method's entry in the table of section 10 */
 
 struct appm_renderer {
     appm__mem mem;
     appm_diag diag;
     const appm_scene *scene;
-    appm_method method;
+    const struct appm__estimator *est; /* the method: chosen once, at creation */
     appm_direct direct;
     uint32_t w, h;
     uint64_t M;          /* photon paths per pass */
     double r1;           /* initial radius (the user's, or r_auto) */
-    double r_auto;       /* the scene's automatic radius (section 12): appm's scale */
+    double r_auto;       /* the automatic radius (section 12): appm's scale for clamps and h */
     int r1_auto;
     double alpha;
-    double ppm_r2;       /* ppm: r_j^2 of the current pass */
+    struct {
+        double R2;       /* r_j^2 of the next gather */
+        double R;        /* the radius of the last gather */
+    } ppm;               /* Knaus-Zwicker's global radius (section 10) */
+    double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
     unsigned threads, max_depth;
     uint64_t seed, pass;
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
     appm__pixel *pix;
+    unsigned char *state; /* the method's per-pixel state: w h est->state_size bytes */
     float *image;
     float *aux[APPM_AUX_COUNT];
-    int aux_valid;
     /* photon store: `tasks` regions of `cap` photons; chunk c is traced by task
      * c % tasks, so the layout does not depend on scheduling */
     appm__photon *ph;
-    size_t cap, nph;
+    size_t cap;
     uint32_t tasks, nchunks;
     appm__chunk_rec *chunk;
     uint32_t *task_used;
     int *task_failed;
-    uint32_t *dest;      /* scratch of the counting sort: one per slot of the store */
-    /* hash grid */
-    uint32_t *cell;      /* table_size + 1 bucket starts */
-    size_t cell_cap;     /* entries allocated (the largest table so far) */
-    uint32_t table_bits;
-    float cell_size, inv_cell;
-    appm__v3 grid_lo;
+    uint32_t *dest;      /* scratch of the map's counting sort: one per slot of the store */
+    appm__pmap pmap;     /* this pass's photons, compacted and sorted (section 9) */
     uint64_t dropped[APPM__MAX_THREADS];
     appm_stats stats;
     char last_error[256];
@@ -2891,6 +2931,38 @@ static int appm__quant(float v, float scale)
     float q = v * scale;
     q = q > scale ? scale : (q < -scale ? -scale : q);
     return (int)(q >= 0.0f ? q + 0.5f : q - 0.5f);
+}
+
+/* The inverse of appm__oct_encode before normalisation: (a, b) in [-1, 1]^2 ->
+ * a vector with |x| + |y| + |z| = 1 along the encoded direction. */
+static appm__v3 appm__oct_unpack(float a, float b)
+{
+    float z = 1.0f - fabsf(a) - fabsf(b);
+    if (z < 0.0f) {
+        float t = a;
+        a = (1.0f - fabsf(b)) * (t >= 0.0f ? 1.0f : -1.0f);
+        b = (1.0f - fabsf(t)) * (b >= 0.0f ? 1.0f : -1.0f);
+    }
+    return appm__v(a, b, z);
+}
+
+/* A photon's stored directions as unit vectors: wi (towards where it came
+ * from, 16 bits per coordinate: about 3e-5 rad) and the normal on its side
+ * (8 bits: about 1e-2 rad).  Kept for glossy gathering, which needs wi; the
+ * diffuse gather tests the normal without normalising (10). */
+#if defined(__GNUC__) || defined(__clang__)
+#define APPM__UNUSED __attribute__((unused))
+#else
+#define APPM__UNUSED
+#endif
+APPM__UNUSED static appm__v3 appm__photon_wi(const appm__photon *p)
+{
+    return appm__normalize(appm__oct_unpack((float)p->wi[0] * (1.0f / 32767.0f), (float)p->wi[1] * (1.0f / 32767.0f)));
+}
+
+APPM__UNUSED static appm__v3 appm__photon_normal(const appm__photon *p)
+{
+    return appm__normalize(appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f)));
 }
 
 /* ---- 7.2 Camera rays ---------------------------------------------------------- */
@@ -3192,6 +3264,27 @@ static appm_status appm__photon_pass(appm_renderer *r)
     }
 }
 
+/* Moves the regions' chunks together so that chunk c follows chunk c - 1 (the
+ * chunks of one region are already in order; regions move down one after
+ * another).  chunk[c].start becomes the offset in the compacted array, which
+ * is what the map's build reads.  Returns the number of photons. */
+static size_t appm__store_compact(appm_renderer *r)
+{
+    size_t out = 0;
+    uint32_t t, c;
+    appm__chunk_rec *cr = r->chunk;
+    for (t = 0; t < r->tasks; ++t) {
+        size_t base = (size_t)t * r->cap;
+        for (c = t; c < r->nchunks; c += r->tasks) {
+            if (cr[c].count && base + cr[c].start != out)
+                memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
+            cr[c].start = (uint32_t)out;
+            out += cr[c].count;
+        }
+    }
+    return out;
+}
+
 /* ==== 9. HASH-GRID PHOTON MAP =============================================
  *
  * A uniform grid of cubic cells of size c, hashed into 2^k buckets (k chosen
@@ -3229,11 +3322,10 @@ static int32_t appm__grid_coord(float p, float lo, float inv_cell)
     return (int32_t)c;
 }
 
-static uint32_t appm__photon_bucket(const appm_renderer *r, const appm__photon *p)
+static uint32_t appm__pmap_bucket(const appm__pmap *m, const appm__photon *p)
 {
-    return appm__grid_hash(appm__grid_coord(p->x, r->grid_lo.x, r->inv_cell),
-                           appm__grid_coord(p->y, r->grid_lo.y, r->inv_cell),
-                           appm__grid_coord(p->z, r->grid_lo.z, r->inv_cell), r->table_bits);
+    return appm__grid_hash(appm__grid_coord(p->x, m->lo.x, m->inv_cell), appm__grid_coord(p->y, m->lo.y, m->inv_cell),
+                           appm__grid_coord(p->z, m->lo.z, m->inv_cell), m->bits);
 }
 
 /* k-th smallest of a[0..n) (quickselect, reorders a). */
@@ -3262,75 +3354,138 @@ static float appm__select(float *a, size_t n, size_t k)
     return a[k];
 }
 
-/* Builds the grid over the photons of this pass.  `cell_size` > 0. */
-static appm_status appm__grid_build(appm_renderer *r, float cell_size)
+/* Builds map `m` over photons ph[0..n) with cubic cells of size `cell_size` > 0,
+ * reordering ph in place.  `dest` is scratch for n entries.  `runs` (NULL: the
+ * whole array, in order) lists the stretches of ph in the order the photons
+ * must keep within a bucket - the photon pass's chunks in global order, so
+ * that sums over a bucket do not depend on the thread count.  Fails only for
+ * memory (the bucket table grows when a pass has more photons than any before). */
+static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon *ph, size_t n, uint32_t *dest,
+                                    const appm__chunk_rec *runs, uint32_t nruns, float cell_size)
 {
-    size_t total = 0, i, k;
+    size_t i, k;
     uint32_t c, bits = 10, nb;
     appm__bbox bb;
-    for (c = 0; c < r->nchunks; ++c) total += r->chunk[c].count;
-    while (bits < 30 && ((size_t)1 << bits) < total) bits++;
+    while (bits < 30 && ((size_t)1 << bits) < n) bits++;
     nb = 1u << bits;
-    if ((size_t)nb + 1 > r->cell_cap) { /* the table only grows: memory stays flat */
-        uint32_t *cell = (uint32_t *)appm__alloc(&r->mem, (size_t)nb + 1, sizeof *cell);
+    if ((size_t)nb + 1 > m->cell_cap) { /* the table only grows: memory stays flat */
+        uint32_t *cell = (uint32_t *)appm__alloc(mem, (size_t)nb + 1, sizeof *cell);
         if (!cell) return APPM_ERR_NOMEM;
-        appm__free(&r->mem, r->cell);
-        r->cell = cell;
-        r->cell_cap = (size_t)nb + 1;
+        appm__free(mem, m->cell);
+        m->cell = cell;
+        m->cell_cap = (size_t)nb + 1;
     }
-    r->table_bits = bits;
-    /* compact the regions so chunk c follows chunk c-1 (chunks of one region are
-     * already in order; regions are moved down one after another) */
-    {
-        size_t out = 0;
-        uint32_t t;
-        appm__chunk_rec *cr = r->chunk;
-        for (t = 0; t < r->tasks; ++t) {
-            size_t base = (size_t)t * r->cap;
-            for (c = t; c < r->nchunks; c += r->tasks) {
-                if (cr[c].count && base + cr[c].start != out)
-                    memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
-                cr[c].start = (uint32_t)out; /* now: offset in the compacted array */
-                out += cr[c].count;
-            }
-        }
-    }
-    r->nph = total;
+    m->bits = bits;
+    m->ph = ph;
+    m->n = n;
     appm__bbox_empty(&bb);
-    for (i = 0; i < total; ++i) appm__bbox_grow(&bb, appm__v(r->ph[i].x, r->ph[i].y, r->ph[i].z));
-    r->grid_lo = total ? bb.lo : appm__v(0, 0, 0);
-    r->cell_size = cell_size;
-    r->inv_cell = 1.0f / cell_size;
-    memset(r->cell, 0, ((size_t)nb + 1) * sizeof *r->cell);
+    for (i = 0; i < n; ++i) appm__bbox_grow(&bb, appm__v(ph[i].x, ph[i].y, ph[i].z));
+    m->lo = n ? bb.lo : appm__v(0, 0, 0);
+    m->cell_size = cell_size;
+    m->inv_cell = 1.0f / cell_size;
+    memset(m->cell, 0, ((size_t)nb + 1) * sizeof *m->cell);
     /* (1) counts, with each photon's bucket kept in dest[] for step (3) */
-    for (i = 0; i < total; ++i) {
-        uint32_t b = appm__photon_bucket(r, &r->ph[i]);
-        r->dest[i] = b;
-        r->cell[b + 1]++;
+    for (i = 0; i < n; ++i) {
+        uint32_t b = appm__pmap_bucket(m, &ph[i]);
+        dest[i] = b;
+        m->cell[b + 1]++;
     }
     /* (2) prefix sums: cell[b] = first slot of bucket b */
-    for (k = 0; k < nb; ++k) r->cell[k + 1] += r->cell[k];
-    /* (3) destinations, assigned walking the chunks in global order c = 0, 1, ...
-     * (the compacted array holds them region by region), with cell[] as running
-     * cursors; then cell[] is restored */
-    for (c = 0; c < r->nchunks; ++c)
-        for (i = r->chunk[c].start; i < (size_t)r->chunk[c].start + r->chunk[c].count; ++i)
-            r->dest[i] = r->cell[r->dest[i]]++;
-    for (k = nb; k > 0; --k) r->cell[k] = r->cell[k - 1];
-    r->cell[0] = 0;
+    for (k = 0; k < nb; ++k) m->cell[k + 1] += m->cell[k];
+    /* (3) destinations, assigned walking the runs in order, with cell[] as
+     * running cursors; then cell[] is restored */
+    if (!runs)
+        for (i = 0; i < n; ++i) dest[i] = m->cell[dest[i]]++;
+    for (c = 0; runs && c < nruns; ++c)
+        for (i = runs[c].start; i < (size_t)runs[c].start + runs[c].count; ++i) dest[i] = m->cell[dest[i]]++;
+    for (k = nb; k > 0; --k) m->cell[k] = m->cell[k - 1];
+    m->cell[0] = 0;
     /* (4) permute in place: each swap puts one photon in its final slot */
-    for (i = 0; i < total; ++i) {
-        while (r->dest[i] != i) {
-            uint32_t j = r->dest[i], tj;
-            appm__photon tp = r->ph[j];
-            r->ph[j] = r->ph[i];
-            r->ph[i] = tp;
-            tj = r->dest[j];
-            r->dest[j] = j;
-            r->dest[i] = tj;
+    for (i = 0; i < n; ++i) {
+        while (dest[i] != i) {
+            uint32_t j = dest[i], tj;
+            appm__photon tp = ph[j];
+            ph[j] = ph[i];
+            ph[i] = tp;
+            tj = dest[j];
+            dest[j] = j;
+            dest[i] = tj;
         }
     }
     return APPM_OK;
+}
+
+typedef void (*appm__pmap_visit)(void *ctx, const appm__photon *p);
+
+/* The photons of bucket b that lie within R of x (d2 computed as the gather
+ * does, so both agree on the boundary); with `cx` non-NULL only those whose
+ * own cell is cx (several cells can share a bucket). */
+static void appm__pmap_bucket_visit(const appm__pmap *m, uint32_t b, const int32_t *cx, appm__v3 x, float R2,
+                                    appm__pmap_visit visit, void *ctx)
+{
+    size_t i, end = m->cell[b + 1];
+    for (i = m->cell[b]; i < end; ++i) {
+        const appm__photon *p = &m->ph[i];
+        float dx = x.x - p->x, dy = x.y - p->y, dz = x.z - p->z;
+        if (!(dx * dx + dy * dy + dz * dz < R2)) continue;
+        if (cx && (appm__grid_coord(p->x, m->lo.x, m->inv_cell) != cx[0] ||
+                   appm__grid_coord(p->y, m->lo.y, m->inv_cell) != cx[1] ||
+                   appm__grid_coord(p->z, m->lo.z, m->inv_cell) != cx[2]))
+            continue;
+        visit(ctx, p);
+    }
+}
+
+/* Calls visit(ctx, p) once for every photon p with |x - p|^2 < R^2, in map
+ * order (bucket by bucket, chunk order within a bucket).  Visits every cell
+ * overlapping the box [x - R, x + R]; a query larger than the grid itself
+ * scans the array instead. */
+static void appm__pmap_query(const appm__pmap *m, appm__v3 x, float R, appm__pmap_visit visit, void *ctx)
+{
+    float R2 = R * R;
+    int32_t lo[3], hi[3], cc[3];
+    double ncells;
+    uint32_t seen[27];
+    int nseen = 0, check;
+    size_t i;
+    if (m->n == 0) return;
+    lo[0] = appm__grid_coord(x.x - R, m->lo.x, m->inv_cell);
+    lo[1] = appm__grid_coord(x.y - R, m->lo.y, m->inv_cell);
+    lo[2] = appm__grid_coord(x.z - R, m->lo.z, m->inv_cell);
+    hi[0] = appm__grid_coord(x.x + R, m->lo.x, m->inv_cell);
+    hi[1] = appm__grid_coord(x.y + R, m->lo.y, m->inv_cell);
+    hi[2] = appm__grid_coord(x.z + R, m->lo.z, m->inv_cell);
+    ncells = ((double)hi[0] - lo[0] + 1) * ((double)hi[1] - lo[1] + 1) * ((double)hi[2] - lo[2] + 1);
+    if (ncells > (double)m->n || ncells > (double)(1u << m->bits)) {
+        for (i = 0; i < m->n; ++i) {
+            const appm__photon *p = &m->ph[i];
+            float dx = x.x - p->x, dy = x.y - p->y, dz = x.z - p->z;
+            if (dx * dx + dy * dy + dz * dz < R2) visit(ctx, p);
+        }
+        return;
+    }
+    /* small queries read each bucket once (deduplicated); large ones accept a
+     * photon only in the cell it belongs to */
+    check = ncells > 27.0;
+    for (cc[2] = lo[2]; cc[2] <= hi[2]; ++cc[2])
+        for (cc[1] = lo[1]; cc[1] <= hi[1]; ++cc[1])
+            for (cc[0] = lo[0]; cc[0] <= hi[0]; ++cc[0]) {
+                uint32_t b = appm__grid_hash(cc[0], cc[1], cc[2], m->bits);
+                if (!check) {
+                    int k, dup = 0;
+                    for (k = 0; k < nseen; ++k) dup |= seen[k] == b;
+                    if (dup) continue;
+                    seen[nseen++] = b;
+                }
+                appm__pmap_bucket_visit(m, b, check ? cc : NULL, x, R2, visit, ctx);
+            }
+}
+
+static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
+{
+    appm__free(mem, m->cell);
+    m->cell = NULL;
+    m->cell_cap = 0;
 }
 
 /* ==== 10. ESTIMATORS ======================================================
@@ -3347,28 +3502,32 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
  * with k_r(d) = K(|d|/r) / r^2, mu2 the per-axis second moment, R(K) = int K^2.
  * The biweight is smooth (C1), which the finite-difference Laplacian needs.
  *
- * ppm  (Knaus-Zwicker 2011): one global radius, r_j^2 = r_1^2 prod_{k<j}
- *      (k + alpha) / (k + 1); the pixel is the plain mean over passes of
+ * The formulas, their derivations and their sources are in docs/algorithm.md,
+ * cited here by section (the papers' own equation numbers could not be
+ * checked against the papers, so they are not quoted).
+ *
+ * ppm  (Knaus-Zwicker 2011, algorithm.md 2.3): one global radius, r_j^2 = r_1^2
+ *      prod_{k<j} (k + alpha) / (k + 1); the pixel is the plain mean over passes of
  *      Ihat_j = (1/M) sum_i k_{r_j}(x_j - y_i) Psi_ji.
- * sppm (Hachisuka-Jensen 2009): per pixel N, R, tau; after a pass that found m
+ * sppm (Hachisuka-Jensen 2009, algorithm.md 2.2): per pixel N, R, tau; after a pass that found m
  *      photons with flux Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)),
  *      tau' = (tau + Phi) R'^2 / R^2; L = tau / (j M pi R^2).
- * appm (Kaplanyan-Dachsbacher 2013): per pixel and pass, the radius that
- *      minimises the estimated MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
+ * appm (Kaplanyan-Dachsbacher 2013, algorithm.md 4): per pixel and pass, the radius that
+ *      minimises the estimated MSE(r) (4.2) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
  *         r^6 = c_f R(K) S / (M j mu2^2 dI^2),   c_f = 2/3,
  *      where S is the running mean of s_j = (1/M) sum_i k_r lum(Psi_i)^2 (a
  *      second moment) and dI the running mean of the per-vertex Laplacian,
  *      estimated from the same photons by a 5-point finite difference of kernel
- *      estimates with bandwidth h (section 10.2).  c_f = 2/3 is the constant
+ *      estimates with bandwidth h (algorithm.md 4.6).  c_f = 2/3 is the constant
  *      that is optimal when every pass is averaged with weight 1/j and r_j
- *      shrinks as j^(-1/6) (the plug-in constant would be 2; see the design
- *      notes).  Safeguards: KZ radius r_1 j^(-1/6) while warming up; while a
+ *      shrinks as j^(-1/6) (the plug-in constant would be 2; algorithm.md 4.3
+ *      and the toy of 4.9).  Safeguards (4.7): KZ radius r_1 j^(-1/6) while warming up; while a
  *      pixel has seen fewer than 8 photons its radius doubles each pass; the
- *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_a),
- *      2 max(r_1, r_a)] j^(-1/6) (r_a: the automatic radius), so the clamps
+ *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_auto),
+ *      2 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), so the clamps
  *      shrink at the optimal rate.  The Laplacian bandwidth is a fixed
- *      schedule, h = 1.5 r_a j^(-1/8), estimated on every 8th pass and
- *      averaged with weights h^6 (section 10.2); dI^2 is corrected for the
+ *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
+ *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
  *      noise of its estimate.
  *
  *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
@@ -3379,37 +3538,51 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
-#ifndef APPM__CF
-#define APPM__CF (2.0 / 3.0)
-#endif
-#ifndef APPM__WARMUP
+/* The constants of the adaptive method, measured or derived as the comment
+ * above says; fixed at compile time (no build option changes them). */
+#define APPM__CF (2.0 / 3.0)                     /* c_f of the radius formula */
 #define APPM__WARMUP 4                           /* passes on the KZ schedule */
-#endif
-#ifndef APPM__KMIN
 #define APPM__KMIN 8.0                           /* photons before adapting */
-#endif
-#ifndef APPM__RLO
-#define APPM__RLO 0.1
-#endif
-#ifndef APPM__RHI
-#define APPM__RHI 2.0
-#endif
-#ifndef APPM__KAPPA
+#define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
+#define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
-#endif
-#ifndef APPM__LAP_EVERY
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
-#endif
-#ifndef APPM__DI_FLOOR
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
-#endif
 #define APPM__NORMAL_COS 0.5f
+
+/* Per-pixel state of each method (beside appm__pixel, which all share), named
+ * after its paper's symbols as pbrt-v4's SPPMPixel is.  Plain doubles and
+ * 64-bit counts only: the estimator table lists them field by field, so they
+ * can be written and read back one by one.  A method that splits the photon
+ * term into components (caustic, diffuse, ...) with statistics of their own
+ * gives its state an array of such records and lists each field. */
+typedef struct appm__ppm_state {
+    double I[3];    /* running mean I_j of the per-pass estimates Ihat_j (photon term) */
+} appm__ppm_state;
+
+typedef struct appm__sppm_state {
+    double tau[3];  /* tau: accumulated flux, rescaled to the current radius */
+    double N;       /* N: accumulated photon count (alpha-weighted, so not whole) */
+    double R;       /* R: radius of the next gather */
+} appm__sppm_state;
+
+typedef struct appm__appm_state {
+    double I[3];    /* running mean I_j of the photon term */
+    double S;       /* running mean of the kernel second moment s_j */
+    double dI;      /* weighted running mean of the per-pass Laplacians */
+    double dI_w;    /* sum of their weights (h_j / r_auto)^6 */
+    double dI_m2;   /* weighted Welford M2 of the per-pass Laplacians (their spread) */
+    double R;       /* radius r_j of the last gather */
+    double R2sum;   /* sum of r_j^2, for the bias estimate */
+    uint64_t N;     /* photons found so far */
+} appm__appm_state;
 
 typedef struct appm__gather {
     appm__v3 x, n, t, b; /* visible point, normal, tangent frame */
     appm__v3 wf;         /* W f */
     float R;             /* kernel radius */
     float h;             /* appm: Laplacian bandwidth (0: none) */
+    float R2, Rg2;       /* R^2 and max(R, 2h)^2, set by the query */
     unsigned max_p;      /* longest photon path that still counts */
     int biweight;
     double e[3];         /* sum of K-weighted gamma (scaled at the end) */
@@ -3427,14 +3600,8 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
     if (!(d2 < Rg2) || p->segs > g->max_p) return;
     { /* same surface: angle(n_photon, n) < 60 deg.  The octahedral decode without
        * its normalisation: cos >= c  <=>  dot > 0 and dot^2 >= c^2 |v|^2 */
-        float ox = (float)p->n[0] * (1.0f / 127.0f), oy = (float)p->n[1] * (1.0f / 127.0f);
-        float oz = 1.0f - fabsf(ox) - fabsf(oy), dn;
-        if (oz < 0.0f) {
-            float tx = ox;
-            ox = (1.0f - fabsf(oy)) * (tx >= 0.0f ? 1.0f : -1.0f);
-            oy = (1.0f - fabsf(tx)) * (oy >= 0.0f ? 1.0f : -1.0f);
-        }
-        pn = appm__v(ox, oy, oz);
+        float dn;
+        pn = appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f));
         dn = appm__dot(pn, g->n);
         if (!(dn > 0.0f) || dn * dn < APPM__NORMAL_COS * APPM__NORMAL_COS * appm__dot(pn, pn)) return;
     }
@@ -3453,7 +3620,7 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
         g->count++;
     }
     if (g->h > 0.0f) {
-        /* 10.2  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
+        /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
          * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h. */
         double ih = 1.0 / g->h, a = (double)d2 * ih * ih, sum = 0.0, v;
         double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
@@ -3472,54 +3639,23 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
     }
 }
 
-/* Visits every photon within max(R, 2h) of g->x (section 9's query). */
-static void appm__gather_query(const appm_renderer *r, appm__gather *g)
+static void appm__gather_visit(void *ctx, const appm__photon *p)
 {
-    float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h, R2 = g->R * g->R, Rg2 = Rg * Rg;
-    int32_t lo[3], hi[3], cx, cy, cz;
-    double ncells;
-    uint32_t seen[27];
-    int nseen = 0, check;
-    size_t i;
-    if (r->nph == 0) return;
-    lo[0] = appm__grid_coord(g->x.x - Rg, r->grid_lo.x, r->inv_cell);
-    lo[1] = appm__grid_coord(g->x.y - Rg, r->grid_lo.y, r->inv_cell);
-    lo[2] = appm__grid_coord(g->x.z - Rg, r->grid_lo.z, r->inv_cell);
-    hi[0] = appm__grid_coord(g->x.x + Rg, r->grid_lo.x, r->inv_cell);
-    hi[1] = appm__grid_coord(g->x.y + Rg, r->grid_lo.y, r->inv_cell);
-    hi[2] = appm__grid_coord(g->x.z + Rg, r->grid_lo.z, r->inv_cell);
-    ncells = ((double)hi[0] - lo[0] + 1) * ((double)hi[1] - lo[1] + 1) * ((double)hi[2] - lo[2] + 1);
-    if (ncells > (double)r->nph || ncells > (double)(1u << r->table_bits)) {
-        /* a query larger than the grid itself: a plain scan is cheaper */
-        for (i = 0; i < r->nph; ++i) appm__gather_photon(g, &r->ph[i], R2, Rg2);
-        return;
-    }
-    check = ncells > 27.0;
-    for (cz = lo[2]; cz <= hi[2]; ++cz)
-        for (cy = lo[1]; cy <= hi[1]; ++cy)
-            for (cx = lo[0]; cx <= hi[0]; ++cx) {
-                uint32_t b = appm__grid_hash(cx, cy, cz, r->table_bits), end = r->cell[b + 1];
-                if (!check) {
-                    int k, dup = 0;
-                    for (k = 0; k < nseen; ++k) dup |= seen[k] == b;
-                    if (dup) continue;
-                    seen[nseen++] = b;
-                    for (i = r->cell[b]; i < end; ++i) appm__gather_photon(g, &r->ph[i], R2, Rg2);
-                } else {
-                    for (i = r->cell[b]; i < end; ++i) {
-                        const appm__photon *p = &r->ph[i];
-                        if (appm__grid_coord(p->x, r->grid_lo.x, r->inv_cell) != cx ||
-                            appm__grid_coord(p->y, r->grid_lo.y, r->inv_cell) != cy ||
-                            appm__grid_coord(p->z, r->grid_lo.z, r->inv_cell) != cz)
-                            continue;
-                        appm__gather_photon(g, p, R2, Rg2);
-                    }
-                }
-            }
+    appm__gather *g = (appm__gather *)ctx;
+    appm__gather_photon(g, p, g->R2, g->Rg2);
+}
+
+/* Visits every photon within max(R, 2h) of g->x (section 9's query). */
+static void appm__gather_query(const appm__pmap *m, appm__gather *g)
+{
+    float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h;
+    g->R2 = g->R * g->R;
+    g->Rg2 = Rg * Rg;
+    appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
 }
 
 /* Whether pass j estimates the Laplacian.  Its gather reaches 2h (h from
- * appm__lap_h below: 1.5 r_a j^(-1/8)), several times the area of the radiance
+ * appm__lap_h below: 1.5 r_auto j^(-1/8)), several times the area of the radiance
  * kernel, so it is the expensive part of a pass.  For a fixed cost f h^2 (f: the fraction of passes that estimate it),
  * the variance of the running mean dI goes as 1 / (f h^6) = 1 / (cost h^4):
  * a wide bandwidth on a few passes beats a narrow one on every pass.  The price
@@ -3555,7 +3691,7 @@ static void appm__gather_finish(const appm__gather *g, double invM, double *e, d
     if (g->h > 0.0f) *dl = g->dl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
 }
 
-/* ---- 10.1 The adaptive radius (section 4 of the design notes) -------------- */
+/* ---- 10.1 The adaptive radius (docs/algorithm.md 4.3 - 4.7) ----------------- */
 
 /* The closed-form minimiser of MSE(r) = R(K) S / (M N r^2) + (mu2 r^2 dI / 2)^2
  * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M N mu2^2 dI^2).  Takes dI^2; returns
@@ -3574,7 +3710,7 @@ static double appm__r_opt(double S, double dI2, double MN, double cf)
  * the Laplacian is mostly noise, the radius grows (less noise, more bias)
  * instead of collapsing.  With per-pass variances c / w_j, the weighted Welford
  * sum M2 estimates (n - 1) c, and the mean's variance is c / sum(w). */
-static double appm__di2(const appm__pixel *p, uint64_t n)
+static double appm__di2(const appm__appm_state *p, uint64_t n)
 {
     double d2 = p->dI * p->dI, c = d2;
     if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
@@ -3582,25 +3718,25 @@ static double appm__di2(const appm__pixel *p, uint64_t n)
 }
 
 /* Radius for pass j from the pixel's statistics after j-1 passes; r1 is the
- * initial radius, rb the scene's automatic one.  Never NaN, 0 or inf: every
- * path ends inside [RLO min(r1, rb), RHI max(r1, rb)] j^(-1/6). */
-static double appm__appm_radius(double r1, double rb, uint64_t M, uint64_t j, const appm__pixel *p)
+ * initial radius, r_auto the automatic one.  Never NaN, 0 or inf: every
+ * path ends inside [RLO min(r1, r_auto), RHI max(r1, r_auto)] j^(-1/6). */
+static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j, const appm__appm_state *p)
 {
     double sj = pow((double)j, -1.0 / 6.0), rk = r1 * sj, rad = rk;
-    double lo = APPM__RLO * (r1 < rb ? r1 : rb) * sj, hi = APPM__RHI * (r1 > rb ? r1 : rb) * sj;
-    if (j > 1 && p->n < APPM__KMIN && p->r > 0.0) {
+    double lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * sj, hi = APPM__RHI * (r1 > r_auto ? r1 : r_auto) * sj;
+    if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* too few photons seen to estimate anything: widen, as a k-nearest-
          * neighbour radius would, instead of waiting at a radius that may be
          * the reason so few photons arrive */
-        rad = 2.0 * p->r;
+        rad = 2.0 * p->R;
         return rad > hi ? hi : rad;
     }
-    if (j > APPM__WARMUP && p->n >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
+    if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
         rad = appm__r_opt(p->S, appm__di2(p, appm__lap_count(j - 1)), (double)M * (double)j, APPM__CF);
         if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
-        if (p->r > 0.0) {
-            if (rad < 0.5 * p->r) rad = 0.5 * p->r;
-            if (rad > 2.0 * p->r) rad = 2.0 * p->r;
+        if (p->R > 0.0) {
+            if (rad < 0.5 * p->R) rad = 0.5 * p->R;
+            if (rad > 2.0 * p->R) rad = 2.0 * p->R;
         }
     }
     if (!(rad >= lo)) rad = lo; /* also catches NaN */
@@ -3608,15 +3744,15 @@ static double appm__appm_radius(double r1, double rb, uint64_t M, uint64_t j, co
     return rad;
 }
 
-/* The Laplacian bandwidth of pass j: h_j = kappa r_b j^(-1/8), a fixed schedule
- * from the scene's automatic radius r_b (section 12), shrinking more slowly than
- * r (design notes, section 4.6).  It deliberately does not follow the pixel's
+/* The Laplacian bandwidth of pass j: h_j = kappa r_auto j^(-1/8), a fixed schedule
+ * from the automatic radius r_auto (section 12), shrinking more slowly than
+ * r (docs/algorithm.md 4.6).  It deliberately does not follow the pixel's
  * adaptive radius: with h = kappa r, a sharp feature seen through a wide h
  * looks flat (|dI| falls like h^-4), which licenses a wider r, which keeps h
  * wide - a start with a large radius would never come back. */
-static double appm__lap_h(double rb, uint64_t j)
+static double appm__lap_h(double r_auto, uint64_t j)
 {
-    return APPM__KAPPA * rb * pow((double)j, -1.0 / 8.0);
+    return APPM__KAPPA * r_auto * pow((double)j, -1.0 / 8.0);
 }
 
 /* Welford update of the per-pass estimate's luminance (for the noise estimate). */
@@ -3627,92 +3763,290 @@ static void appm__welford(appm__pixel *p, uint64_t j, double v)
     p->wm2 += d * (v - p->wmean);
 }
 
-/* The recursive (Yamato) means of ppm and appm after pass j:
- *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j     and likewise S_j; dI is the
- *   weighted mean over the passes that estimate the Laplacian (weight
- *   dl_weight, 0 on the others),
- * plus the bookkeeping of the error estimate (sum of r_j^2, Welford). */
-static void appm__pixel_update(appm__pixel *p, uint64_t pass, int adaptive, const double *e,
-                               double s, double dl, double dl_weight, uint64_t count, double ld_lum)
+/* The recursive (Yamato) mean of ppm and appm after pass j:
+ *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j. */
+static void appm__mean_update(double *I, uint64_t pass, const double *e)
 {
     double j = (double)pass;
     int c;
-    for (c = 0; c < 3; ++c) p->acc[c] += (e[c] - p->acc[c]) / j;
-    if (adaptive) {
-        p->S += (s - p->S) / j;
-        if (dl_weight > 0.0) {
-            /* inverse-variance weighted mean (West 1979): a Laplacian from bandwidth
-             * h has variance ~ 1/h^6, so early passes with a small radius would
-             * otherwise drown the later, better estimates */
-            double d = dl - p->dI;
-            p->dI_w += dl_weight;
-            p->dI += d * (dl_weight / p->dI_w);
-            p->dI_m2 += dl_weight * d * (dl - p->dI);
-        }
-        p->n += (double)count;
-        p->r2sum += p->r * p->r;
-    }
-    appm__welford(p, pass, ld_lum + appm__lumd(e));
+    for (c = 0; c < 3; ++c) I[c] += (e[c] - I[c]) / j;
 }
+
+/* appm's statistics after pass j: the mean I and likewise S; dI is the weighted
+ * mean over the passes that estimate the Laplacian (weight dl_weight, 0 on the
+ * others); plus the photon count and the sum of r_j^2 of the bias estimate. */
+static void appm__appm_update(appm__appm_state *p, uint64_t pass, const double *e, double s, double dl,
+                              double dl_weight, uint64_t count)
+{
+    double j = (double)pass;
+    appm__mean_update(p->I, pass, e);
+    p->S += (s - p->S) / j;
+    if (dl_weight > 0.0) {
+        /* inverse-variance weighted mean (West 1979): a Laplacian from bandwidth
+         * h has variance ~ 1/h^6, so early passes with a small radius would
+         * otherwise drown the later, better estimates */
+        double d = dl - p->dI;
+        p->dI_w += dl_weight;
+        p->dI += d * (dl_weight / p->dI_w);
+        p->dI_m2 += dl_weight * d * (dl - p->dI);
+    }
+    p->N += count;
+    p->R2sum += p->R * p->R;
+}
+
+/* ---- 10.2 The estimator table ------------------------------------------------
+ *
+ * One entry per appm_method: what the method is (capability flags, the aux
+ * maps it provides, its per-pixel state) and what it does (hooks).  The
+ * renderer picks its entry once, in appm_renderer_create, and calls only
+ * through it; a new method is one entry plus its own functions.  Hooks that a
+ * method does not need are NULL.  Per pass j the renderer calls:
+ *   start       once, on pass 1, after r1 is known (initialise state)
+ *   radius      per pixel: the gather radius of pass j (stored in appm__vp.r)
+ *   commit      per pixel, after the gather: fold it into the state (the
+ *               direct term is already committed to appm__pixel)
+ *   pass_end    once, after the gather (global schedules)
+ * and on request:
+ *   photon_term the photon part of the pixel value after j passes (0: none)
+ *   bias        the estimated bias of the pixel (luminance), for the error
+ *   aux_value   the RADIUS and LAPLACIAN maps */
+enum {
+    APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
+    APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
+    APPM__CAP_LAPLACIAN = 4, /* gathers the Laplacian, on the passes appm__lap_pass   */
+    APPM__CAP_ERROR = 8      /* keeps an error estimate (appm_stats.est_relerr)      */
+};
+
+typedef struct appm__field { /* one field of a method's per-pixel state */
+    const char *name;
+    size_t offset;           /* bytes from the start of the state */
+    unsigned count;          /* values */
+    unsigned is_u64;         /* 1: uint64_t values, 0: doubles */
+} appm__field;
+
+typedef struct appm__estimator {
+    const char *name;        /* appm_method_name */
+    unsigned caps;           /* APPM__CAP_* */
+    unsigned aux;            /* bit (1 << k) for every map k of appm_aux it provides */
+    size_t state_size;       /* bytes of per-pixel state (0: none) */
+    const appm__field *fields;
+    unsigned nfields;
+    void (*start)(appm_renderer *r);
+    float (*radius)(const appm_renderer *r, const void *st);
+    void (*commit)(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
+                   unsigned worker);
+    void (*pass_end)(appm_renderer *r);
+    int (*photon_term)(const appm_renderer *r, const void *st, double j, double *out);
+    double (*bias)(const void *st, double j);
+    double (*aux_value)(const appm_renderer *r, const void *st, appm_aux which);
+} appm__estimator;
+
+/* The state of pixel i. */
+static void *appm__state(const appm_renderer *r, size_t i)
+{
+    return r->state + i * r->est->state_size;
+}
+
+/* This pass's estimates from a gather (appm__gather_finish); a NaN or inf
+ * among them is counted as dropped and the pass contributes 0 instead. */
+static void appm__gather_estimates(appm_renderer *r, const appm__gather *g, unsigned worker, double *e, double *s,
+                                   double *dl)
+{
+    appm__gather_finish(g, 1.0 / (double)r->M, e, s, dl);
+    if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && *s - *s == 0.0 &&
+          *dl - *dl == 0.0)) {
+        r->dropped[worker]++;
+        e[0] = e[1] = e[2] = *s = *dl = 0.0;
+    }
+}
+
+/* -- ppm (Knaus-Zwicker 2011): one global radius, r_{j+1}^2 = r_j^2 (j + alpha) / (j + 1)
+ *    (algorithm.md 2.3), the plain mean of the Ihat_j. */
+static const appm__field appm__ppm_fields[] = {{"I", offsetof(appm__ppm_state, I), 3, 0}};
+
+static void appm__ppm_start(appm_renderer *r) { r->ppm.R2 = r->r1 * r->r1; }
+
+static float appm__ppm_radius(const appm_renderer *r, const void *st)
+{
+    (void)st;
+    return (float)sqrt(r->ppm.R2);
+}
+
+static void appm__ppm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
+                             unsigned worker)
+{
+    appm__ppm_state *k = (appm__ppm_state *)st;
+    double e[3], s, dl;
+    appm__gather_estimates(r, g, worker, e, &s, &dl);
+    appm__mean_update(k->I, r->pass, e);
+    appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e));
+}
+
+static void appm__ppm_pass_end(appm_renderer *r)
+{
+    r->ppm.R = sqrt(r->ppm.R2);
+    r->ppm.R2 *= ((double)r->pass + r->alpha) / ((double)r->pass + 1.0);
+}
+
+static int appm__ppm_term(const appm_renderer *r, const void *st, double j, double *out)
+{
+    const appm__ppm_state *k = (const appm__ppm_state *)st;
+    (void)r;
+    (void)j;
+    out[0] = k->I[0];
+    out[1] = k->I[1];
+    out[2] = k->I[2];
+    return 1;
+}
+
+static double appm__ppm_aux(const appm_renderer *r, const void *st, appm_aux which)
+{
+    (void)st;
+    (void)which; /* RADIUS only */
+    return r->ppm.R;
+}
+
+/* -- sppm (Hachisuka-Jensen 2009): after a pass that found m photons with flux
+ *    Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)), tau' = (tau + Phi) R'^2 / R^2
+ *    (algorithm.md 2.2); L = tau / (j M pi R^2). */
+static const appm__field appm__sppm_fields[] = {{"tau", offsetof(appm__sppm_state, tau), 3, 0},
+                                                {"N", offsetof(appm__sppm_state, N), 1, 0},
+                                                {"R", offsetof(appm__sppm_state, R), 1, 0}};
+
+static void appm__sppm_start(appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    for (i = 0; i < npix; ++i) ((appm__sppm_state *)appm__state(r, i))->R = r->r1;
+}
+
+static float appm__sppm_radius(const appm_renderer *r, const void *st)
+{
+    (void)r;
+    return (float)((const appm__sppm_state *)st)->R;
+}
+
+static void appm__sppm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp,
+                              const appm__gather *g, unsigned worker)
+{
+    appm__sppm_state *k = (appm__sppm_state *)st;
+    double R = k->R, N_new, R_new, ratio, phi[3];
+    int c;
+    (void)px;
+    (void)vp;
+    if (g->count == 0) return;
+    N_new = k->N + r->alpha * (double)g->count;
+    R_new = R * sqrt(N_new / (k->N + (double)g->count));
+    ratio = (R_new * R_new) / (R * R);
+    phi[0] = g->wf.x * g->e[0];
+    phi[1] = g->wf.y * g->e[1];
+    phi[2] = g->wf.z * g->e[2];
+    if (phi[0] - phi[0] == 0.0 && phi[1] - phi[1] == 0.0 && phi[2] - phi[2] == 0.0) {
+        for (c = 0; c < 3; ++c) k->tau[c] = (k->tau[c] + phi[c]) * ratio;
+        k->N = N_new;
+        k->R = R_new;
+    } else {
+        r->dropped[worker]++;
+    }
+}
+
+static int appm__sppm_term(const appm_renderer *r, const void *st, double j, double *out)
+{
+    const appm__sppm_state *k = (const appm__sppm_state *)st;
+    int c;
+    if (!(k->R > 0.0)) return 0;
+    for (c = 0; c < 3; ++c) out[c] = k->tau[c] / (j * (double)r->M * APPM__PI * k->R * k->R);
+    return 1;
+}
+
+static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux which)
+{
+    (void)r;
+    (void)which; /* RADIUS only: the radius of the next gather */
+    return ((const appm__sppm_state *)st)->R;
+}
+
+/* -- appm (Kaplanyan-Dachsbacher 2013): the radius of section 10.1, the
+ *    recursive means of appm__appm_update, bias (mu2 r^2 / 2) dI. */
+static const appm__field appm__appm_fields[] = {
+    {"I", offsetof(appm__appm_state, I), 3, 0},         {"S", offsetof(appm__appm_state, S), 1, 0},
+    {"dI", offsetof(appm__appm_state, dI), 1, 0},       {"dI_w", offsetof(appm__appm_state, dI_w), 1, 0},
+    {"dI_m2", offsetof(appm__appm_state, dI_m2), 1, 0}, {"R", offsetof(appm__appm_state, R), 1, 0},
+    {"R2sum", offsetof(appm__appm_state, R2sum), 1, 0}, {"N", offsetof(appm__appm_state, N), 1, 1}};
+
+static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
+{
+    return (float)appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, (const appm__appm_state *)st);
+}
+
+static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
+                              unsigned worker)
+{
+    appm__appm_state *a = (appm__appm_state *)st;
+    double e[3], s, dl, hr = g->h / r->r_auto;
+    a->R = vp->r;
+    appm__gather_estimates(r, g, worker, e, &s, &dl);
+    appm__appm_update(a, r->pass, e, s, dl, g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g->count);
+    appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e));
+}
+
+static double appm__appm_bias(const void *st, double j)
+{
+    const appm__appm_state *a = (const appm__appm_state *)st;
+    return 0.5 * APPM__MU2 * a->dI * (a->R2sum / j);
+}
+
+static double appm__appm_aux(const appm_renderer *r, const void *st, appm_aux which)
+{
+    const appm__appm_state *a = (const appm__appm_state *)st;
+    (void)r;
+    return which == APPM_AUX_LAPLACIAN ? a->dI : a->R;
+}
+
+#define APPM__AUX_BIT(k) (1u << (k))
+
+static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
+    /* APPM_METHOD_APPM */
+    {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_LAPLACIAN | APPM__CAP_ERROR,
+     APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_LAPLACIAN) |
+         APPM__AUX_BIT(APPM_AUX_ERROR),
+     sizeof(appm__appm_state), appm__appm_fields, sizeof appm__appm_fields / sizeof appm__appm_fields[0], NULL,
+     appm__appm_radius_hook, appm__appm_commit, NULL, appm__ppm_term, appm__appm_bias, appm__appm_aux},
+    /* APPM_METHOD_PPM */
+    {"ppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE),
+     sizeof(appm__ppm_state), appm__ppm_fields, sizeof appm__ppm_fields / sizeof appm__ppm_fields[0],
+     appm__ppm_start, appm__ppm_radius, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL, appm__ppm_aux},
+    /* APPM_METHOD_SPPM */
+    {"sppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS), sizeof(appm__sppm_state), appm__sppm_fields,
+     sizeof appm__sppm_fields / sizeof appm__sppm_fields[0], appm__sppm_start, appm__sppm_radius,
+     appm__sppm_commit, NULL, appm__sppm_term, NULL, appm__sppm_aux},
+    /* APPM_METHOD_PT: section 11; its whole path sum is the "direct" term */
+    {"pt", APPM__CAP_ERROR, APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_ERROR), 0, NULL, 0, NULL,
+     NULL, NULL, NULL, NULL, NULL, NULL}};
 
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
-    const double invM = 1.0 / (double)r->M;
+    const appm__estimator *est = r->est;
     uint32_t x;
     for (x = 0; x < r->w; ++x) {
         size_t pi = (size_t)row * r->w + x;
         const appm__vp *vp = &r->vp[pi];
         appm__pixel *p = &r->pix[pi];
         appm__gather g;
-        double e[3] = {0, 0, 0}, s = 0.0, dl = 0.0;
-        int c;
         memset(&g, 0, sizeof g);
         appm__add3(p->ld, vp->ld); /* the pass has succeeded: commit its direct term */
-        if (r->method == APPM_METHOD_APPM) p->r = vp->r;
         if (vp->segs > 0 && vp->segs < r->max_depth) {
             g.x = vp->x;
             g.n = vp->n;
             appm__basis(vp->n, &g.t, &g.b);
             g.wf = vp->wf;
             g.max_p = r->max_depth - vp->segs;
-            g.biweight = r->method == APPM_METHOD_APPM;
-            g.R = r->method == APPM_METHOD_PPM ? (float)sqrt(r->ppm_r2) : (float)p->r;
-            g.h = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)
-                      ? (float)appm__lap_h(r->r_auto, r->pass)
-                      : 0.0f;
-            appm__gather_query(r, &g);
+            g.biweight = (est->caps & APPM__CAP_BIWEIGHT) != 0;
+            g.R = vp->r;
+            g.h = (float)r->lap_h;
+            appm__gather_query(&r->pmap, &g);
         }
-        if (r->method == APPM_METHOD_SPPM) {
-            if (g.count > 0) {
-                double R = p->r, n_new = p->n + r->alpha * (double)g.count;
-                double R_new = R * sqrt(n_new / (p->n + (double)g.count)), ratio = (R_new * R_new) / (R * R);
-                double phi[3];
-                phi[0] = g.wf.x * g.e[0];
-                phi[1] = g.wf.y * g.e[1];
-                phi[2] = g.wf.z * g.e[2];
-                if (phi[0] - phi[0] == 0.0 && phi[1] - phi[1] == 0.0 && phi[2] - phi[2] == 0.0) {
-                    for (c = 0; c < 3; ++c) p->acc[c] = (p->acc[c] + phi[c]) * ratio;
-                    p->n = n_new;
-                    p->r = R_new;
-                } else {
-                    r->dropped[worker]++;
-                }
-            }
-            continue;
-        }
-        appm__gather_finish(&g, invM, e, &s, &dl);
-        if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && s - s == 0.0 &&
-              dl - dl == 0.0)) {
-            r->dropped[worker]++;
-            e[0] = e[1] = e[2] = s = dl = 0.0;
-        }
-        {
-            double hr = g.h / r->r_auto;
-            appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl,
-                               g.h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g.count,
-                               (double)appm__lum(vp->ld));
-        }
+        est->commit(r, p, appm__state(r, pi), vp, &g, worker);
     }
 }
 
@@ -3894,40 +4228,23 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
     for (i = 0; i < s->ntri; ++i) {
         const appm__material *m = &s->mat[s->info[i].mat];
         appm__light *l;
-        double a = (double)s->info[i].area;
         if (!m->emissive) continue;
         l = &s->light[k];
         l->kind = APPM__LIGHT_AREA;
         l->tri = i;
         l->value = m->ke;
-        l->power[0] = APPM__PI * a * m->ke.x; /* Phi = pi A Le for a Lambertian emitter */
-        l->power[1] = APPM__PI * a * m->ke.y;
-        l->power[2] = APPM__PI * a * m->ke.z;
+        appm__light_power(s, l, l->power);
         s->info[i].light = (int32_t)k++;
     }
     for (i = 0; i < extra; ++i) {
         appm__light *l = &s->light[k];
         *l = ((appm__light *)L->lights.data)[i];
-        if (l->kind == APPM__LIGHT_POINT) {
-            l->power[0] = 4.0 * APPM__PI * l->value.x;
-            l->power[1] = 4.0 * APPM__PI * l->value.y;
-            l->power[2] = 4.0 * APPM__PI * l->value.z;
-        } else if (l->kind == APPM__LIGHT_SPOT) {
-            /* 2 pi I [ (1 - cos_inner) + (cos_inner - cos_cone) / 5 ]: the d^4 ramp
-             * integrates to a fifth of its width in cos(theta) */
-            double f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
-            l->power[0] = f * l->value.x;
-            l->power[1] = f * l->value.y;
-            l->power[2] = f * l->value.z;
-        } else { /* environment: L through the disk of the bounding sphere from all directions */
-            double f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
+        if (l->kind == APPM__LIGHT_ENV) {
             if (s->env >= 0)
                 return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
             s->env = (int)k;
-            l->power[0] = f * l->value.x;
-            l->power[1] = f * l->value.y;
-            l->power[2] = f * l->value.z;
         }
+        appm__light_power(s, l, l->power);
         k++;
     }
     s->nlight = k;
@@ -4185,7 +4502,8 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->task_used);
     appm__free(&r->mem, r->task_failed);
     appm__free(&r->mem, r->dest);
-    appm__free(&r->mem, r->cell);
+    appm__free(&r->mem, r->state);
+    appm__pmap_free(&r->pmap, &r->mem);
 }
 
 /* Photons per task region of the first store, 1.5 per path plus slack, in
@@ -4199,19 +4517,12 @@ static size_t appm__store_guess(uint64_t paths, unsigned tasks)
     return guess < (double)limit ? (size_t)guess : limit;
 }
 
-APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
-                                          appm_renderer **out, appm_diag *diag)
+/* The options of a renderer of `scene`: cfg (NULL: all defaults) with every 0
+ * replaced by its default, validated.  APPM_ERR_INVALID_ARG for an absurd one. */
+static appm_status appm__config_resolve(const appm_scene *scene, const appm_config *cfg, appm_config *out,
+                                        appm_diag *diag)
 {
-    appm__mem m;
-    appm_renderer *r;
     appm_config c;
-    size_t npix;
-    appm_diag local;
-    if (!diag) diag = &local;
-    appm__diag_clear(diag);
-    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
-    *out = NULL;
-    if (!scene) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene");
     if (cfg) c = *cfg;
     else memset(&c, 0, sizeof c);
     if (c.width == 0) c.width = scene->width;
@@ -4219,7 +4530,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     if (c.width > 32768 || c.height > 32768)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "image size %ux%u is above 32768",
                           (unsigned)c.width, (unsigned)c.height);
-    if ((int)c.method < 0 || c.method > APPM_METHOD_PT)
+    if ((int)c.method < 0 || c.method >= APPM_METHOD_COUNT)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown method %d", (int)c.method);
     if ((int)c.direct < 0 || c.direct > APPM_DIRECT_PHOTONS)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown direct-light mode");
@@ -4241,6 +4552,26 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
+    *out = c;
+    return APPM_OK;
+}
+
+APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
+                                          appm_renderer **out, appm_diag *diag)
+{
+    appm__mem m;
+    appm_renderer *r;
+    appm_config c;
+    appm_status st;
+    size_t npix;
+    appm_diag local;
+    if (!diag) diag = &local;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
+    *out = NULL;
+    if (!scene) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene");
+    memset(&c, 0, sizeof c); /* filled below; gcc cannot see that on every path */
+    if ((st = appm__config_resolve(scene, cfg, &c, diag)) != APPM_OK) return st;
     appm__mem_init(&m, &c);
     m.diag = diag;
     r = (appm_renderer *)appm__alloc(&m, 1, sizeof *r);
@@ -4248,7 +4579,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->mem = m;
     r->mem.diag = diag;
     r->scene = scene;
-    r->method = c.method;
+    r->est = &appm__estimators[c.method];
     r->direct = c.direct;
     r->w = c.width;
     r->h = c.height;
@@ -4266,7 +4597,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->vp = (appm__vp *)appm__alloc(&r->mem, npix, sizeof *r->vp);
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
-    if (r->method != APPM_METHOD_PT) {
+    if (r->est->state_size) r->state = (unsigned char *)appm__alloc(&r->mem, npix, r->est->state_size);
+    if (r->est->caps & APPM__CAP_PHOTONS) {
         r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks, sizeof *r->chunk);
         r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
         r->task_failed = (int *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_failed);
@@ -4275,8 +4607,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }
-    if (!r->vp || !r->pix || !r->image ||
-        (r->method != APPM_METHOD_PT && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
+    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) ||
+        ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
         fm = r->mem;
@@ -4304,6 +4636,7 @@ APPM_API const char *appm_renderer_last_error(const appm_renderer *r)
     return r ? r->last_error : "";
 }
 
+/* Every pixel's gather radius of this pass, from its method (10.2). */
 static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
@@ -4311,7 +4644,7 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
     (void)worker;
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
-        r->vp[i].r = (float)appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, &r->pix[i]);
+        r->vp[i].r = r->est->radius(r, appm__state(r, i));
     }
 }
 
@@ -4334,103 +4667,112 @@ static double appm__default_radius(appm_renderer *r)
     return rad;
 }
 
-/* Median of the gather radii of the pixels that have a visible point. */
+/* Median of the gather reaches (the radius, or the Laplacian's 2h) of the
+ * pixels that have a visible point: section 9's cell size is a multiple of it. */
 static float appm__median_gather_radius(appm_renderer *r)
 {
     size_t n = 0, i, npix = (size_t)r->w * r->h;
     float *tmp = r->image; /* scratch: the image is rebuilt on request */
-    const double h2 = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)
-                          ? 2.0 * appm__lap_h(r->r_auto, r->pass) /* the Laplacian's reach */
-                          : 0.0;
+    const double h2 = 2.0 * r->lap_h;
     for (i = 0; i < npix; ++i) {
         double g;
         if (r->vp[i].segs == 0) continue;
-        g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2)
-            : r->method == APPM_METHOD_APPM ? (double)r->vp[i].r
-                                            : r->pix[i].r;
+        g = (double)r->vp[i].r;
         tmp[n++] = (float)(h2 > g ? h2 : g);
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
     return APPM__CELL_SCALE * appm__select(tmp, n, n / 2);
 }
 
+/* The photon part of pixel i's value after j passes into out[3]; 0: none. */
+static int appm__photon_term(const appm_renderer *r, size_t i, double j, double *out)
+{
+    return r->est->photon_term && r->est->photon_term(r, appm__state(r, i), j, out);
+}
+
+/* The estimated relative error of the image (appm_stats.est_relerr):
+ *   sqrt( mean over pixels of (bias^2 + Var) / (I^2 + 0.01) ),
+ * Var from the Welford spread of the per-pass estimates, divided by j. */
 static void appm__estimate_error(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     double j = (double)r->pass, sum = 0.0;
-    if (r->pass < 2 || (r->method != APPM_METHOD_APPM && r->method != APPM_METHOD_PT)) {
+    if (r->pass < 2 || !(r->est->caps & APPM__CAP_ERROR)) {
         r->stats.est_relerr = -1.0;
         return;
     }
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = p->wm2 / ((j - 1.0) * j), bias = 0.0, I;
-        if (r->method == APPM_METHOD_APPM) {
-            bias = 0.5 * APPM__MU2 * p->dI * (p->r2sum / j);
-            I = appm__lumd(p->ld) / j + appm__lumd(p->acc);
-        } else {
-            I = appm__lumd(p->ld) / j;
-        }
+        double var = p->wm2 / ((j - 1.0) * j), bias = 0.0, I, t[3];
+        if (r->est->bias) bias = r->est->bias(appm__state(r, i), j);
+        I = appm__lumd(p->ld) / j;
+        if (appm__photon_term(r, i, j, t)) I += appm__lumd(t);
         sum += (bias * bias + var) / (I * I + 0.01);
     }
     r->stats.est_relerr = sqrt(sum / (double)npix);
 }
 
+/* One photon-mapping pass (eye pass, radii, photon pass, map, gather); times
+ * t[0..2] at the ends of the radii, the photon pass and the map.  On failure
+ * nothing is committed: the pixel state changes only in the gather. */
+static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
+{
+    const appm__estimator *est = r->est;
+    appm_status st;
+    float cell;
+    appm__parallel_for(r->threads, r->h, appm__eye_task, r);
+    if (r->pass == 1) {
+        r->r_auto = appm__default_radius(r);
+        if (r->r1_auto) r->r1 = r->r_auto;
+        if (est->start) est->start(r);
+    }
+    r->lap_h = (est->caps & APPM__CAP_LAPLACIAN) && appm__lap_pass(r->pass) ? appm__lap_h(r->r_auto, r->pass)
+                                                                             : 0.0;
+    appm__parallel_for(r->threads, r->h, appm__radius_task, r);
+    cell = appm__median_gather_radius(r);
+    t[0] = appm__seconds();
+    st = appm__photon_pass(r);
+    t[1] = appm__seconds();
+    if (st == APPM_OK)
+        st = appm__pmap_build(&r->pmap, &r->mem, r->ph, appm__store_compact(r), r->dest, r->chunk, r->nchunks,
+                              cell > 0.0f ? cell : 1.0f);
+    if (st != APPM_OK) return st;
+    t[2] = appm__seconds();
+    appm__parallel_for(r->threads, r->h, appm__gather_task, r);
+    if (est->pass_end) est->pass_end(r);
+    r->stats.photons_emitted += r->M;
+    r->stats.photons_stored = r->pmap.n;
+    return APPM_OK;
+}
+
 APPM_API appm_status appm_renderer_pass(appm_renderer *r)
 {
-    double t0, t1, t2, t3, t4;
+    double t0, t[3], t4;
     appm_status st;
     unsigned k;
     if (!r) return APPM_ERR_INVALID_ARG;
     appm__diag_clear(&r->diag);
     t0 = appm__seconds();
     r->pass++;
-    r->aux_valid = 0;
-    if (r->method == APPM_METHOD_PT) {
+    if (!(r->est->caps & APPM__CAP_PHOTONS)) {
         appm__parallel_for(r->threads, r->h, appm__pt_task, r);
-        t1 = t2 = t3 = appm__seconds();
-    } else {
-        float cell;
-        appm__parallel_for(r->threads, r->h, appm__eye_task, r);
-        if (r->pass == 1) {
-            size_t i, npix = (size_t)r->w * r->h;
-            r->r_auto = appm__default_radius(r);
-            if (r->r1_auto) r->r1 = r->r_auto;
-            r->ppm_r2 = r->r1 * r->r1;
-            if (r->method == APPM_METHOD_SPPM)
-                for (i = 0; i < npix; ++i) r->pix[i].r = r->r1;
-        }
-        if (r->method == APPM_METHOD_APPM) appm__parallel_for(r->threads, r->h, appm__radius_task, r);
-        cell = appm__median_gather_radius(r);
-        t1 = appm__seconds();
-        st = appm__photon_pass(r);
-        t2 = appm__seconds();
-        if (st == APPM_OK) st = appm__grid_build(r, cell > 0.0f ? cell : 1.0f);
-        if (st != APPM_OK) {
-            r->pass--;
-            if (st == APPM_ERR_NOMEM && r->diag.status == APPM_OK)
-                appm__fail(&r->diag, st, NULL, 0, "out of memory in the photon pass");
-            appm__copy_str(r->last_error, sizeof r->last_error, r->diag.message);
-            return st;
-        }
-        t3 = appm__seconds();
-        appm__parallel_for(r->threads, r->h, appm__gather_task, r);
-        if (r->method == APPM_METHOD_PPM) {
-            r->stats.initial_radius = r->r1;
-            r->ppm_r2 *= ((double)r->pass + r->alpha) / ((double)r->pass + 1.0);
-        }
-        r->stats.photons_emitted += r->M;
-        r->stats.photons_stored = r->nph;
+        t[0] = t[1] = t[2] = appm__seconds();
+    } else if ((st = appm__photon_method_pass(r, t)) != APPM_OK) {
+        r->pass--;
+        if (st == APPM_ERR_NOMEM && r->diag.status == APPM_OK)
+            appm__fail(&r->diag, st, NULL, 0, "out of memory in the photon pass");
+        appm__copy_str(r->last_error, sizeof r->last_error, r->diag.message);
+        return st;
     }
     t4 = appm__seconds();
     r->stats.passes = r->pass;
     r->stats.eye_paths += (uint64_t)r->w * r->h;
     r->stats.initial_radius = r->r1;
     r->stats.seconds += t4 - t0;
-    r->stats.seconds_eye += t1 - t0;
-    r->stats.seconds_photons += t2 - t1;
-    r->stats.seconds_grid += t3 - t2;
-    r->stats.seconds_gather += t4 - t3;
+    r->stats.seconds_eye += t[0] - t0;
+    r->stats.seconds_photons += t[1] - t[0];
+    r->stats.seconds_grid += t[2] - t[1];
+    r->stats.seconds_gather += t4 - t[2];
     r->stats.dropped_samples = 0;
     for (k = 0; k < APPM__MAX_THREADS; ++k) r->stats.dropped_samples += r->dropped[k];
     r->stats.memory_bytes = r->mem.live;
@@ -4439,6 +4781,7 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
     return APPM_OK;
 }
 
+/* Pixel value after j passes: mean direct term + the method's photon term. */
 APPM_API void appm_renderer_image(appm_renderer *r, appm_image *out)
 {
     size_t i, npix;
@@ -4451,14 +4794,11 @@ APPM_API void appm_renderer_image(appm_renderer *r, appm_image *out)
     j = r->pass ? (double)r->pass : 1.0;
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        int c;
+        double t[3];
+        int c, has = appm__photon_term(r, i, j, t);
         for (c = 0; c < 3; ++c) {
             double v = p->ld[c] / j;
-            if (r->method == APPM_METHOD_SPPM) {
-                if (p->r > 0.0) v += p->acc[c] / (j * (double)r->M * APPM__PI * p->r * p->r);
-            } else if (r->method != APPM_METHOD_PT) {
-                v += p->acc[c];
-            }
+            if (has) v += t[c];
             r->image[3 * i + c] = (float)v;
         }
     }
@@ -4480,10 +4820,7 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
     double j;
     float *a;
     if (!r || (int)which < 0 || which >= APPM_AUX_COUNT || r->pass == 0) return NULL;
-    if (which == APPM_AUX_LAPLACIAN && r->method != APPM_METHOD_APPM) return NULL;
-    if (which == APPM_AUX_RADIUS && r->method == APPM_METHOD_PT) return NULL;
-    if ((which == APPM_AUX_VARIANCE || which == APPM_AUX_ERROR) && r->method == APPM_METHOD_SPPM) return NULL;
-    if (which == APPM_AUX_ERROR && r->method == APPM_METHOD_PPM) return NULL;
+    if (!(r->est->aux & APPM__AUX_BIT(which))) return NULL;
     npix = (size_t)r->w * r->h;
     j = (double)r->pass;
     if (!r->aux[which]) { /* allocated on first request: most renders never ask */
@@ -4496,20 +4833,32 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
         double var = r->pass > 1 ? p->wm2 / ((j - 1.0) * j) : 0.0, v;
         switch (which) {
         case APPM_AUX_RADIUS:
-            v = r->method == APPM_METHOD_PPM
-                    ? sqrt(r->ppm_r2 * ((j + 1.0) / (j + r->alpha))) /* the radius of the last pass */
-                    : p->r;
-            break;
+        case APPM_AUX_LAPLACIAN: v = r->est->aux_value(r, appm__state(r, i), which); break;
         case APPM_AUX_VARIANCE: v = var; break;
-        case APPM_AUX_LAPLACIAN: v = p->dI; break;
-        default:
+        default: /* the error bar |bias| + 1.645 sigma */
             v = 1.645 * sqrt(var);
-            if (r->method == APPM_METHOD_APPM) v += fabs(0.5 * APPM__MU2 * p->dI * (p->r2sum / j));
+            if (r->est->bias) v += fabs(r->est->bias(appm__state(r, i), j));
             break;
         }
         a[i] = (float)v;
     }
     return a;
+}
+
+APPM_API const char *appm_method_name(appm_method m)
+{
+    return (int)m >= 0 && m < APPM_METHOD_COUNT ? appm__estimators[m].name : NULL;
+}
+
+APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
+{
+    int k;
+    for (k = 0; name && k < (int)APPM_METHOD_COUNT; ++k)
+        if (strcmp(name, appm__estimators[k].name) == 0) {
+            if (out) *out = (appm_method)k;
+            return APPM_OK;
+        }
+    return APPM_ERR_INVALID_ARG;
 }
 
 /* ==== LICENSE =============================================================

@@ -122,6 +122,21 @@ static const char *const RENDER_HELP =
     "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
     "  -q, --quiet           no progress output and no warnings\n";
 
+/* "appm, ppm, sppm or pt": the library's method names, for messages. */
+static const char *method_list(char *buf, size_t size)
+{
+    size_t len = 0;
+    int m, n = (int)APPM_METHOD_COUNT;
+    buf[0] = 0;
+    for (m = 0; m < n; ++m) {
+        int k = snprintf(buf + len, size - len, "%s%s", m == 0 ? "" : (m + 1 < n ? ", " : " or "),
+                         appm_method_name((appm_method)m));
+        if (k < 0 || (size_t)k >= size - len) break;
+        len += (size_t)k;
+    }
+    return buf;
+}
+
 /* ---- Strict number parsing ---------------------------------------------- */
 
 static int parse_double(const char *s, double *out)
@@ -294,11 +309,10 @@ static int parse_render(int argc, char **argv, render_opts *o)
         else if (strcmp(a, "--log") == 0) o->log = v;
         else if (strcmp(a, "--aux") == 0) o->aux = v;
         else if (strcmp(a, "--method") == 0) {
-            if (strcmp(v, "appm") == 0) o->cfg.method = APPM_METHOD_APPM;
-            else if (strcmp(v, "ppm") == 0) o->cfg.method = APPM_METHOD_PPM;
-            else if (strcmp(v, "sppm") == 0) o->cfg.method = APPM_METHOD_SPPM;
-            else if (strcmp(v, "pt") == 0) o->cfg.method = APPM_METHOD_PT;
-            else return usage_error("unknown method '%s' (appm, ppm, sppm or pt)", v);
+            if (appm_method_parse(v, &o->cfg.method) != APPM_OK) {
+                char names[256];
+                return usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
+            }
         } else if (strcmp(a, "--direct") == 0) {
             if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
             else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
@@ -473,6 +487,7 @@ static int cmd_render(int argc, char **argv)
         if (o.have_until && st.est_relerr >= 0 && st.est_relerr < o.until_error) break;
     }
     if (progress) fprintf(stderr, "\n");
+    appm_renderer_stats(r, &st); /* also after a failed pass, even the first */
     if (rc == 0 || st.passes > 0) {
         appm_renderer_image(r, &img);
         if ((s = appm_image_write(o.output, &img, o.exposure, &d)) != APPM_OK) {
@@ -491,12 +506,11 @@ static int cmd_render(int argc, char **argv)
         }
     }
     if (rc == 0) {
-        static const char *const mname[4] = {"appm", "ppm", "sppm", "pt"};
         appm_renderer_stats(r, &st);
         printf("passes=%llu photons=%llu seconds=%.2f radius=%.6g output=%s method=%s threads=%u "
                "peak_bytes=%llu dropped=%llu",
                (unsigned long long)st.passes, (unsigned long long)st.photons_emitted, st.seconds,
-               st.initial_radius, o.output, mname[o.cfg.method], st.threads,
+               st.initial_radius, o.output, appm_method_name(o.cfg.method), st.threads,
                (unsigned long long)st.peak_bytes, (unsigned long long)st.dropped_samples);
         printf(" eye_s=%.3f photon_s=%.3f grid_s=%.3f gather_s=%.3f photons_stored=%llu",
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
@@ -519,6 +533,26 @@ done:
 
 /* ---- appm compare / info --------------------------------------------------- */
 
+/* Pixels of `img` with a NaN or infinite channel; the first (in reading order,
+ * row 0 at the top) into *fx, *fy.  Says so on stderr and returns their count. */
+static unsigned long report_nonfinite(const char *path, const appm_image *img)
+{
+    unsigned long n = 0, fx = 0, fy = 0, i, npix = (unsigned long)img->width * img->height;
+    for (i = 0; i < npix; ++i) {
+        const float *p = &img->rgb[3 * i];
+        int c, bad = 0;
+        for (c = 0; c < 3; ++c) bad |= !(p[c] - p[c] == 0.0f); /* NaN or inf */
+        if (bad && n++ == 0) {
+            fx = i % img->width;
+            fy = i / img->width;
+        }
+    }
+    if (n)
+        fprintf(stderr, "appm: %s: %lu pixel%s hold NaN or infinite values; the first is x=%lu y=%lu (row 0 at the top)\n",
+                path, n, n == 1 ? "" : "s", fx, fy);
+    return n;
+}
+
 static int cmd_compare(int argc, char **argv)
 {
     appm_image a, b;
@@ -538,6 +572,11 @@ static int cmd_compare(int argc, char **argv)
     if (appm_image_compare(&a, &b, &c) != APPM_OK) {
         fprintf(stderr, "appm: %s is %lux%lu but %s is %lux%lu\n", argv[2], (unsigned long)a.width,
                 (unsigned long)a.height, argv[3], (unsigned long)b.width, (unsigned long)b.height);
+        appm_image_free(NULL, &a);
+        appm_image_free(NULL, &b);
+        return EXIT_INPUT;
+    }
+    if (report_nonfinite(argv[2], &a) + report_nonfinite(argv[3], &b) > 0) {
         appm_image_free(NULL, &a);
         appm_image_free(NULL, &b);
         return EXIT_INPUT;

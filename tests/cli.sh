@@ -1,6 +1,6 @@
 #!/bin/sh
 # shellcheck disable=SC2016 # the awk programs in single quotes are not for the shell
-# tests/cli.sh - the command line contract (design: interface.md section 3):
+# tests/cli.sh - the command line contract (docs/scene-format.md section 3):
 # help and version, info, render to every format, exit codes and messages for
 # bad options and bad files, compare, --log, --aux, failed writes, the embed
 # example and SIGINT.
@@ -194,6 +194,22 @@ check "compare a b: mae $(value mae) = 0.25" near "$(value mae)" 0.25
 check "compare a b: mean_a $(value mean_a) = 0.75" near "$(value mean_a)" 0.75
 check "compare a b: mean_b $(value mean_b) = 1" near "$(value mean_b)" 1
 
+# NaN (7fc00000) and +inf (7f800000) pixels: a 3x2 image whose pixel (1,0)
+# has a NaN and (2,1) an inf (rows stored bottom to top: the file's first row
+# is y = 1).  compare must say how many and where the first is, and exit 2.
+nan_le='\0000\0000\0300\0177'
+inf_le='\0000\0000\0200\0177'
+printf 'PF\n3 2\n-1.0\n%b' "$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le$inf_le" >"$T/nan.pfm"
+printf '%b' "$one_le$one_le$one_le$one_le$nan_le$one_le$one_le$one_le$one_le" >>"$T/nan.pfm"
+printf 'PF\n3 2\n-1.0\n%b' "$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le" >"$T/ones.pfm"
+printf '%b' "$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le" >>"$T/ones.pfm"
+run "$APPM" compare "$T/nan.pfm" "$T/ones.pfm"
+check "compare with NaN/inf exits 2 (got $rc)" [ "$rc" -eq 2 ]
+check "compare with NaN/inf: no rmse line" [ ! -s "$T/out" ]
+check "compare with NaN/inf: 2 pixels, the first at x=1 y=0" grep -q 'nan.pfm: 2 pixels hold NaN or infinite values; the first is x=1 y=0' "$T/err"
+run "$APPM" compare "$T/ones.pfm" "$T/nan.pfm"
+check "compare with NaN/inf in the reference exits 2 (got $rc)" [ "$rc" -eq 2 ]
+
 run "$APPM" compare "$T/a.pfm" "$T/a.pfm"
 check "compare a a exits 0" [ "$rc" -eq 0 ]
 check "compare a a: rmse=0 relmse=0 mae=0" grep -q '^rmse=0 relmse=0 mae=0 ' "$T/out"
@@ -284,6 +300,21 @@ if [ -n "$EMBED" ]; then
     check "embed exits 0" [ "$rc" -eq 0 ]
     check "embed wrote a PNG" [ "$(magic "$T/embed.png" 4)" = '211PNG' ]
 fi
+
+# ---- a first pass that fails ---------------------------------------------------
+# The photon store must grow in the first pass (many photons per path in a
+# closed box) beyond what ulimit -v leaves: the render reports it, exits 3 and
+# writes no image of zero passes.  APPM_PATTERN (the CLI built with
+# -ftrivial-auto-var-init=pattern) makes a read of never-filled stats visible.
+for bin in "$APPM" ${APPM_PATTERN:+"$(abspath "$APPM_PATTERN")"}; do
+    rm -f "$T/oom.pfm"
+    (ulimit -v 100000 2>/dev/null && exec "$bin" render scenes/cornell-empty-white.scene --size 8x8 \
+        --photons 1000000 --passes 1 --threads 1 -q -o "$T/oom.pfm") >"$T/out" 2>"$T/err"
+    rc=$?
+    check "first pass out of memory: exit 3 (got $rc)" [ "$rc" -eq 3 ]
+    check "first pass out of memory: the message" grep -q 'pass failed: out of memory' "$T/err"
+    check "first pass out of memory: no image" absent "$T/oom.pfm"
+done
 
 # ---- SIGINT: stop after the pass in flight, write, report ----------------------------
 

@@ -11,7 +11,8 @@
 #   -ffast-math     must fail, with the library's #error
 #   wasm32-wasi     clang -Werror, no threads: the web build (appm.c + web/shim.c), and
 #                   the tests that run in seconds (t_portable, t_alloc, t_image, t_loader,
-#                   t_bvh, t_sampling, t_fuzz_regress), 32-bit size_t, under Node's WASI
+#                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator), 32-bit size_t,
+#                   under Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
 #   QEMU=1          t_portable built for aarch64 and big-endian s390x runs under qemu-user
@@ -208,7 +209,8 @@ if have clang "wasm32-wasi"; then
         step "clang wasm32-wasi -Werror: appm.c web/shim.c (make web)" \
             $WASM -mexec-model=reactor appm.c web/shim.c -o "$OUT/appm.wasm"
         if have node "wasm32-wasi: the tests under Node's WASI"; then
-            for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress; do
+            for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress t_pmap \
+                t_estimator; do
                 if $WASM "tests/$n.c" -o "$OUT/$n.wasm" >"$log" 2>&1; then
                     run_test "wasm32-wasi: tests/$n.c under node" env APPM_TEST_QUICK=1 \
                         node --experimental-wasi-unstable-preview1 --no-warnings \

@@ -1,6 +1,6 @@
 /* tests/t_loader.c - the OBJ/MTL/.scene loader against the interface contract
- * (design/interface.md sections 1 and 2) and the malformed inputs that crashed
- * other loaders (design/testing.md section 3).
+ * (docs/scene-format.md sections 1 and 2) and the malformed inputs that crashed
+ * other loaders (docs/testing.md section 3).
  *
  * What is checked, and why it matters:
  *   - the Cornell boxes of scenes/ load with the triangle, material and light
@@ -955,7 +955,7 @@ static void test_mtl_values(void)
 }
 
 /* OBJ statements that are understood but not modelled (l, p, curves, ...):
- * one warning per statement kind and file (interface.md section 2). */
+ * one warning per statement kind and file (docs/scene-format.md section 2). */
 static void test_obj_ignored_warnings(void)
 {
     appm_scene *s;
@@ -1118,7 +1118,7 @@ static void test_scene_malformed(void)
 }
 
 /* Numbers after a complete statement are not silently skipped either
- * ("no silent skipping", interface.md section 1). */
+ * ("no silent skipping", docs/scene-format.md section 1). */
 static void test_scene_trailing_tokens(void)
 {
     static const char *const bad[] = {"image 64 48 junk", "environment 1 1 1 7"};
@@ -1136,7 +1136,7 @@ static void test_scene_trailing_tokens(void)
 }
 
 /* A bare .obj gets a camera that frames its bounding box looking along -z,
- * 512x512 and fov 40 (interface.md section 1). */
+ * 512x512 and fov 40 (docs/scene-format.md section 1). */
 static void test_bare_obj_camera(void)
 {
     appm_scene *s;
@@ -1229,6 +1229,35 @@ static void test_parse_number(void)
     }
 }
 
+/* A UTF-8 byte order mark at the start of a .scene, .obj or .mtl (Windows
+ * editors write one) is skipped, not an unknown keyword (docs/scene-format.md 1);
+ * a BOM anywhere else is still an error, and line numbers stay right. */
+static void test_bom(void)
+{
+    appm_scene *s = NULL;
+    appm_diag d;
+    logbuf lb;
+    CHECK(load_mem("\xEF\xBB\xBFmtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl light\nf 1 2 3\n",
+                   "\xEF\xBB\xBFnewmtl light\nKd 0.5 0.5 0.5\nKe 1 1 1\n", &s, &d, &lb) == APPM_OK);
+    CHECK_MSG(lb.n == 0, "%d warnings for a BOM (first: %s)", lb.n, lb.n ? lb.msg[0] : "");
+    if (s) CHECK(s->ntri == 1 && s->nlight == 1 && s->mat[s->info[0].mat].emissive);
+    appm_scene_destroy(s);
+    /* a BOM alone, and a BOM in front of an empty MTL */
+    s = NULL;
+    CHECK(load_mem("\xEF\xBB\xBF", NULL, &s, &d, &lb) == APPM_ERR_PARSE && strstr(d.message, "no triangles"));
+    appm_scene_destroy(s);
+    s = NULL;
+    CHECK(load_scene_text("\xEF\xBB\xBFmesh ../fixtures/no-light.obj\nimage 64 48\nlight point position 0 1 0 "
+                          "intensity 1 1 1\n",
+                          &s, &d) == APPM_OK);
+    if (s) CHECK(s->width == 64 && s->height == 48);
+    appm_scene_destroy(s);
+    s = NULL;
+    CHECK(load_scene_text("image 64 48\n\xEF\xBB\xBFmesh ../fixtures/no-light.obj\n", &s, &d) == APPM_ERR_PARSE);
+    CHECK_MSG(d.line == 2, "a BOM on line 2: error on line %u", d.line);
+    appm_scene_destroy(s);
+}
+
 int main(void)
 {
     test_parse_number();
@@ -1257,5 +1286,6 @@ int main(void)
     test_scene_malformed();
     test_scene_trailing_tokens();
     test_bare_obj_camera();
+    test_bom();
     return check_finish();
 }

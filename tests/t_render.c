@@ -501,16 +501,17 @@ static int xc_other_plane(const appm__vp *u, const appm__vp *v)
  * the last pass, each pixel's mean radius and its photon term. */
 static double xc_edge_bound(const appm_renderer *r, const double *rsum, int passes)
 {
-    const double c = r->method == APPM_METHOD_APPM ? 48.0 / (105.0 * APPM__PI) : 2.0 / (3.0 * APPM__PI);
+    const double c = (r->est->caps & APPM__CAP_BIWEIGHT) ? 48.0 / (105.0 * APPM__PI) : 2.0 / (3.0 * APPM__PI);
     double loss = 0.0;
     uint32_t x, y, w = r->w, h = r->h;
     for (y = 0; y < h; ++y)
         for (x = 0; x < w; ++x) {
             size_t i = (size_t)y * w + x;
             const appm__vp *v = &r->vp[i];
-            const double *acc = r->pix[i].acc;
+            double acc[3] = {0, 0, 0};
             int edge = 0;
             if (v->segs == 0 || !(v->footprint > 0.0f)) continue;
+            appm__photon_term(r, i, (double)passes, acc); /* I: the photon term of ppm and appm */
             edge |= x > 0 && xc_other_plane(&r->vp[i - 1], v);
             edge |= x + 1 < w && xc_other_plane(&r->vp[i + 1], v);
             edge |= y > 0 && xc_other_plane(&r->vp[i - w], v);

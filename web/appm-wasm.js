@@ -40,6 +40,8 @@ var AppmWasm = (function () {
       self.memory = inst.exports.memory;
       // A WASI reactor: _initialize runs the C library's start-up once.
       if (self.x._initialize) self.x._initialize();
+      self.methods = {}; // the library's names: appm, ppm, sppm, pt
+      for (var m = 0; m < self.x.web_method_count(); ++m) self.methods[self.cstring(self.x.web_method_name(m))] = m;
       return self;
     });
   };
@@ -71,13 +73,11 @@ var AppmWasm = (function () {
     if (s !== 0) throw new Error(this.error());
   };
 
-  var METHODS = { appm: 0, ppm: 1, sppm: 2, pt: 3 };
-  AppmWasm.METHODS = METHODS;
-
   // opts: method (name), width, height, photons, radius, alpha, seed (0: defaults).
   AppmWasm.prototype.start = function (o) {
-    var m = METHODS[o.method];
-    if (m === undefined) throw new Error('unknown method ' + o.method);
+    var m = this.methods[o.method];
+    if (m === undefined) throw new Error('unknown method ' + o.method + ' (the library has ' +
+                                         Object.keys(this.methods).join(', ') + ')');
     this.width = o.width; this.height = o.height;
     var s = this.x.web_create(m, o.width, o.height, o.photons || 0, o.radius || 0, o.alpha || 0,
                               o.seed || 0);
