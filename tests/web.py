@@ -18,7 +18,8 @@ number of passes.  Then it checks:
   * the maps: appm's radius, variance and Laplacian maps drawn, ppm's Laplacian
     absent (it keeps none);
   * no exception and no console error in the page or its workers;
-and saves a screenshot, build/web/classroom.png and .jpg (the README's picture).
+and saves screenshots: build/web/classroom.png and .jpg (the README's picture), and
+build/web/default.png (the page as it opens).
 
   python3 tests/web.py [--bench [SIZE [PASSES]]]
                      --bench: passes/s of appm, wasm in Chromium against the native build
@@ -356,6 +357,9 @@ def run_default_page(browser, base):
     check(s["equal"] == "time" and abs(secs[0] - secs[1]) <= 2 * slack,
           "equal time: %.2f s and %.2f s inside passes, apart by at most about a pass (%.2f s)"
           % (secs[0], secs[1], slack))
+    shot = browser.send("Page.captureScreenshot", {"format": "png"}, session=sid)
+    with open(os.path.join(OUT, "default.png"), "wb") as f:
+        f.write(base64.b64decode(shot["data"]))
     browser.send("Runtime.evaluate", {"expression": "document.activeElement.blur()"}, session=sid)
     key(browser, sid, " ", "Space")
     time.sleep(1.0)
