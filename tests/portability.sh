@@ -11,7 +11,7 @@
 #   -ffast-math     must fail, with the library's #error
 #   wasm32-wasi     clang -Werror, no threads: the web build (appm.c + web/shim.c), and
 #                   the tests that run in seconds (t_portable, t_alloc, t_image, t_loader,
-#                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator), 32-bit size_t,
+#                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator, t_lights), 32-bit size_t,
 #                   under Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
@@ -210,7 +210,7 @@ if have clang "wasm32-wasi"; then
             $WASM -mexec-model=reactor appm.c web/shim.c -o "$OUT/appm.wasm"
         if have node "wasm32-wasi: the tests under Node's WASI"; then
             for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress t_pmap \
-                t_estimator; do
+                t_estimator t_lights; do
                 if $WASM "tests/$n.c" -o "$OUT/$n.wasm" >"$log" 2>&1; then
                     run_test "wasm32-wasi: tests/$n.c under node" env APPM_TEST_QUICK=1 \
                         node --experimental-wasi-unstable-preview1 --no-warnings \
