@@ -11,8 +11,8 @@
 #   -ffast-math     must fail, with the library's #error
 #   wasm32-wasi     clang -Werror, no threads: the web build (appm.c + web/shim.c), and
 #                   the tests that run in seconds (t_portable, t_alloc, t_image, t_loader,
-#                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator, t_lights), 32-bit size_t,
-#                   under Node's WASI
+#                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator, t_lights),
+#                   32-bit size_t, under Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
 #   QEMU=1          t_portable built for aarch64 and big-endian s390x runs under qemu-user

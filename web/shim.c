@@ -77,8 +77,8 @@ int web_load(const char *obj, unsigned obj_len, const char *mtl, unsigned mtl_le
     appm_scene_destroy(W.scene);
     W.scene = NULL;
     W.error[0] = '\0';
-    s = appm_scene_load_obj_memory(obj, obj_len, mtl_len ? mtl : NULL, mtl_len, name, NULL, &W.scene,
-                                   &W.diag);
+    s = appm_scene_load_obj_memory(obj, obj_len, mtl_len ? mtl : NULL, mtl_len, name, NULL,
+                                   &W.scene, &W.diag);
     if (s != APPM_OK) web_set_error(s, &W.diag);
     return (int)s;
 }
@@ -86,7 +86,10 @@ int web_load(const char *obj, unsigned obj_len, const char *mtl, unsigned mtl_le
 /* The library's method names, so that the page asks for methods by name:
  * web_method_name(m) for m = 0 .. web_method_count() - 1 (appm_method values). */
 WEB_EXPORT(web_method_count) int web_method_count(void) { return (int)APPM_METHOD_COUNT; }
-WEB_EXPORT(web_method_name) const char *web_method_name(int m) { return appm_method_name((appm_method)m); }
+WEB_EXPORT(web_method_name) const char *web_method_name(int m)
+{
+    return appm_method_name((appm_method)m);
+}
 
 /* A renderer for the loaded scene.  method: an appm_method value; photons,
  * radius, alpha: 0 means the library's default. */
@@ -103,7 +106,8 @@ int web_create(int method, int width, int height, double photons, double radius,
         return (int)APPM_ERR_INVALID_ARG;
     }
     if (!(photons >= 0 && photons < 9.0e15) || !(seed >= 0 && seed < 9.0e15) || width < 1 ||
-        height < 1 || width > 32768 || height > 32768 || method < 0 || method >= (int)APPM_METHOD_COUNT) {
+        height < 1 || width > 32768 || height > 32768 || method < 0 ||
+        method >= (int)APPM_METHOD_COUNT) {
         snprintf(W.error, sizeof W.error, "an option is out of range");
         return (int)APPM_ERR_INVALID_ARG;
     }
