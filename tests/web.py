@@ -368,6 +368,17 @@ def run_default_page(browser, base):
     b = state(browser, sid)
     check(not a["running"] and [x["passes"] for x in a["sides"]] == [x["passes"] for x in b["sides"]],
           "Space pauses (passes stay at %s)" % [x["passes"] for x in b["sides"]])
+    mean = ("(function () { var c = document.querySelector('canvas.img'), d = c.getContext('2d')"
+            ".getImageData(0, 0, c.width, c.height).data, t = 0; for (var i = 0; i < d.length; i += 4)"
+            " t += d[i] + d[i + 1] + d[i + 2]; return t / d.length; })()")
+    before = browser.send("Runtime.evaluate", {"expression": mean, "returnByValue": True},
+                          session=sid)["result"]["value"]
+    key(browser, sid, "+", "Equal")
+    time.sleep(0.8)
+    after = browser.send("Runtime.evaluate", {"expression": mean, "returnByValue": True},
+                         session=sid)["result"]["value"]
+    check(after > before * 1.05, "+ raises the exposure of the paused picture (mean byte %.1f -> %.1f)"
+          % (before, after))
     key(browser, sid, "n", "KeyN")
     time.sleep(1.5)
     c = state(browser, sid)

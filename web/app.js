@@ -209,9 +209,9 @@ function onWorkerMessage(r, side, m) {
     side.busy = false;
     drawPictures(side, m.pictures);
     drawStats(side);
-    side.linear = m.linear;
-    if (r.sides.every(function (s) { return s.done && !s.busy; })) finishRun(r);
-    return;
+    if (m.linear) side.linear = m.linear;
+    if (!r.finished && r.sides.every(function (s) { return s.done && !s.busy; })) finishRun(r);
+    break;
   }
   schedule(r);
 }
@@ -247,6 +247,7 @@ function schedule(r) {
 
 function finishRun(r) {
   r.running = false;
+  r.finished = true;
   status('Done: ' + r.sides.map(function (s) {
     return describe(s.settings) + ' ' + s.stats.passes + ' passes in ' + s.stats.seconds.toFixed(2) + ' s';
   }).join('; ') + '.');
@@ -268,6 +269,17 @@ function stepOnce() {
   run.sides.forEach(function (s) { s.stepTarget = s.stats.passes + (s.done ? 0 : 1); });
   run.stepping = true;
   schedule(run);
+}
+
+// Redraws the pictures at the current exposure (while paused or done; a running
+// side gets it with its next pass anyway).
+function refreshPictures() {
+  if (!run) return;
+  run.sides.forEach(function (s) {
+    if (s.busy || !s.started || !s.stats || !s.stats.passes) return;
+    s.busy = true;
+    s.worker.postMessage({ type: 'snapshot', linear: false, exposure: exposure() });
+  });
 }
 
 function exposure() {
@@ -443,10 +455,15 @@ function onKey(e) {
   if (e.key === 'Enter' && t.tagName !== 'BUTTON') { e.preventDefault(); startRun(); }
   else if (e.key === ' ' && t.tagName !== 'BUTTON') { e.preventDefault(); togglePause(); }
   else if (e.key === 'n' || e.key === 'N') stepOnce();
-  else if (e.key === '+' || e.key === '=') { $('exposure').value = String(+(exposure() * 1.25).toFixed(3)); }
-  else if (e.key === '-') { $('exposure').value = String(+(exposure() / 1.25).toFixed(3)); }
+  else if (e.key === '+' || e.key === '=') setExposure(exposure() * 1.25);
+  else if (e.key === '-') setExposure(exposure() / 1.25);
   else if (e.key === '?') toggleHelp();
   else if (e.key >= '1' && e.key <= String(PRESETS.length)) { applyPreset(+e.key - 1); startRun(); }
+}
+
+function setExposure(e) {
+  $('exposure').value = String(+e.toFixed(3));
+  refreshPictures();
 }
 
 function toggleHelp() {
@@ -512,6 +529,7 @@ $('preset').addEventListener('change', function () { if ($('preset').value !== '
 $('controls').addEventListener('submit', function (e) { e.preventDefault(); startRun(); });
 $('pausebtn').addEventListener('click', togglePause);
 $('stepbtn').addEventListener('click', stepOnce);
+$('exposure').addEventListener('change', refreshPictures);
 $('helpbtn').addEventListener('click', toggleHelp);
 document.addEventListener('keydown', onKey);
 if (testMode) applyTestParams();
