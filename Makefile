@@ -4,7 +4,9 @@
 #   make test-long    the slow statistical tests (more samples)
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), wasm32-wasi,
 #                     C89/C++ header
-#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset
+#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
+#                     make bench-sampler: --sampler qmc against random on every scene
+#   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 #   make web          web/appm.wasm and the scenes of the classroom page (clang, lld, wasi-libc)
@@ -21,7 +23,8 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick fuzz web test-web clean
+.PHONY: all test test-long portability dynamic bench bench-quick bench-bvh bench-sampler fuzz web \
+        test-web clean
 
 all: appm
 
@@ -71,6 +74,12 @@ bench: appm
 
 bench-quick: appm
 	sh bench/run.sh quick
+
+bench-bvh:
+	sh bench/bvh.sh
+
+bench-sampler: appm
+	sh bench/sampler.sh
 
 fuzz:
 	sh tests/fuzz/run.sh
