@@ -5,7 +5,7 @@ make test-web runs it after `make web` and `make appm`.  It serves web/ on 127.0
 opens index.html in headless Chromium (DevTools protocol over a pipe: no package
 needed), and lets the page itself - the same controls, workers and appm.wasm a
 student gets - render CornellBox-Sphere with appm and ppm side by side for a fixed
-number of passes.  Then it checks:
+number of passes (appm with the qmc sampler, ppm with the random one).  Then it checks:
 
   * the pixels against `appm render` of the same scene, seed, size and passes.
     Identical bytes are not possible: pow, sin, cos, tan, sinf and cosf of
@@ -46,6 +46,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "build", "web")
 SCENE = "CornellBox-Sphere"
 SIZE, PASSES, SEED = 128, 32, 7
+SETTINGS = (("appm", "qmc"), ("ppm", "random"))  # method and sampler of the two sides
 NOISE_FRACTION = 1 / 200.0  # of the seed-to-seed RMS difference
 REL_TOL, REL_QUANTILE = 1e-3, 0.99
 
@@ -231,11 +232,11 @@ def read_pfm(path):
     return w, h, out
 
 
-def native(method, passes, threads=None, size=SIZE, seed=SEED):
-    path = os.path.join(OUT, "native-%s-seed%d.pfm" % (method, seed))
+def native(method, passes, threads=None, size=SIZE, seed=SEED, sampler="qmc"):
+    path = os.path.join(OUT, "native-%s-%s-seed%d.pfm" % (method, sampler, seed))
     cmd = [os.path.join(ROOT, "appm"), "render", os.path.join(ROOT, "scenes", SCENE + ".obj"),
            "--size", "%dx%d" % (size, size), "--seed", str(seed), "--passes", str(passes),
-           "--method", method, "-q", "-o", path]
+           "--method", method, "--sampler", sampler, "-q", "-o", path]
     if threads:
         cmd += ["--threads", str(threads)]
     line = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
@@ -271,6 +272,7 @@ def browser_exe():
 
 def check_side(side, ref, noise):
     m = side["method"]
+    check(side["sampler"] == dict(SETTINGS)[m], "%s: the %s sampler" % (m, side["sampler"]))
     st = side["stats"]
     check(st["passes"] == PASSES and st["photons"] == PASSES * SIZE * SIZE,
           "%s: %d passes of %d photon paths (got %d passes, %d photons)"
@@ -298,12 +300,12 @@ def check_side(side, ref, noise):
 
 def run_test(browser, base):
     refs, noise = {}, {}
-    for m in ("appm", "ppm"):
-        refs[m] = native(m, PASSES)[0]
-        other = native(m, PASSES, seed=SEED + 1)[0]
+    for m, smp in SETTINGS:
+        refs[m] = native(m, PASSES, sampler=smp)[0]
+        other = native(m, PASSES, seed=SEED + 1, sampler=smp)[0]
         noise[m] = rms_difference(read_pfm(refs[m])[2], read_pfm(other)[2])
-    url = "%s/index.html?test=1&scene=%s&size=%d&passes=%d&seed=%d&methods=appm,ppm&equal=passes" % (
-        base, SCENE, SIZE, PASSES, SEED)
+    url = "%s/index.html?test=1&scene=%s&size=%d&passes=%d&seed=%d&methods=%s&equal=passes" % (
+        base, SCENE, SIZE, PASSES, SEED, ",".join(m + ":" + smp for m, smp in SETTINGS))
     t0 = time.time()
     sid = open_page(browser, url)
     result = wait_result(browser, sid, 100)

@@ -29,6 +29,8 @@ var PRESETS = [
     sides: [{ method: 'appm' }, { method: 'ppm' }, { method: 'sppm' }] },
   { name: 'ppm with α = 1 (fixed radius, never converges) against α = 2/3', count: 2, equal: 'passes',
     sides: [{ method: 'ppm', alpha: '1' }, { method: 'ppm', alpha: '0.6667' }] },
+  { name: 'appm with the random sampler against the qmc (Sobol\') sampler', count: 2, equal: 'passes',
+    sides: [{ method: 'appm', sampler: 'random' }, { method: 'appm', sampler: 'qmc' }] },
 ];
 
 var $ = function (id) { return document.getElementById(id); };
@@ -52,6 +54,8 @@ function sideControls(i) {
   f.innerHTML =
     '<legend style="color:' + COLOURS[i] + '">Setting ' + 'ABC'[i] + '</legend>' +
     '<label>Method <select name="method"></select></label>' +
+    '<label>Sampler <select name="sampler"><option value="qmc" selected>qmc (Sobol\')</option>' +
+    '<option value="random">random (PCG)</option></select></label>' +
     '<label>Initial radius <select name="radius"></select> automatic</label>' +
     '<label>α <input name="alpha" type="number" min="0.05" max="1" step="0.05" value="0.6667"></label>' +
     '<label>Photons per pass <input name="photons" type="number" min="0" step="1024" value="0">' +
@@ -87,6 +91,7 @@ function applyPreset(i) {
     ctl[k].querySelector('[name=radius]').value = s.radius || '1';
     ctl[k].querySelector('[name=alpha]').value = s.alpha || '0.6667';
     ctl[k].querySelector('[name=photons]').value = '0';
+    ctl[k].querySelector('[name=sampler]').value = s.sampler || 'qmc';
   });
   showSideControls();
 }
@@ -98,6 +103,7 @@ function readSettings() {
     var c = ctl[i], alpha = +c.querySelector('[name=alpha]').value;
     sides.push({
       method: c.querySelector('[name=method]').value,
+      sampler: c.querySelector('[name=sampler]').value,
       radiusFactor: +c.querySelector('[name=radius]').value,
       alpha: alpha > 0 && alpha <= 1 ? alpha : 0,
       photons: Math.max(0, Math.floor(+c.querySelector('[name=photons]').value || 0)),
@@ -118,6 +124,7 @@ function describe(s) {
   var t = s.method;
   if (s.method !== 'pt' && s.radiusFactor !== 1) t += ', r₀ = ' + s.radiusFactor + ' × auto';
   if ((s.method === 'ppm' || s.method === 'sppm') && s.alpha) t += ', α = ' + (+s.alpha.toFixed(3));
+  if (s.sampler === 'random') t += ', random sampler';
   if (s.photons) t += ', ' + s.photons + ' photons/pass';
   return t;
 }
@@ -178,7 +185,7 @@ function makeSide(r, i, s, scene) {
   w.onmessage = function (e) { if (run === r) onWorkerMessage(r, side, e.data); };
   w.onerror = function (e) { if (run === r) reportError('worker ' + 'ABC'[i], e.message || 'failed'); };
   w.postMessage({ type: 'load', obj: scene.obj, mtl: scene.mtl, name: scene.name });
-  w.postMessage({ type: 'start', opts: { method: s.method, width: r.settings.width,
+  w.postMessage({ type: 'start', opts: { method: s.method, sampler: s.sampler, width: r.settings.width,
     height: r.settings.height, photons: s.photons, radiusFactor: s.radiusFactor, alpha: s.alpha,
     seed: r.settings.seed } });
   return side;
@@ -489,7 +496,7 @@ function colours(canvas) {
 
 function testResult(r) {
   return { done: true, sides: r.sides.map(function (s) {
-    return { method: s.settings.method, stats: s.stats, width: r.settings.width, height: r.settings.height,
+    return { method: s.settings.method, sampler: s.settings.sampler, stats: s.stats, width: r.settings.width, height: r.settings.height,
              linear: base64(s.linear), image_colours: colours(s.view.image),
              map_colours: s.view.maps.map(colours), history: s.history.length };
   }) };
@@ -511,10 +518,14 @@ function applyTestParams() {
   if (params.get('equal')) $('equal').value = params.get('equal');
   $('stop').value = params.get('passes') || '16';
   $('stopunit').value = 'passes';
+  // methods=appm,ppm:random  (a method per setting, optionally :sampler)
   var methods = (params.get('methods') || 'appm').split(',');
   $('count').value = String(methods.length);
   var ctl = document.querySelectorAll('.sidectl');
-  methods.forEach(function (m, k) { ctl[k].querySelector('[name=method]').value = m; });
+  methods.forEach(function (m, k) {
+    ctl[k].querySelector('[name=method]').value = m.split(':')[0];
+    ctl[k].querySelector('[name=sampler]').value = m.split(':')[1] || 'qmc';
+  });
   showSideControls();
 }
 

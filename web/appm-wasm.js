@@ -73,14 +73,19 @@ var AppmWasm = (function () {
     if (s !== 0) throw new Error(this.error());
   };
 
-  // opts: method (name), width, height, photons, radius, alpha, seed (0: defaults).
+  var SAMPLERS = { qmc: 0, random: 1 }; // appm_sampler
+
+  // opts: method (name), sampler ('qmc' or 'random'), width, height, photons, radius,
+  // alpha, seed (0: defaults).
   AppmWasm.prototype.start = function (o) {
     var m = this.methods[o.method];
     if (m === undefined) throw new Error('unknown method ' + o.method + ' (the library has ' +
                                          Object.keys(this.methods).join(', ') + ')');
+    var smp = SAMPLERS[o.sampler || 'qmc'];
+    if (smp === undefined) throw new Error('unknown sampler ' + o.sampler);
     this.width = o.width; this.height = o.height;
-    var s = this.x.web_create(m, o.width, o.height, o.photons || 0, o.radius || 0, o.alpha || 0,
-                              o.seed || 0);
+    var s = this.x.web_create(m, smp, o.width, o.height, o.photons || 0, o.radius || 0,
+                              o.alpha || 0, o.seed || 0);
     if (s !== 0) throw new Error(this.error());
   };
 

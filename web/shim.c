@@ -91,11 +91,12 @@ WEB_EXPORT(web_method_name) const char *web_method_name(int m)
     return appm_method_name((appm_method)m);
 }
 
-/* A renderer for the loaded scene.  method: an appm_method value; photons,
- * radius, alpha: 0 means the library's default. */
+/* A renderer for the loaded scene.  method: an appm_method value; sampler: an
+ * appm_sampler value (0 qmc, 1 random); photons, radius, alpha: 0 means the
+ * library's default. */
 WEB_EXPORT(web_create)
-int web_create(int method, int width, int height, double photons, double radius, double alpha,
-               double seed)
+int web_create(int method, int sampler, int width, int height, double photons, double radius,
+               double alpha, double seed)
 {
     appm_config cfg;
     appm_status s;
@@ -107,12 +108,13 @@ int web_create(int method, int width, int height, double photons, double radius,
     }
     if (!(photons >= 0 && photons < 9.0e15) || !(seed >= 0 && seed < 9.0e15) || width < 1 ||
         height < 1 || width > 32768 || height > 32768 || method < 0 ||
-        method >= (int)APPM_METHOD_COUNT) {
+        method >= (int)APPM_METHOD_COUNT || sampler < 0 || sampler > (int)APPM_SAMPLER_RANDOM) {
         snprintf(W.error, sizeof W.error, "an option is out of range");
         return (int)APPM_ERR_INVALID_ARG;
     }
     appm_config_init(&cfg);
     cfg.method = (appm_method)method;
+    cfg.sampler = (appm_sampler)sampler;
     cfg.width = (uint32_t)width;
     cfg.height = (uint32_t)height;
     cfg.photons = (uint64_t)photons;

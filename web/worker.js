@@ -2,8 +2,8 @@
  *
  * Messages in (from the page):
  *   {type: 'load', obj, mtl, name}       the scene, as OBJ and MTL text
- *   {type: 'start', opts}                a new renderer (opts: method, width, height,
- *                                        photons, radiusFactor, alpha, seed)
+ *   {type: 'start', opts}                a new renderer (opts: method, sampler, width,
+ *                                        height, photons, radiusFactor, alpha, seed)
  *   {type: 'pass', pictures, exposure}   one pass; pictures: send the image and maps too
  *   {type: 'snapshot', linear, exposure} the image and maps now (and the float image)
  * Messages out:
@@ -39,12 +39,13 @@ function pictures(exposure, transfer) {
 function start(o) {
   var f = o.radiusFactor || 1, radius = 0;
   if (f !== 1) {
-    appm.start({ method: 'ppm', width: o.width, height: o.height, photons: o.photons, seed: o.seed });
+    appm.start({ method: 'ppm', sampler: o.sampler, width: o.width, height: o.height,
+                 photons: o.photons, seed: o.seed });
     appm.pass();
     radius = appm.stats().radius * f;
   }
-  appm.start({ method: o.method, width: o.width, height: o.height, photons: o.photons,
-               radius: radius, alpha: o.alpha, seed: o.seed });
+  appm.start({ method: o.method, sampler: o.sampler, width: o.width, height: o.height,
+               photons: o.photons, radius: radius, alpha: o.alpha, seed: o.seed });
 }
 
 function handle(msg) {
