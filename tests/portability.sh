@@ -12,7 +12,7 @@
 #   wasm32-wasi     clang -Werror, no threads: the web build (appm.c + web/shim.c), and
 #                   the tests that run in seconds (t_portable, t_alloc, t_image, t_loader,
 #                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator, t_lights,
-#                   t_extremes), 32-bit size_t, under Node's WASI
+#                   t_extremes, t_sampler), 32-bit size_t, under Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
 #   QEMU=1          t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
@@ -286,7 +286,7 @@ if have clang "wasm32-wasi"; then
             # overflow silently overwrites malloc's state; the tests' big local arrays
             # (t_bvh's most of all) get 32 MiB, below the data, so an overflow traps.
             for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress t_pmap \
-                t_estimator t_lights t_extremes; do
+                t_estimator t_lights t_extremes t_sampler; do
                 if $WASM "tests/$n.c" -o "$OUT/$n.wasm" -Wl,-z,stack-size=33554432 \
                     -Wl,--stack-first >"$log" 2>&1; then
                     run_test "wasm32-wasi: tests/$n.c under node" env APPM_TEST_QUICK=1 \
