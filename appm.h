@@ -317,6 +317,8 @@ typedef struct appm_stats {
     uint64_t peak_bytes;            /* the most the renderer held at once               */
     uint64_t dropped_samples;       /* NaN/inf contributions discarded (never in image)  */
     double est_relerr;              /* appm: estimated image relative error (< 0: none)  */
+    double clamped;                 /* appm: fraction of gathering pixels at a radius bound
+                                       after the last pass (< 0: none)                     */
     unsigned threads;
 } appm_stats;
 
@@ -327,15 +329,21 @@ APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
  * no such map (e.g. laplacian for ppm), before the first pass, or when the map's
  * memory (allocated on the first request) cannot be had.
  *   RADIUS     the radius each pixel gathered with in the last pass (scene units;
- *              sppm: the radius R of its next gather)
+ *              sppm: the radius R of its next gather; appm: the radius of the
+ *              pixel's dominant photon component, the one with the larger term)
  *   VARIANCE   the estimated variance of the pixel (luminance)
  *   LAPLACIAN  the estimated pixel Laplacian dI (luminance per area^2)
- *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)        */
+ *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)
+ *   RADIUS_CAUSTIC, RADIUS_DIFFUSE  appm: the radius of each photon component
+ *              (caustic: photons whose last bounce was specular; diffuse: the
+ *              rest) in the last pass                                          */
 typedef enum appm_aux {
     APPM_AUX_RADIUS = 0,
     APPM_AUX_VARIANCE,
     APPM_AUX_LAPLACIAN,
     APPM_AUX_ERROR,
+    APPM_AUX_RADIUS_CAUSTIC,
+    APPM_AUX_RADIUS_DIFFUSE,
     APPM_AUX_COUNT
 } appm_aux;
 APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which);

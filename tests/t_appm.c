@@ -191,7 +191,7 @@ static void test_selector_guards(void)
                     p.dI = vals[b];
                     p.N = (uint64_t)n_values[k];
                     p.R = k == 2 ? 0.02 : 0.0;
-                    r = appm__appm_radius(r1, r1, 1000, j + 5, &p);
+                    r = appm__appm_radius(r1, r1, 1000, j + 5, &p, APPM__CF, 0.0);
                     rk = r1 * pow((double)(j + 5), -1.0 / 6.0);
                     if (!(r > 0.0) || !(r < HUGE_VAL) || r < APPM__RLO * rk * (1 - 1e-12) ||
                         r > APPM__RHI * rk * (1 + 1e-12))
@@ -205,7 +205,7 @@ static void test_selector_guards(void)
         p.S = 1.0;
         p.dI = (double)NAN;
         p.N = 100;
-        CHECK(appm__appm_radius(r1, r1, 1000, 10, &p) == r1 * pow(10.0, -1.0 / 6.0));
+        CHECK(appm__appm_radius(r1, r1, 1000, 10, &p, APPM__CF, 0.0) == r1 * pow(10.0, -1.0 / 6.0));
         CHECK(appm__r_opt(0.0, 50.0, 1e4, 2.0) == 0.0);
         CHECK(appm__r_opt(1.0, 0.0, 1e4, 2.0) == 0.0);
         CHECK(appm__r_opt(1.0, (double)NAN, 1e4, 2.0) == 0.0);
@@ -219,9 +219,9 @@ static void test_selector_guards(void)
         p.S = 1.0;
         p.N = 100;
         p.dI = 1e-12;
-        CHECK_NEAR(appm__appm_radius(r1, r1, 1000, 10, &p), APPM__RHI * rk, 1e-15);
+        CHECK_NEAR(appm__appm_radius(r1, r1, 1000, 10, &p, APPM__CF, 0.0), APPM__RHI * rk, 1e-15);
         p.dI = 1e12;
-        CHECK_NEAR(appm__appm_radius(r1, r1, 1000, 10, &p), APPM__RLO * rk, 1e-15);
+        CHECK_NEAR(appm__appm_radius(r1, r1, 1000, 10, &p, APPM__CF, 0.0), APPM__RLO * rk, 1e-15);
     }
 }
 
@@ -247,7 +247,7 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
             double e[3], s, dl, ev;
             uint64_t count;
             float h;
-            p.R = adaptive ? appm__appm_radius(r1, TOY_RB, 1000, (uint64_t)j, &p)
+            p.R = adaptive ? appm__appm_radius(r1, TOY_RB, 1000, (uint64_t)j, &p, APPM__CF, 0.0)
                            : r1 * pow((double)j, -1.0 / 6.0); /* KZ with alpha = 2/3 */
             h = adaptive && appm__lap_pass((uint64_t)j) ? (float)appm__lap_h(TOY_RB, (uint64_t)j) : 0.0f;
             toy_pass(&rng, 1000, (float)p.R, h, adaptive, 0, &ev, &s, &dl, &count);
