@@ -2889,6 +2889,7 @@ struct appm_renderer {
     } ppm;               /* Knaus-Zwicker's global radius (section 10) */
     struct {
         double price;    /* lambda of 10.3: the price of a gathered photon this pass; 0: none */
+        double *di2;     /* 10.4: per pixel and component, dI^2 pooled over neighbours (scratch) */
     } appm;
     double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
     unsigned threads, max_depth;
@@ -3537,14 +3538,21 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      shrinks as j^(-1/6) (the plug-in constant would be 2; algorithm.md 4.3
  *      and the toy of 4.9).  Safeguards (4.7): KZ radius r_1 j^(-1/6) while warming up; while a
  *      pixel has seen fewer than 8 photons its radius doubles each pass; the
- *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_auto),
- *      2 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), so the clamps
- *      shrink at the optimal rate.  The Laplacian bandwidth is a fixed
+ *      change per pass limited to [1/2, 2]; r bounded by [0.1 min(r_1, r_auto),
+ *      8 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), bounds
+ *      that shrink at the optimal rate.  The Laplacian bandwidth is a fixed
  *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
  *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
  *      noise of its estimate.
+ *      Beyond the paper (algorithm.md 4.10 - 4.12, section 10.3 below): the
+ *      photons are split into a caustic and a diffuse component, each with
+ *      its own statistics and radius (c_f halved: the minimiser of a bound on
+ *      the coupled MSE); a radius stops growing where the photons it would
+ *      gather cost more time than the error they remove is worth (a price per
+ *      gathered photon, which replaced the upper clamp 2 max(r_1, r_auto)
+ *      j^(-1/6) measured below); dI^2 is pooled over neighbouring pixels.
  *
- *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
+ *      The former upper clamp and h were measured at equal time (CornellBox-Sphere,
  *      256x256, 30 s, 2 threads; RMSE against the path-traced reference):
  *      RHI 4, kappa 2: 0.00795 (378 passes); RHI 2: 0.00736 (417); RHI 1.5:
  *      0.00723 (428); RHI 2, kappa 1.5: 0.00708 (435).  A wide radius in flat
@@ -3560,6 +3568,7 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
 #define APPM__RHI 8.0                            /* upper bound, times max(r1, r_auto) j^(-1/6) */
 #define APPM__CF_SPLIT (APPM__CF / 2.0)          /* c_f of each component (10.3) */
+#define APPM__POOL 2                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__TAU 18.0                           /* cost of an eye or photon path / gathered photon */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
@@ -3758,6 +3767,15 @@ static double appm__r_opt(double S, double dI2, double MN, double cf)
     return (r6 > 0.0 && r6 < HUGE_VAL) ? pow(r6, 1.0 / 6.0) : 0.0;
 }
 
+/* dI^2 - Var(dI): an unbiased estimate of the square of the true Laplacian
+ * (may be negative); see appm__di2. */
+static double appm__di2_unbiased(const appm__appm_state *p, uint64_t n)
+{
+    double c = p->dI * p->dI;
+    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
+    return c;
+}
+
 /* dI^2 for the radius formula.  The square of a noisy mean overestimates the
  * square of its expectation: E[dI^2] = dI_true^2 + Var(dI).  So the variance of
  * the weighted mean is taken off, keeping at least APPM__DI_FLOOR of dI^2: where
@@ -3766,8 +3784,7 @@ static double appm__r_opt(double S, double dI2, double MN, double cf)
  * sum M2 estimates (n - 1) c, and the mean's variance is c / sum(w). */
 static double appm__di2(const appm__appm_state *p, uint64_t n)
 {
-    double d2 = p->dI * p->dI, c = d2;
-    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
+    double d2 = p->dI * p->dI, c = appm__di2_unbiased(p, n);
     return c > APPM__DI_FLOOR * d2 ? c : APPM__DI_FLOOR * d2;
 }
 
@@ -3786,7 +3803,7 @@ static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, 
  * saves (10.3; 0: none).  Never NaN, 0 or inf: every path ends inside the
  * bounds of appm__appm_bounds. */
 static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j, const appm__appm_state *p,
-                                double cf, double cap)
+                                double cf, double cap, double di2)
 {
     double lo, hi, rad = r1 * pow((double)j, -1.0 / 6.0);
     appm__appm_bounds(r1, r_auto, j, &lo, &hi);
@@ -3799,7 +3816,8 @@ static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j
         return rad > hi ? hi : (rad >= lo ? rad : lo);
     }
     if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
-        rad = appm__r_opt(p->S, appm__di2(p, appm__lap_count(j - 1)), (double)M * (double)j, cf);
+        if (!(di2 >= 0.0)) di2 = appm__di2(p, appm__lap_count(j - 1));
+        rad = appm__r_opt(p->S, di2, (double)M * (double)j, cf);
         if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
         if (p->R > 0.0) {
             if (rad < 0.5 * p->R) rad = 0.5 * p->R;
@@ -4043,6 +4061,30 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
     return ((const appm__sppm_state *)st)->R;
 }
 
+/* ---- 10.3 Photon components, the price of a gathered photon, pooled dI^2 ------
+ *
+ * Components (algorithm.md 4.10).  The pixel's photon term is I = I_c + I_d,
+ * caustic and diffuse photons gathered with radii r_c, r_d; independent noise,
+ * so MSE = sum_k A_k / r_k^2 + (b_c r_c^2 + b_d r_d^2)^2, A_k = R(K) S_k / (M j),
+ * b_k = mu2 dI_k / 2.  The bias terms add before squaring, so the radii are
+ * coupled; the joint minimiser diverges where b_c b_d < 0 (the biases cancel)
+ * and that sign is what a noisy Laplacian cannot tell.  (a + b)^2 <= 2a^2 + 2b^2
+ * bounds the MSE by a separable sum whose minimiser is 4.3's formula per
+ * component with c_f / 2 (APPM__CF_SPLIT): exact for equal biases, 5 % of MSE
+ * off when one dominates.
+ *
+ * Price (algorithm.md 4.11).  With J = T / C passes in time T and a pass cost
+ * C = t0 + gamma pi sum_p rho_p r_p^2, d(sum_p MSE_p)/d(r_p^2) = 0 gives
+ *     (1/J) (-A_p / r_p^4 + lambda rho_p) + 2 B_p r_p^2 = 0,
+ *     lambda = pi sum_q v_q / C_u   (v_q: per-pass variance of pixel q; C_u = C / gamma),
+ * so in flat regions the radius stops at r_cap^4 = A_p / (lambda rho_p)
+ * (appm__appm_cap); the radius is min(r_opt, r_cap).  sum_q v_q is P times
+ * the median spread (the few pixels whose spread overstates their error -
+ * stratified jitter over a light's edge - would otherwise set the price).
+ *
+ * Pooling (algorithm.md 4.12).  dI^2 - Var(dI) averaged over the 5x5
+ * neighbours on the same surface within h (appm__pool_di2), then floored. */
+
 /* -- appm (Kaplanyan-Dachsbacher 2013) with two photon components (10.3): the
  *    radius of section 10.1 per component, the recursive means of
  *    appm__appm_update per component; the pixel is their sum, and so is its
@@ -4079,7 +4121,10 @@ static double appm__appm_cap(const appm_renderer *r, const appm__appm_px *a, int
 
 static double appm__appm_comp_radius(const appm_renderer *r, const appm__appm_px *a, int c)
 {
-    return appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, &a->k[c], APPM__CF_SPLIT, appm__appm_cap(r, a, c));
+    size_t i = (size_t)((const unsigned char *)a - r->state) / sizeof(appm__appm_px);
+    double di2 = r->appm.di2 && r->pass > APPM__WARMUP ? r->appm.di2[APPM__NCOMP * i + (size_t)c] : -1.0;
+    return appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, &a->k[c], APPM__CF_SPLIT, appm__appm_cap(r, a, c),
+                             di2);
 }
 
 static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
@@ -4120,6 +4165,54 @@ static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const
     appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e) + appm__lumd(ec));
 }
 
+/* 10.4: dI^2 of pixel i's component c pooled over the pixels of the
+ * (2 APPM__POOL + 1)^2 window whose visible points this pass lie within h of
+ * its own on the same surface (normals within 25 degrees) and that have seen
+ * APPM__KMIN photons of the component: the mean of their unbiased estimates
+ * dI_q^2 - Var(dI_q), floored at APPM__DI_FLOOR times the mean dI_q^2. */
+static double appm__pool_di2(const appm_renderer *r, size_t i, int c, uint64_t n, double h)
+{
+    const appm__vp *v = &r->vp[i];
+    int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
+    double sum = 0.0, sq = 0.0, m = 0.0;
+    for (dy = -APPM__POOL; dy <= APPM__POOL; ++dy)
+        for (dx = -APPM__POOL; dx <= APPM__POOL; ++dx) {
+            int64_t x = x0 + dx, y = y0 + dy;
+            size_t q;
+            const appm__appm_state *p;
+            appm__v3 d;
+            if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
+            q = (size_t)(y * (int64_t)r->w + x);
+            p = &((const appm__appm_px *)appm__state(r, q))->k[c];
+            d = appm__sub(r->vp[q].x, v->x);
+            if (q != i && (r->vp[q].segs == 0 || p->N < APPM__KMIN || !((double)appm__dot(d, d) < h * h) ||
+                           !(appm__dot(r->vp[q].n, v->n) > 0.9f)))
+                continue;
+            sum += appm__di2_unbiased(p, n);
+            sq += p->dI * p->dI;
+            m += 1.0;
+        }
+    sum /= m;
+    sq *= APPM__DI_FLOOR / m;
+    return sum > sq ? sum : sq;
+}
+
+/* Fills r->appm.di2 for pass j (before the radii; the state after j - 1 passes). */
+static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    uint64_t n = appm__lap_count(r->pass - 1);
+    double h = appm__lap_h(r->r_auto, r->pass);
+    uint32_t x;
+    int c;
+    (void)worker;
+    for (x = 0; x < r->w; ++x) {
+        size_t i = (size_t)row * r->w + x;
+        for (c = 0; c < APPM__NCOMP; ++c)
+            r->appm.di2[APPM__NCOMP * i + (size_t)c] = r->vp[i].segs ? appm__pool_di2(r, i, c, n, h) : -1.0;
+    }
+}
+
 /* The price of a gathered photon for pass j (10.3), from the state after j-1
  * passes (so a resumed render computes the same):
  *   lambda = pi sum_q v_q / C,   C = tau (P + M) + G,
@@ -4132,6 +4225,7 @@ static void appm__appm_pass_begin(appm_renderer *r)
     double j1 = (double)r->pass - 1.0, var = 0.0, G = 0.0, C;
     r->appm.price = 0.0;
     if (r->pass <= APPM__WARMUP) return;
+    appm__parallel_for(r->threads, r->h, appm__pool_task, r);
     for (i = 0; i < npix; ++i) {
         const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
         r->image[i] = (float)(r->pix[i].wm2 / (j1 - 1.0));
@@ -4698,6 +4792,7 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->task_failed);
     appm__free(&r->mem, r->dest);
     appm__free(&r->mem, r->state);
+    appm__free(&r->mem, r->appm.di2);
     appm__pmap_free(&r->pmap, &r->mem);
 }
 
@@ -4782,6 +4877,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
     if (r->est->state_size) r->state = (unsigned char *)appm__alloc(&r->mem, npix, r->est->state_size);
+    if (r->est->caps & APPM__CAP_LAPLACIAN)
+        r->appm.di2 = (double *)appm__alloc(&r->mem, npix, APPM__NCOMP * sizeof(double));
     if (r->est->caps & APPM__CAP_PHOTONS) {
         r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks, sizeof *r->chunk);
         r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
@@ -4792,6 +4889,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }
     if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) ||
+        ((r->est->caps & APPM__CAP_LAPLACIAN) && !r->appm.di2) ||
         ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
