@@ -8,8 +8,9 @@
  *                             parallel loop over a mutex-guarded task counter
  *   2. Core utilities         diagnostics, the one allocation wrapper, growable
  *                             arrays, float3 math, the PCG32 random streams
- *   3. Image I/O              PFM read/write, PPM (P6), PNG (stored deflate),
- *                             sRGB transfer, write-to-temporary-then-rename
+ *   3. Image I/O              PFM read/write, PPM (P6), PNG and OpenEXR with
+ *                             their own deflate (LZ77 + Huffman), sRGB transfer,
+ *                             write-to-temporary-then-rename
  *   4. OBJ/MTL and scenes     locale-free number parser, OBJ/MTL/`.scene`
  *                             readers with file:line errors, scene assembly
  *   5. BVH                    binned-SAH build, watertight ray/triangle test,
@@ -569,9 +570,10 @@ static void appm__rng_float3(appm__rng *r, float *u)
  * PFM (linear float): header "PF\n<w> <h>\n<scale>\n", then rows from the
  * BOTTOM of the picture to the top; a negative scale means little-endian floats.
  * We write the host's byte order (found with memcpy, not pointer punning) and
- * read either.  PPM (P6) and PNG are 8-bit sRGB after an exposure multiply.  The
- * PNG writer stores the pixels in uncompressed deflate blocks: no zlib, yet a
- * valid file (CRC-32 per chunk, Adler-32 over the zlib stream).  Every writer
+ * read either.  PPM (P6) and PNG are 8-bit sRGB after an exposure multiply;
+ * OpenEXR is linear float or half.  PNG and ZIP-compressed EXR use the deflate
+ * compressor of 3.1 (no zlib): CRC-32 per PNG chunk, Adler-32 over each zlib
+ * stream.  Every writer
  * writes "<name>.tmp" and renames it, so a failed write never leaves a
  * half-written file under the final name (a destination that exists and is not
  * a regular file - /dev/stdout, a FIFO - is written in place).
@@ -654,42 +656,6 @@ static void appm__png_chunk_end(appm__out *o)
     appm__put(o, b, 4);
 }
 
-/* The zlib stream of a PNG made of stored deflate blocks: each block is a
- * 5-byte header (BFINAL, LEN, ~LEN) and up to 65535 raw bytes. */
-typedef struct appm__zstore {
-    appm__out *o;
-    size_t raw, done, left_in_block;
-    uint32_t s1, s2; /* Adler-32 halves */
-} appm__zstore;
-
-static void appm__zstore_feed(appm__zstore *z, const unsigned char *p, size_t n)
-{
-    while (n > 0) {
-        size_t take, k;
-        if (z->left_in_block == 0) {
-            unsigned char b[5];
-            size_t len = z->raw - z->done < 65535 ? z->raw - z->done : 65535;
-            b[0] = (unsigned char)(z->done + len == z->raw);
-            b[1] = (unsigned char)(len & 255);
-            b[2] = (unsigned char)(len >> 8);
-            b[3] = (unsigned char)(~len & 255);
-            b[4] = (unsigned char)((~len >> 8) & 255);
-            appm__put_crc(z->o, b, 5);
-            z->left_in_block = len;
-        }
-        take = n < z->left_in_block ? n : z->left_in_block;
-        for (k = 0; k < take; ++k) {
-            z->s1 = (z->s1 + p[k]) % 65521u;
-            z->s2 = (z->s2 + z->s1) % 65521u;
-        }
-        appm__put_crc(z->o, p, take);
-        p += take;
-        n -= take;
-        z->done += take;
-        z->left_in_block -= take;
-    }
-}
-
 /* Converts row y to sRGB bytes piece by piece through a stack buffer (no heap
  * use at all) and hands each piece to `emit`. */
 #define APPM__ROW_PIECE 256
@@ -713,26 +679,607 @@ static void appm__emit_srgb_row(const appm_image *img, uint32_t y, float exposur
     }
 }
 
-static void appm__emit_png(void *ctx, const unsigned char *p, size_t n)
-{
-    appm__zstore_feed((appm__zstore *)ctx, p, n);
-}
-
 static void appm__emit_plain(void *ctx, const unsigned char *p, size_t n)
 {
     appm__put((appm__out *)ctx, p, n);
 }
 
-static void appm__write_png_body(appm__out *o, const appm_image *img, float exposure)
+/* ---- 3.1 Deflate (RFC 1951) inside a zlib stream (RFC 1950) ----------------
+ *
+ * A streaming compressor in bounded memory, allocated once per file: a 64 KiB
+ * window (two halves of 32 KiB; when the second fills, it slides down and the
+ * hash positions with it), hash chains over 3-byte prefixes, lazy matching as in
+ * zlib's deflate_slow (a match at p is emitted only if p + 1 does not start a
+ * longer one), and blocks of up to APPM__Z_SYMS symbols.  Each block is sent
+ * with the cheaper of the fixed Huffman code and a dynamic one built from its
+ * own symbol counts (lengths limited to 15 bits, code-length code to 7).  The
+ * compressed bytes go to a sink in pieces of at most APPM__Z_OUT bytes (for a PNG,
+ * one IDAT chunk each; for an EXR block, a memory buffer).
+ */
+#define APPM__Z_W 32768      /* window size: the farthest a match may reach back */
+#define APPM__Z_MINM 3
+#define APPM__Z_MAXM 258
+#define APPM__Z_HASH 32768   /* hash buckets over the next 3 bytes */
+#define APPM__Z_SYMS 16384   /* symbols per block */
+#define APPM__Z_OUT 65536    /* compressed bytes per sink call */
+/* Chain links followed per position (the effort): for PNG near zlib's level 9
+ * (4096) in size at a fraction of its time; EXR float data gains little. */
+#ifndef APPM__PNG_CHAIN
+#define APPM__PNG_CHAIN 1024
+#endif
+#define APPM__EXR_CHAIN 64
+#ifndef APPM__PNG_MINKEEP
+#define APPM__PNG_MINKEEP 6
+#endif
+/* A match may reach back at most this far, so that a chain never follows a
+ * prev[] slot already reused by a newer position (zlib's MAX_DIST). */
+#define APPM__Z_MAXDIST (APPM__Z_W - APPM__Z_MAXM - APPM__Z_MINM - 1)
+
+typedef void (*appm__sink_fn)(void *ctx, const unsigned char *p, size_t n);
+
+typedef struct appm__zlib {
+    unsigned char *win;   /* 2 W bytes: the window and the look-ahead */
+    int32_t *head, *prev; /* newest position per hash; older position per slot (-1: none) */
+    uint16_t *lit, *dist; /* the block's symbols: literal or length, and distance (0: literal) */
+    unsigned char *out;   /* APPM__Z_OUT compressed bytes waiting for the sink */
+    size_t fill, pos, nsym, nout;
+    int have_prev;        /* lazy matching: the byte at pos - 1 is not yet emitted */
+    unsigned prev_len, prev_dist;
+    unsigned max_chain;   /* chain links followed per position: the effort */
+    unsigned min_keep;    /* shorter matches are dropped (zlib's Z_FILTERED: 6) */
+    uint64_t bits;        /* bit buffer, least significant bit first */
+    unsigned nbits;
+    uint32_t s1, s2;      /* Adler-32 halves of the uncompressed data */
+    uint32_t fl[286], fd[30]; /* symbol counts of the current block */
+    appm__sink_fn sink;
+    void *ctx;
+} appm__zlib;
+
+static const uint16_t appm__len_base[29] = {3,  4,  5,  6,  7,  8,  9,  10, 11,  13,
+                                            15, 17, 19, 23, 27, 31, 35, 43, 51,  59,
+                                            67, 83, 99, 115, 131, 163, 195, 227, 258};
+static const unsigned char appm__len_extra[29] = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2,
+                                                  2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0};
+static const uint16_t appm__dist_base[30] = {1,    2,    3,    4,    5,    7,     9,     13,
+                                             17,   25,   33,   49,   65,   97,    129,   193,
+                                             257,  385,  513,  769,  1025, 1537,  2049,  3073,
+                                             4097, 6145, 8193, 12289, 16385, 24577};
+static const unsigned char appm__dist_extra[30] = {0, 0, 0, 0, 1, 1, 2, 2,  3,  3,  4,  4,  5,  5,  6,
+                                                   6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13};
+
+static unsigned appm__log2u(unsigned v)
+{
+    unsigned k = 0;
+    while (v >>= 1) k++;
+    return k;
+}
+
+/* Length 3..258 -> code index 0..28 (symbol 257 + index): four codes per
+ * power of two above 10, each with log2 - 2 extra bits. */
+static unsigned appm__len_code(unsigned len)
+{
+    unsigned l = len - 3, nb;
+    if (len == 258) return 28;
+    if (l < 8) return l;
+    nb = appm__log2u(l);
+    return 4 * (nb - 1) + ((l >> (nb - 2)) & 3u);
+}
+
+/* Distance 1..32768 -> code 0..29: two codes per power of two above 4. */
+static unsigned appm__dist_code(unsigned dist)
+{
+    unsigned d = dist - 1, nb;
+    if (d < 4) return d;
+    nb = appm__log2u(d);
+    return 2 * nb + ((d >> (nb - 1)) & 1u);
+}
+
+static appm_status appm__zlib_init(appm__zlib *z, appm__mem *m, unsigned max_chain, unsigned min_keep)
+{
+    memset(z, 0, sizeof *z);
+    z->win = (unsigned char *)appm__alloc(m, 2 * APPM__Z_W, 1);
+    z->head = (int32_t *)appm__alloc(m, APPM__Z_HASH, sizeof(int32_t));
+    z->prev = (int32_t *)appm__alloc(m, APPM__Z_W, sizeof(int32_t));
+    z->lit = (uint16_t *)appm__alloc(m, APPM__Z_SYMS, sizeof(uint16_t));
+    z->dist = (uint16_t *)appm__alloc(m, APPM__Z_SYMS, sizeof(uint16_t));
+    z->out = (unsigned char *)appm__alloc(m, APPM__Z_OUT, 1);
+    z->max_chain = max_chain;
+    z->min_keep = min_keep;
+    return z->win && z->head && z->prev && z->lit && z->dist && z->out ? APPM_OK : APPM_ERR_NOMEM;
+}
+
+static void appm__zlib_release(appm__zlib *z, appm__mem *m)
+{
+    appm__free(m, z->win);
+    appm__free(m, z->head);
+    appm__free(m, z->prev);
+    appm__free(m, z->lit);
+    appm__free(m, z->dist);
+    appm__free(m, z->out);
+    memset(z, 0, sizeof *z);
+}
+
+static void appm__zlib_flush_out(appm__zlib *z)
+{
+    if (z->nout) z->sink(z->ctx, z->out, z->nout);
+    z->nout = 0;
+}
+
+/* Appends the n low bits of v (n <= 32), first bit first. */
+static void appm__zbits(appm__zlib *z, uint32_t v, unsigned n)
+{
+    z->bits |= (uint64_t)v << z->nbits;
+    z->nbits += n;
+    while (z->nbits >= 8) {
+        z->out[z->nout++] = (unsigned char)z->bits;
+        z->bits >>= 8;
+        z->nbits -= 8;
+        if (z->nout == APPM__Z_OUT) appm__zlib_flush_out(z);
+    }
+}
+
+/* Starts a zlib stream: header 0x78 0xDA (deflate, 32K window, "best"
+ * compression; 0x78DA is a multiple of 31), empty window, Adler-32 = 1. */
+static void appm__zlib_begin(appm__zlib *z, appm__sink_fn sink, void *ctx)
+{
+    size_t i;
+    z->sink = sink;
+    z->ctx = ctx;
+    z->fill = z->pos = z->nsym = z->nout = 0;
+    z->have_prev = 0;
+    z->bits = 0;
+    z->nbits = 0;
+    z->s1 = 1;
+    z->s2 = 0;
+    for (i = 0; i < APPM__Z_HASH; ++i) z->head[i] = -1;
+    memset(z->fl, 0, sizeof z->fl);
+    memset(z->fd, 0, sizeof z->fd);
+    appm__zbits(z, 0x78, 8);
+    appm__zbits(z, 0xDA, 8);
+}
+
+static void appm__zlib_adler(appm__zlib *z, const unsigned char *p, size_t n)
+{
+    while (n > 0) { /* 5552 bytes is the most before the sums could pass 2^32 (zlib's NMAX) */
+        size_t k = n < 5552 ? n : 5552;
+        n -= k;
+        while (k--) {
+            z->s1 += *p++;
+            z->s2 += z->s1;
+        }
+        z->s1 %= 65521u;
+        z->s2 %= 65521u;
+    }
+}
+
+/* Huffman code lengths for the counts freq[0..n-1] (n <= 288), none longer
+ * than maxbits; count 0 gets length 0.  Optimal lengths come from the
+ * two-queue construction over the symbols sorted by count (leaves in one queue,
+ * merged nodes, born in non-decreasing weight, in the other).  If the longest
+ * exceeds maxbits, the excess is folded back as zlib and miniz do: clamp, then
+ * repair the Kraft sum by moving one leaf down a level at a time, and deal the
+ * lengths out again, the longest to the rarest symbols. */
+static void appm__huff_lengths(const uint32_t *freq, unsigned n, unsigned maxbits, unsigned char *len)
+{
+    uint16_t sym[288], parent[2 * 288], depth[2 * 288];
+    uint32_t w[2 * 288], kraft = 0;
+    unsigned count[33], m = 0, i, k, leaf = 0, node, next;
+    memset(len, 0, n);
+    memset(count, 0, sizeof count);
+    for (i = 0; i < n; ++i)
+        if (freq[i]) sym[m++] = (uint16_t)i;
+    if (m < 2) {
+        if (m == 1) len[sym[0]] = 1;
+        return;
+    }
+    for (i = 1; i < m; ++i) { /* stable insertion sort by count: ties keep symbol order */
+        uint16_t s = sym[i];
+        for (k = i; k > 0 && freq[sym[k - 1]] > freq[s]; --k) sym[k] = sym[k - 1];
+        sym[k] = s;
+    }
+    for (i = 0; i < m; ++i) w[i] = freq[sym[i]];
+    for (node = next = m; next < 2 * m - 1; ++next) {
+        unsigned a = (leaf < m && (node >= next || w[leaf] <= w[node])) ? leaf++ : node++;
+        unsigned b = (leaf < m && (node >= next || w[leaf] <= w[node])) ? leaf++ : node++;
+        w[next] = w[a] + w[b];
+        parent[a] = parent[b] = (uint16_t)next;
+    }
+    depth[2 * m - 2] = 0; /* the root; every parent has a larger index than its children */
+    for (i = 2 * m - 2; i-- > 0;) depth[i] = (uint16_t)(depth[parent[i]] + 1);
+    for (i = 0; i < m; ++i) count[depth[i] > 32 ? 32 : depth[i]]++;
+    for (i = maxbits + 1; i <= 32; ++i) {
+        count[maxbits] += count[i];
+        count[i] = 0;
+    }
+    for (i = 1; i <= maxbits; ++i) kraft += (uint32_t)count[i] << (maxbits - i);
+    while (kraft > (1u << maxbits)) { /* each step: one leaf fewer at maxbits, Kraft sum - 1 */
+        count[maxbits]--;
+        for (i = maxbits - 1; i > 0; --i)
+            if (count[i]) {
+                count[i]--;
+                count[i + 1] += 2;
+                break;
+            }
+        kraft--;
+    }
+    for (k = 0, i = maxbits; i >= 1; --i)
+        for (leaf = count[i]; leaf > 0; --leaf) len[sym[k++]] = (unsigned char)i;
+}
+
+/* Canonical codes from lengths (RFC 1951, 3.2.2), bit-reversed because
+ * deflate sends Huffman codes most significant bit first into an LSB-first
+ * stream. */
+static void appm__huff_codes(const unsigned char *len, unsigned n, uint16_t *code)
+{
+    unsigned count[16], next[16], i, c = 0;
+    memset(count, 0, sizeof count);
+    for (i = 0; i < n; ++i) count[len[i]]++;
+    count[0] = 0;
+    for (i = 1; i < 16; ++i) {
+        c = (c + count[i - 1]) << 1;
+        next[i] = c;
+    }
+    for (i = 0; i < n; ++i) {
+        unsigned v, r = 0, b;
+        code[i] = 0;
+        if (!len[i]) continue;
+        v = next[len[i]]++;
+        for (b = 0; b < len[i]; ++b, v >>= 1) r = (r << 1) | (v & 1u);
+        code[i] = (uint16_t)r;
+    }
+}
+
+/* The code-length sequence of a dynamic block, run-length coded: 16 repeats
+ * the previous length 3-6 times, 17 and 18 give 3-10 and 11-138 zeros.  Each
+ * entry is symbol | extra-bits value << 5; fc counts the symbols. */
+static unsigned appm__zrle(const unsigned char *lens, unsigned n, uint16_t *rle, uint32_t *fc)
+{
+    unsigned i = 0, m = 0, last = 99;
+    while (i < n) {
+        unsigned v = lens[i], run = 1, t;
+        while (i + run < n && lens[i + run] == v) run++;
+        if (v == 0 && run >= 3) {
+            t = run > 138 ? 138 : run;
+            rle[m++] = (uint16_t)(t >= 11 ? 18u | (t - 11) << 5 : 17u | (t - 3) << 5);
+            fc[t >= 11 ? 18 : 17]++;
+            last = 0;
+        } else if (v != 0 && v == last && run >= 3) {
+            t = run > 6 ? 6 : run;
+            rle[m++] = (uint16_t)(16u | (t - 3) << 5);
+            fc[16]++;
+        } else {
+            t = 1;
+            rle[m++] = (uint16_t)v;
+            fc[v]++;
+            last = v;
+        }
+        i += t;
+    }
+    return m;
+}
+
+/* A dynamic block's code tables, and what it and the fixed code would cost. */
+typedef struct appm__zplan {
+    unsigned char ll[288], dl[30], cl[19]; /* 288: the fixed code's two unused symbols count too */
+    uint16_t rle[316];
+    unsigned hlit, hdist, hclen, nrle;
+    uint64_t dyn_bits, fixed_bits;
+} appm__zplan;
+
+static const unsigned char appm__cl_order[19] = {16, 17, 18, 0, 8,  7, 9,  6, 10, 5,
+                                                 11, 4,  12, 3, 13, 2, 14, 1, 15};
+
+static unsigned appm__nonzero(const uint32_t *f, unsigned n)
+{
+    unsigned i, k = 0;
+    for (i = 0; i < n; ++i) k += f[i] != 0;
+    return k;
+}
+
+static void appm__zplan_make(appm__zlib *z, appm__zplan *pl)
+{
+    uint32_t fc[19];
+    unsigned i;
+    unsigned char lens[316];
+    z->fl[256] = 1; /* end of block */
+    /* Two used symbols at least per code, so that every code is complete (a
+     * lone length-1 code is legal in some alphabets only); a dummy costs a few
+     * header bits. */
+    if (appm__nonzero(z->fl, 286) < 2) z->fl[0] += 1;
+    if (appm__nonzero(z->fd, 30) == 1) z->fd[z->fd[0] ? 1 : 0] += 1;
+    appm__huff_lengths(z->fl, 286, 15, pl->ll);
+    appm__huff_lengths(z->fd, 30, 15, pl->dl);
+    for (pl->hlit = 286; pl->hlit > 257 && pl->ll[pl->hlit - 1] == 0; --pl->hlit) {
+    }
+    for (pl->hdist = 30; pl->hdist > 1 && pl->dl[pl->hdist - 1] == 0; --pl->hdist) {
+    }
+    memcpy(lens, pl->ll, pl->hlit);
+    memcpy(lens + pl->hlit, pl->dl, pl->hdist);
+    memset(fc, 0, sizeof fc);
+    pl->nrle = appm__zrle(lens, pl->hlit + pl->hdist, pl->rle, fc);
+    if (appm__nonzero(fc, 19) < 2) fc[fc[0] ? 1 : 0] += 1;
+    appm__huff_lengths(fc, 19, 7, pl->cl);
+    for (pl->hclen = 19; pl->hclen > 4 && pl->cl[appm__cl_order[pl->hclen - 1]] == 0; --pl->hclen) {
+    }
+    pl->dyn_bits = 3 + 5 + 5 + 4 + 3 * (uint64_t)pl->hclen;
+    pl->fixed_bits = 3;
+    for (i = 0; i < pl->nrle; ++i) {
+        unsigned s = pl->rle[i] & 31u;
+        pl->dyn_bits += pl->cl[s] + (s == 16 ? 2u : s == 17 ? 3u : s == 18 ? 7u : 0u);
+    }
+    for (i = 0; i < 286; ++i) {
+        unsigned extra = i >= 257 ? appm__len_extra[i - 257] : 0, fixed = i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8;
+        pl->dyn_bits += (uint64_t)z->fl[i] * (pl->ll[i] + extra);
+        pl->fixed_bits += (uint64_t)z->fl[i] * (fixed + extra);
+    }
+    for (i = 0; i < 30; ++i) {
+        pl->dyn_bits += (uint64_t)z->fd[i] * (pl->dl[i] + appm__dist_extra[i]);
+        pl->fixed_bits += (uint64_t)z->fd[i] * (5u + appm__dist_extra[i]);
+    }
+}
+
+/* Sends the block's symbols and its end-of-block code. */
+static void appm__zsend(appm__zlib *z, const unsigned char *ll, unsigned nll, const unsigned char *dl)
+{
+    uint16_t lc[288], dc[30];
+    size_t i;
+    appm__huff_codes(ll, nll, lc);
+    appm__huff_codes(dl, 30, dc);
+    for (i = 0; i < z->nsym; ++i) {
+        unsigned v = z->lit[i], d = z->dist[i], c;
+        if (d == 0) {
+            appm__zbits(z, lc[v], ll[v]);
+            continue;
+        }
+        c = appm__len_code(v);
+        appm__zbits(z, lc[257 + c], ll[257 + c]);
+        appm__zbits(z, v - appm__len_base[c], appm__len_extra[c]);
+        c = appm__dist_code(d);
+        appm__zbits(z, dc[c], dl[c]);
+        appm__zbits(z, d - appm__dist_base[c], appm__dist_extra[c]);
+    }
+    appm__zbits(z, lc[256], ll[256]);
+}
+
+/* Ends the current block: dynamic or fixed code, whichever is shorter. */
+static void appm__zblock(appm__zlib *z, int final)
+{
+    appm__zplan pl;
+    unsigned i;
+    appm__zplan_make(z, &pl);
+    if (pl.dyn_bits < pl.fixed_bits) {
+        uint16_t cc[19];
+        appm__zbits(z, (uint32_t)final | 2u << 1, 3); /* BFINAL, BTYPE 2: dynamic */
+        appm__zbits(z, pl.hlit - 257, 5);
+        appm__zbits(z, pl.hdist - 1, 5);
+        appm__zbits(z, pl.hclen - 4, 4);
+        for (i = 0; i < pl.hclen; ++i) appm__zbits(z, pl.cl[appm__cl_order[i]], 3);
+        appm__huff_codes(pl.cl, 19, cc);
+        for (i = 0; i < pl.nrle; ++i) {
+            unsigned s = pl.rle[i] & 31u;
+            appm__zbits(z, cc[s], pl.cl[s]);
+            if (s >= 16) appm__zbits(z, pl.rle[i] >> 5, s == 16 ? 2 : s == 17 ? 3 : 7);
+        }
+        appm__zsend(z, pl.ll, 286, pl.dl);
+    } else { /* RFC 1951, 3.2.6: 8, 9, 7, 8 bits for literal/length ranges, 5 for distances */
+        for (i = 0; i < 288; ++i) pl.ll[i] = (unsigned char)(i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8);
+        for (i = 0; i < 30; ++i) pl.dl[i] = 5;
+        appm__zbits(z, (uint32_t)final | 1u << 1, 3);
+        appm__zsend(z, pl.ll, 288, pl.dl);
+    }
+    z->nsym = 0;
+    memset(z->fl, 0, sizeof z->fl);
+    memset(z->fd, 0, sizeof z->fd);
+}
+
+static void appm__zsym(appm__zlib *z, unsigned v, unsigned dist)
+{
+    z->lit[z->nsym] = (uint16_t)v;
+    z->dist[z->nsym] = (uint16_t)dist;
+    z->nsym++;
+    if (dist == 0) {
+        z->fl[v]++;
+    } else {
+        z->fl[257 + appm__len_code(v)]++;
+        z->fd[appm__dist_code(dist)]++;
+    }
+    if (z->nsym == APPM__Z_SYMS) appm__zblock(z, 0);
+}
+
+static uint32_t appm__zhash(const unsigned char *p) /* Knuth's multiplicative hash of 3 bytes */
+{
+    uint32_t v = (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16;
+    return (v * 2654435761u) >> 17; /* 15 bits */
+}
+
+static void appm__zinsert(appm__zlib *z, size_t p)
+{
+    uint32_t h = appm__zhash(z->win + p);
+    z->prev[p & (APPM__Z_W - 1)] = z->head[h];
+    z->head[h] = (int32_t)p;
+}
+
+/* The longest match at p (already inserted) of more than `better` (and at
+ * least min_keep) and at most maxlen bytes, following at most max_chain links
+ * (a quarter of them when the match to beat is already long, as zlib's
+ * good_length).  0 if none.  A candidate is first tested at the two bytes that
+ * would make it longer than the best so far (zlib's scan_end), which rejects
+ * most of them at once. */
+static unsigned appm__zmatch(const appm__zlib *z, size_t p, unsigned maxlen, unsigned better,
+                             unsigned *dist)
+{
+    const unsigned char *s = z->win + p;
+    unsigned least = z->min_keep > APPM__Z_MINM ? z->min_keep - 1 : APPM__Z_MINM - 1; /* shorter: dropped anyway */
+    unsigned best = better < least ? least : better, found = 0;
+    unsigned chain = better >= 32 ? z->max_chain >> 2 : z->max_chain;
+    int32_t c = z->prev[p & (APPM__Z_W - 1)];
+    if (best >= maxlen) return 0;
+    while (c >= 0 && p - (size_t)c <= APPM__Z_MAXDIST && chain-- > 0) {
+        const unsigned char *q = z->win + c;
+        if (q[best] == s[best] && q[best - 1] == s[best - 1] && q[0] == s[0] && q[1] == s[1]) {
+            unsigned n = 2;
+            while (n < maxlen && q[n] == s[n]) n++;
+            if (n > best) {
+                best = n;
+                found = 1;
+                *dist = (unsigned)(p - (size_t)c);
+                if (n >= maxlen) break;
+            }
+        }
+        c = z->prev[c & (APPM__Z_W - 1)];
+    }
+    return found ? best : 0;
+}
+
+/* LZ77 with lazy evaluation over the window: runs while more than a longest
+ * match of look-ahead is there (or to the end when flushing).  Invariant
+ * after a call without flush: fill - pos <= APPM__Z_MAXM. */
+static void appm__zrun(appm__zlib *z, int flush)
+{
+    while (z->pos < z->fill && (flush || z->fill - z->pos > APPM__Z_MAXM)) {
+        size_t p = z->pos, avail = z->fill - p;
+        unsigned maxlen = avail < APPM__Z_MAXM ? (unsigned)avail : APPM__Z_MAXM, cur = 0, cdist = 0;
+        if (avail >= APPM__Z_MINM) {
+            appm__zinsert(z, p);
+            cur = appm__zmatch(z, p, maxlen, z->have_prev ? z->prev_len : 0, &cdist);
+            if (cur == APPM__Z_MINM && cdist > 4096) cur = 0; /* 3 bytes that far cost more than literals */
+            if (cur < z->min_keep) cur = 0;
+        }
+        if (z->have_prev && z->prev_len >= APPM__Z_MINM && z->prev_len >= cur) {
+            size_t end = p - 1 + z->prev_len, q;
+            appm__zsym(z, z->prev_len, z->prev_dist);
+            for (q = p + 1; q < end; ++q)
+                if (z->fill - q >= APPM__Z_MINM) appm__zinsert(z, q);
+            z->pos = end;
+            z->have_prev = 0;
+        } else {
+            if (z->have_prev) appm__zsym(z, z->win[p - 1], 0);
+            z->have_prev = 1;
+            z->prev_len = cur;
+            z->prev_dist = cdist;
+            z->pos = p + 1;
+        }
+    }
+    if (flush && z->have_prev) { /* a match there would have been emitted in the loop */
+        appm__zsym(z, z->win[z->pos - 1], 0);
+        z->have_prev = 0;
+    }
+}
+
+/* Moves the upper half of the window down; positions move with it, and those
+ * that fall out of the window become "none". */
+static void appm__zslide(appm__zlib *z)
+{
+    size_t i;
+    memcpy(z->win, z->win + APPM__Z_W, APPM__Z_W);
+    z->fill -= APPM__Z_W;
+    z->pos -= APPM__Z_W;
+    for (i = 0; i < APPM__Z_HASH; ++i) z->head[i] = z->head[i] >= APPM__Z_W ? z->head[i] - APPM__Z_W : -1;
+    for (i = 0; i < APPM__Z_W; ++i) z->prev[i] = z->prev[i] >= APPM__Z_W ? z->prev[i] - APPM__Z_W : -1;
+}
+
+static void appm__zlib_feed(appm__zlib *z, const unsigned char *p, size_t n)
+{
+    appm__zlib_adler(z, p, n);
+    while (n > 0) {
+        size_t take;
+        if (z->fill == 2 * APPM__Z_W) appm__zslide(z); /* pos >= W here, by zrun's invariant */
+        take = 2 * APPM__Z_W - z->fill;
+        if (take > n) take = n;
+        memcpy(z->win + z->fill, p, take);
+        z->fill += take;
+        p += take;
+        n -= take;
+        appm__zrun(z, 0);
+    }
+}
+
+/* Ends the stream: the rest of the input, the final block, byte alignment, the
+ * Adler-32 (most significant byte first). */
+static void appm__zlib_end(appm__zlib *z)
+{
+    appm__zrun(z, 1);
+    appm__zblock(z, 1);
+    if (z->nbits) appm__zbits(z, 0, 8 - z->nbits);
+    appm__zbits(z, z->s2 >> 8, 8);
+    appm__zbits(z, z->s2 & 255u, 8);
+    appm__zbits(z, z->s1 >> 8, 8);
+    appm__zbits(z, z->s1 & 255u, 8);
+    appm__zlib_flush_out(z);
+}
+
+/* ---- 3.2 PNG --------------------------------------------------------------- */
+
+/* The Paeth predictor (PNG specification, 9.4): whichever of the left (a),
+ * upper (b) and upper-left (c) byte is nearest to a + b - c, ties in that order. */
+static int appm__paeth(int a, int b, int c)
+{
+    int p = a + b - c, pa = p > a ? p - a : a - p, pb = p > b ? p - b : b - p, pc = p > c ? p - c : c - p;
+    return pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+}
+
+/* Filter type t (0 none, 1 sub, 2 up, 3 average, 4 Paeth) of the n bytes of
+ * `cur` against the row above `up` (zeros above the first row), 3 bytes per
+ * pixel, into out[0..n] with the type byte first.  Returns the sum of the
+ * filtered bytes read as signed magnitudes: the "minimum sum of absolute
+ * differences" guess of libpng and stb_image_write at which filter will
+ * compress best. */
+static uint64_t appm__png_filter(int t, const unsigned char *cur, const unsigned char *up, size_t n,
+                                 unsigned char *out)
+{
+    uint64_t cost = 0;
+    size_t i;
+    out[0] = (unsigned char)t;
+    for (i = 0; i < n; ++i) {
+        int a = i >= 3 ? cur[i - 3] : 0, b = up[i], c = i >= 3 ? up[i - 3] : 0, pred;
+        unsigned char v;
+        pred = t == 0 ? 0 : t == 1 ? a : t == 2 ? b : t == 3 ? (a + b) >> 1 : appm__paeth(a, b, c);
+        v = (unsigned char)(cur[i] - pred);
+        out[1 + i] = v;
+        cost += v < 128 ? v : 256u - v;
+    }
+    return cost;
+}
+
+static void appm__emit_copy(void *ctx, const unsigned char *p, size_t n)
+{
+    unsigned char **dst = (unsigned char **)ctx;
+    memcpy(*dst, p, n);
+    *dst += n;
+}
+
+/* One IDAT chunk per piece of compressed output. */
+static void appm__png_idat(void *ctx, const unsigned char *p, size_t n)
+{
+    appm__out *o = (appm__out *)ctx;
+    appm__png_chunk_begin(o, "IDAT", (uint32_t)n);
+    appm__put_crc(o, p, n);
+    appm__png_chunk_end(o);
+}
+
+/* Rows are converted to sRGB bytes, each row filtered five ways and the
+ * cheapest (by the guess above) sent to the compressor.  All buffers are
+ * allocated here, once: four rows and the compressor's window and tables. */
+static appm_status appm__write_png_body(appm__out *o, appm__mem *m, const appm_image *img,
+                                        float exposure)
 {
     static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
     const uint32_t w = img->width, h = img->height;
-    const size_t raw = (size_t)h * (1 + (size_t)w * 3); /* filter byte + RGB per row */
-    const size_t nblocks = raw / 65535 + (raw % 65535 != 0);
-    const size_t zlen = 2 + raw + 5 * nblocks + 4;
-    unsigned char b[13];
-    appm__zstore z;
+    const size_t n = (size_t)w * 3;
+    unsigned char b[13], *rows, *cur, *up, *best, *trial;
+    appm__zlib z;
+    appm_status st = appm__zlib_init(&z, m, APPM__PNG_CHAIN, APPM__PNG_MINKEEP);
     uint32_t y;
+    rows = (unsigned char *)appm__alloc(m, 4, n + 1); /* zeroed: the row above the first */
+    if (st != APPM_OK || !rows) {
+        appm__free(m, rows);
+        appm__zlib_release(&z, m);
+        return APPM_ERR_NOMEM;
+    }
+    cur = rows;
+    up = cur + (n + 1);
+    best = up + (n + 1);
+    trial = best + (n + 1);
     appm__put(o, sig, 8);
     appm__png_chunk_begin(o, "IHDR", 13);
     appm__be32(b, w);
@@ -740,29 +1287,245 @@ static void appm__write_png_body(appm__out *o, const appm_image *img, float expo
     b[8] = 8;  /* bit depth */
     b[9] = 2;  /* colour type: RGB */
     b[10] = 0; /* compression: deflate */
-    b[11] = 0; /* filter method 0 (each row then says filter type 0: none) */
+    b[11] = 0; /* filter method 0: a filter type byte leads each row */
     b[12] = 0; /* no interlace */
     appm__put_crc(o, b, 13);
     appm__png_chunk_end(o);
-    appm__png_chunk_begin(o, "IDAT", (uint32_t)zlen);
-    b[0] = 0x78; /* zlib: deflate, 32K window */
-    b[1] = 0x01; /* check bits: 0x7801 is a multiple of 31; no dictionary */
-    appm__put_crc(o, b, 2);
-    z.o = o;
-    z.raw = raw;
-    z.done = z.left_in_block = 0;
-    z.s1 = 1;
-    z.s2 = 0;
+    appm__zlib_begin(&z, appm__png_idat, o);
     for (y = 0; y < h; ++y) {
-        unsigned char filter = 0;
-        appm__zstore_feed(&z, &filter, 1);
-        appm__emit_srgb_row(img, y, exposure, appm__emit_png, &z);
+        unsigned char *dst = cur, *t;
+        uint64_t cost, c;
+        int f;
+        appm__emit_srgb_row(img, y, exposure, appm__emit_copy, &dst);
+        cost = appm__png_filter(0, cur, up, n, best);
+        for (f = 1; f <= 4; ++f)
+            if ((c = appm__png_filter(f, cur, up, n, trial)) < cost) {
+                cost = c;
+                t = best;
+                best = trial;
+                trial = t;
+            }
+        appm__zlib_feed(&z, best, n + 1);
+        t = up; /* this row is the next one's "above" */
+        up = cur;
+        cur = t;
     }
-    appm__be32(b, (z.s2 << 16) | z.s1);
-    appm__put_crc(o, b, 4);
-    appm__png_chunk_end(o);
+    appm__zlib_end(&z);
     appm__png_chunk_begin(o, "IEND", 0);
     appm__png_chunk_end(o);
+    appm__free(m, rows);
+    appm__zlib_release(&z, m);
+    return APPM_OK;
+}
+
+/* ---- 3.3 OpenEXR --------------------------------------------------------------
+ *
+ * Single-part scanline files (the OpenEXR file layout document): magic
+ * 76 2f 31 01, version 2 with no flags, the header (attributes as name, type,
+ * size, value; an empty name ends it), a table with the file offset of every
+ * block, then the blocks, each "first line, byte count, data".  Everything is
+ * little-endian.  Channels are B, G, R (the header lists them sorted by name);
+ * a block holds, line by line, all B values, then G, then R.  Linear RGB, 32-bit
+ * float or 16-bit half, uncompressed (one line per block) or ZIP (16 lines per
+ * block: the bytes are split into even and odd halves, delta coded, deflated;
+ * a block that would not shrink is stored raw, which readers recognise by its
+ * size).  The offset table precedes the blocks, so a ZIP file is compressed
+ * twice: once to learn the block sizes, once to write them - no seeking, so
+ * a pipe works too, and memory stays at one block.
+ */
+static void appm__le32(unsigned char *b, uint32_t v)
+{
+    b[0] = (unsigned char)v;
+    b[1] = (unsigned char)(v >> 8);
+    b[2] = (unsigned char)(v >> 16);
+    b[3] = (unsigned char)(v >> 24);
+}
+
+/* float -> IEEE half, round to nearest even.  Finite values beyond the half
+ * range become +-65504 (the largest half) rather than infinity; inf and NaN
+ * stay what they are. */
+static uint16_t appm__half(float f)
+{
+    uint32_t x, sign, e, mant, hm, rem, halfway, shift;
+    memcpy(&x, &f, 4);
+    sign = (x >> 16) & 0x8000u;
+    e = (x >> 23) & 255u;
+    mant = x & 0x7FFFFFu;
+    if (e == 255) return (uint16_t)(sign | 0x7C00u | (mant ? 0x200u : 0u));
+    if (e < 113) { /* below 2^-14: a half subnormal (units of 2^-24) or zero */
+        if (e < 102) return (uint16_t)sign;
+        mant |= 0x800000u;
+        shift = 126 - e;
+        hm = mant >> shift;
+        rem = mant & ((1u << shift) - 1u);
+        halfway = 1u << (shift - 1);
+        if (rem > halfway || (rem == halfway && (hm & 1u))) hm++; /* may carry into the exponent: right */
+        return (uint16_t)(sign | hm);
+    }
+    hm = mant >> 13;
+    rem = mant & 0x1FFFu;
+    e -= 112; /* rebias 127 -> 15 */
+    if (rem > 0x1000u || (rem == 0x1000u && (hm & 1u))) {
+        if (++hm == 0x400u) {
+            hm = 0;
+            e++;
+        }
+    }
+    if (e >= 31) return (uint16_t)(sign | 0x7BFFu);
+    return (uint16_t)(sign | e << 10 | hm);
+}
+
+typedef struct appm__exrw {
+    const appm_image *img;
+    int half, zip;
+    uint32_t lines;              /* scanlines per block: 1 or 16 */
+    size_t cap;                  /* bytes of the largest block, uncompressed */
+    unsigned char *raw, *tmp, *packed;
+    size_t npacked;
+    int overflow;                /* the deflated block grew past `cap` */
+    appm__zlib z;
+} appm__exrw;
+
+static void appm__exr_sink(void *ctx, const unsigned char *p, size_t n)
+{
+    appm__exrw *e = (appm__exrw *)ctx;
+    if (e->overflow || n > e->cap - e->npacked) {
+        e->overflow = 1;
+        return;
+    }
+    memcpy(e->packed + e->npacked, p, n);
+    e->npacked += n;
+}
+
+/* The block starting at line y0, as it is stored; its size in *size. */
+static const unsigned char *appm__exr_block(appm__exrw *e, uint32_t y0, size_t *size)
+{
+    const appm_image *img = e->img;
+    uint32_t y1 = y0 + e->lines < img->height ? y0 + e->lines : img->height, y, x;
+    size_t n = 0, i, half_n;
+    int c;
+    for (y = y0; y < y1; ++y)
+        for (c = 2; c >= 0; --c) /* B, G, R */
+            for (x = 0; x < img->width; ++x) {
+                float v = img->rgb[3 * ((size_t)y * img->width + x) + (size_t)c];
+                if (e->half) {
+                    uint16_t hv = appm__half(v);
+                    e->raw[n++] = (unsigned char)hv;
+                    e->raw[n++] = (unsigned char)(hv >> 8);
+                } else {
+                    uint32_t bits;
+                    memcpy(&bits, &v, 4);
+                    appm__le32(e->raw + n, bits);
+                    n += 4;
+                }
+            }
+    *size = n;
+    if (!e->zip) return e->raw;
+    half_n = (n + 1) / 2; /* even bytes first, then odd ones; then each byte minus the one before, + 128 */
+    for (i = 0; i < n; ++i) e->tmp[(i & 1u) ? half_n + i / 2 : i / 2] = e->raw[i];
+    for (i = n; i-- > 1;) e->tmp[i] = (unsigned char)(e->tmp[i] - e->tmp[i - 1] + 128);
+    e->npacked = 0;
+    e->overflow = 0;
+    appm__zlib_begin(&e->z, appm__exr_sink, e);
+    appm__zlib_feed(&e->z, e->tmp, n);
+    appm__zlib_end(&e->z);
+    if (e->overflow || e->npacked >= n) return e->raw;
+    *size = e->npacked;
+    return e->packed;
+}
+
+/* Appends one attribute (name, type, size, value) to the header buffer. */
+static size_t appm__exr_attr(unsigned char *h, size_t at, const char *name, const char *type,
+                             const void *value, uint32_t n)
+{
+    size_t ln = strlen(name) + 1, lt = strlen(type) + 1;
+    memcpy(h + at, name, ln);
+    memcpy(h + at + ln, type, lt);
+    appm__le32(h + at + ln + lt, n);
+    memcpy(h + at + ln + lt + 4, value, n);
+    return at + ln + lt + 4 + n;
+}
+
+static size_t appm__exr_header(unsigned char *h, const appm__exrw *e)
+{
+    unsigned char ch[3 * 18 + 1], box[16], one[4], zero8[8], cmp, order = 0; /* INCREASING_Y */
+    float f1 = 1.0f;
+    uint32_t bits;
+    size_t at = 8;
+    int c;
+    static const unsigned char magic[8] = {0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0};
+    memcpy(h, magic, 8);
+    memset(ch, 0, sizeof ch);
+    for (c = 0; c < 3; ++c) { /* name, pixel type (1 half, 2 float), pLinear, 3 reserved, x and y sampling */
+        unsigned char *q = ch + 18 * c;
+        q[0] = (unsigned char)"BGR"[c];
+        appm__le32(q + 2, e->half ? 1u : 2u);
+        appm__le32(q + 10, 1);
+        appm__le32(q + 14, 1);
+    }
+    memset(box, 0, sizeof box);
+    appm__le32(box + 8, e->img->width - 1);
+    appm__le32(box + 12, e->img->height - 1);
+    memcpy(&bits, &f1, 4);
+    appm__le32(one, bits);
+    memset(zero8, 0, sizeof zero8);
+    cmp = (unsigned char)(e->zip ? 3 : 0); /* ZIP_COMPRESSION : NO_COMPRESSION */
+    at = appm__exr_attr(h, at, "channels", "chlist", ch, sizeof ch);
+    at = appm__exr_attr(h, at, "compression", "compression", &cmp, 1);
+    at = appm__exr_attr(h, at, "dataWindow", "box2i", box, 16);
+    at = appm__exr_attr(h, at, "displayWindow", "box2i", box, 16);
+    at = appm__exr_attr(h, at, "lineOrder", "lineOrder", &order, 1);
+    at = appm__exr_attr(h, at, "pixelAspectRatio", "float", one, 4);
+    at = appm__exr_attr(h, at, "screenWindowCenter", "v2f", zero8, 8);
+    at = appm__exr_attr(h, at, "screenWindowWidth", "float", one, 4);
+    h[at++] = 0;
+    return at;
+}
+
+static appm_status appm__write_exr_body(appm__out *o, appm__mem *m, const appm_image *img, int half,
+                                        int zip)
+{
+    appm__exrw e;
+    unsigned char hdr[512], b[8];
+    size_t hlen, size;
+    uint32_t k, nblock;
+    uint64_t off;
+    appm_status st = APPM_OK;
+    memset(&e, 0, sizeof e);
+    e.img = img;
+    e.half = half;
+    e.zip = zip;
+    e.lines = zip ? 16 : 1;
+    e.cap = (size_t)e.lines * img->width * 3 * (half ? 2 : 4);
+    nblock = (img->height + e.lines - 1) / e.lines;
+    e.raw = (unsigned char *)appm__alloc(m, zip ? 3 : 1, e.cap);
+    if (!e.raw || (zip && (st = appm__zlib_init(&e.z, m, APPM__EXR_CHAIN, 0)) != APPM_OK)) st = APPM_ERR_NOMEM;
+    if (st == APPM_OK) {
+        if (zip) {
+            e.tmp = e.raw + e.cap;
+            e.packed = e.tmp + e.cap;
+        }
+        hlen = appm__exr_header(hdr, &e);
+        appm__put(o, hdr, hlen);
+        off = hlen + 8 * (uint64_t)nblock;
+        for (k = 0; k < nblock; ++k) { /* pass 1: the offset table */
+            appm__exr_block(&e, k * e.lines, &size);
+            appm__le32(b, (uint32_t)off);
+            appm__le32(b + 4, (uint32_t)(off >> 32));
+            appm__put(o, b, 8);
+            off += 8 + size;
+        }
+        for (k = 0; k < nblock; ++k) { /* pass 2: the blocks */
+            const unsigned char *p = appm__exr_block(&e, k * e.lines, &size);
+            appm__le32(b, k * e.lines);
+            appm__le32(b + 4, (uint32_t)size);
+            appm__put(o, b, 8);
+            appm__put(o, p, size);
+        }
+    }
+    if (zip) appm__zlib_release(&e.z, m);
+    appm__free(m, e.raw);
+    return st;
 }
 
 static void appm__write_ppm_body(appm__out *o, const appm_image *img, float exposure)
@@ -798,13 +1561,17 @@ static int appm__ends_with(const char *s, const char *suffix)
     return 1;
 }
 
-APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
-                                      appm_diag *diag)
+APPM_API appm_status appm_image_write_ex(const char *path, const appm_image *img,
+                                         const appm_write_options *opt, const appm_config *cfg,
+                                         appm_diag *diag)
 {
-    enum { PFM, PPM, PNG } kind;
+    enum { PFM, PPM, PNG, EXR } kind;
     char tmp[4096];
     int special;
+    double exposure = opt ? opt->exposure : 0.0;
     appm__out o;
+    appm__mem m;
+    appm_status st = APPM_OK;
     appm__diag_clear(diag);
     if (!path || !img || !img->rgb || img->width == 0 || img->height == 0 ||
         img->width > 32768 || img->height > 32768)
@@ -815,11 +1582,14 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
     if (appm__ends_with(path, ".pfm")) kind = PFM;
     else if (appm__ends_with(path, ".ppm")) kind = PPM;
     else if (appm__ends_with(path, ".png")) kind = PNG;
+    else if (appm__ends_with(path, ".exr")) kind = EXR;
     else
         return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0,
-                          "unknown image format (use .pfm, .ppm or .png)");
+                          "unknown image format (use .pfm, .ppm, .png or .exr)");
     if (strlen(path) + 5 > sizeof tmp)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "path too long");
+    appm__mem_init(&m, cfg);
+    m.diag = diag;
     special = appm__is_special_file(path);
     sprintf(tmp, "%s.tmp", path);
     o.f = fopen(special ? path : tmp, "wb");
@@ -828,15 +1598,27 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
     if (o.ok) {
         if (kind == PFM) appm__write_pfm_body(&o, img);
         else if (kind == PPM) appm__write_ppm_body(&o, img, (float)exposure);
-        else appm__write_png_body(&o, img, (float)exposure);
+        else if (kind == PNG) st = appm__write_png_body(&o, &m, img, (float)exposure);
+        else st = appm__write_exr_body(&o, &m, img, opt && opt->exr_half, !(opt && opt->exr_uncompressed));
         if (fclose(o.f) != 0) o.ok = 0;
+        if (st != APPM_OK) o.ok = 0;
         if (!special) {
             if (o.ok && appm__rename_replace(tmp, path) != 0) o.ok = 0;
             if (!o.ok) remove(tmp);
         }
     }
+    if (st != APPM_OK) return appm__fail(diag, st, path, 0, "out of memory writing the image");
     if (!o.ok) return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot write the image");
     return APPM_OK;
+}
+
+APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
+                                      appm_diag *diag)
+{
+    appm_write_options opt;
+    memset(&opt, 0, sizeof opt);
+    opt.exposure = exposure;
+    return appm_image_write_ex(path, img, &opt, NULL, diag);
 }
 
 /* Reads a whole file through the allocator; one extra zero byte is appended so
@@ -1093,6 +1875,7 @@ typedef struct appm__loader {
     appm__camera cam;
     int have_camera;
     uint32_t width, height;
+    int bare_obj;           /* an OBJ read as a whole scene: no light gets a white environment */
     const char *mem_mtl;    /* in-memory MTL text (appm_scene_load_obj_memory) */
     size_t mem_mtl_len;
 } appm__loader;
@@ -1944,6 +2727,7 @@ struct appm_scene {
     uint32_t nlight;
     double *light_cdf;     /* nlight + 1 entries, light_cdf[nlight] == 1 */
     int env;               /* index of the environment light, or -1 */
+    int env_auto;          /* that environment is the stand-in of a bare OBJ without light */
     appm__node *node;
     uint32_t nnode, depth;
     appm__camera cam;
@@ -4500,13 +5284,49 @@ static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
 
 static double appm__mean3(const double *v) { return (v[0] + v[1] + v[2]) / 3.0; }
 
+/* The light-choice table: each light picked with its share of the total
+ * power (the mean of the three channels), as the cumulative s->light_cdf. */
+static appm_status appm__light_table(appm_scene *s, appm_diag *diag, const char *name)
+{
+    uint32_t i, k = s->nlight;
+    double total = 0.0;
+    for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
+    if (!(total > 0.0) || !(total < HUGE_VAL))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
+    /* Lights are picked by power, so every photon starts with about the total
+     * power in each channel: at most 3 times it (a channel against the mean of
+     * three), 15 times for a spot whose falloff spans its whole cone.  Photon
+     * weights are floats: beyond FLT_MAX / 16 every photon would overflow. */
+    if (total > FLT_MAX / 16.0)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "the lights emit %g W, more than a photon's single-precision weight can "
+                          "carry (%g W): use larger units or a smaller Ke",
+                          total, FLT_MAX / 16.0);
+    s->light_cdf[0] = 0.0;
+    for (i = 0; i < k; ++i) {
+        s->light[i].pick = appm__mean3(s->light[i].power) / total;
+        s->light_cdf[i + 1] = s->light_cdf[i] + s->light[i].pick;
+    }
+    s->light_cdf[k] = 1.0;
+    return APPM_OK;
+}
+
 /* Builds the light table: one area light per emissive triangle (after the BVH
- * has fixed triangle order), then the point, spot and environment lights. */
+ * has fixed triangle order), then the point, spot and environment lights.  A
+ * bare OBJ in which nothing emits gets a constant white environment of
+ * radiance 1 (marked, so that the first light added to the scene replaces it). */
 static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char *name)
 {
     uint32_t i, n = 0, k = 0, extra = (uint32_t)L->lights.count;
-    double total = 0.0;
     for (i = 0; i < s->ntri; ++i) n += s->mat[s->info[i].mat].emissive;
+    if (n + extra == 0 && L->bare_obj && s->ntri > 0) {
+        appm__light *l = (appm__light *)appm__array_push(L->mem, &L->lights);
+        if (!l) return APPM_ERR_NOMEM;
+        l->kind = APPM__LIGHT_ENV;
+        l->value = appm__v(1.0f, 1.0f, 1.0f);
+        extra = 1;
+        s->env_auto = 1;
+    }
     if (n + extra == 0)
         return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
                           "the scene has no light (no material with Ke > 0, no light or environment)");
@@ -4537,25 +5357,7 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
         k++;
     }
     s->nlight = k;
-    for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
-    if (!(total > 0.0) || !(total < HUGE_VAL))
-        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
-    /* Lights are picked by power, so every photon starts with about the total
-     * power in each channel: at most 3 times it (a channel against the mean of
-     * three), 15 times for a spot whose falloff spans its whole cone.  Photon
-     * weights are floats: beyond FLT_MAX / 16 every photon would overflow. */
-    if (total > FLT_MAX / 16.0)
-        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
-                          "the lights emit %g W, more than a photon's single-precision weight can "
-                          "carry (%g W): use larger units or a smaller Ke",
-                          total, FLT_MAX / 16.0);
-    s->light_cdf[0] = 0.0;
-    for (i = 0; i < k; ++i) {
-        s->light[i].pick = appm__mean3(s->light[i].power) / total;
-        s->light_cdf[i + 1] = s->light_cdf[i] + s->light[i].pick;
-    }
-    s->light_cdf[k] = 1.0;
-    return APPM_OK;
+    return appm__light_table(s, L->diag, name);
 }
 
 /* Loader arrays -> scene: exact-size copies, bounds, BVH, lights, camera. */
@@ -4665,11 +5467,13 @@ static appm_status appm__scene_load(const char *path, int text_kind, const char 
     appm__copy_str(s->name, sizeof s->name, path);
     if (st == APPM_OK) {
         if (text_kind == APPM__TEXT_OBJ) {
+            L.bare_obj = 1;
             st = appm__obj_parse(&L, text, text_len, path);
         } else if (text_kind == APPM__TEXT_SCENE) {
             st = appm__scene_parse(&L, text, text_len, path);
         } else if (appm__ends_with(path, ".obj")) {
             L.file = NULL;
+            L.bare_obj = 1;
             st = appm__obj_load(&L, path, 0);
         } else {
             char *buf;
@@ -4777,6 +5581,112 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
     info->peak_bytes = s->mem.peak;
 }
 
+/* Lights added to a loaded scene.  The light arrays are rebuilt one entry
+ * larger (or smaller), through the scene's own allocator, and the choice table
+ * is recomputed; the arrays are untouched when the call fails.  `drop` is the
+ * index of a light to leave out (-1: none), `add` the light to append (NULL:
+ * none). */
+static appm_status appm__scene_relight(appm_scene *s, int drop, const appm__light *add, appm_diag *diag)
+{
+    uint32_t n = s->nlight - (drop >= 0) + (add != NULL), i, k = 0;
+    appm__mem *m = &s->mem;
+    appm__light *nl;
+    double *cdf;
+    appm__light *old = s->light;
+    double *old_cdf = s->light_cdf;
+    uint32_t old_n = s->nlight;
+    int old_env = s->env;
+    appm_status st;
+    if (n == 0) return appm__fail(diag, APPM_ERR_INVALID_ARG, s->name, 0, "the scene would have no light");
+    m->diag = diag;
+    nl = (appm__light *)appm__alloc(m, n, sizeof *nl);
+    cdf = (double *)appm__alloc(m, (size_t)n + 1, sizeof *cdf);
+    m->diag = NULL;
+    if (!nl || !cdf) {
+        appm__free(m, nl);
+        appm__free(m, cdf);
+        return APPM_ERR_NOMEM;
+    }
+    s->env = -1;
+    for (i = 0; i < old_n; ++i) {
+        if ((int)i == drop) continue;
+        if (old[i].kind == APPM__LIGHT_ENV) s->env = (int)k;
+        nl[k++] = old[i]; /* area lights come first and are never dropped: triangle indices hold */
+    }
+    if (add) {
+        nl[k] = *add;
+        appm__light_power(s, &nl[k], nl[k].power);
+        if (add->kind == APPM__LIGHT_ENV) s->env = (int)k;
+        k++;
+    }
+    s->light = nl;
+    s->light_cdf = cdf;
+    s->nlight = k;
+    if ((st = appm__light_table(s, diag, s->name)) != APPM_OK) {
+        s->light = old;
+        s->light_cdf = old_cdf;
+        s->nlight = old_n;
+        s->env = old_env;
+        appm__free(m, nl);
+        appm__free(m, cdf);
+        return st;
+    }
+    appm__free(m, old);
+    appm__free(m, old_cdf);
+    return APPM_OK;
+}
+
+static int appm__finite_nonneg3(const double *v)
+{
+    int i;
+    for (i = 0; i < 3; ++i)
+        if (!(v[i] >= 0.0 && v[i] <= FLT_MAX)) return 0;
+    return 1;
+}
+
+APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double position[3],
+                                                const double intensity[3], appm_diag *diag)
+{
+    appm__light l;
+    appm_status st;
+    int i, drop;
+    appm__diag_clear(diag);
+    if (!scene || !position || !intensity)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or light");
+    for (i = 0; i < 3; ++i)
+        if (!(fabs(position[i]) <= FLT_MAX))
+            return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0, "point light: position is not finite");
+    if (!appm__finite_nonneg3(intensity))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
+                          "point light: intensity must be finite and >= 0");
+    memset(&l, 0, sizeof l);
+    l.kind = APPM__LIGHT_POINT;
+    l.pos = appm__v((float)position[0], (float)position[1], (float)position[2]);
+    l.value = appm__v((float)intensity[0], (float)intensity[1], (float)intensity[2]);
+    drop = scene->env_auto ? scene->env : -1;
+    st = appm__scene_relight(scene, drop, &l, diag);
+    if (st == APPM_OK) scene->env_auto = 0;
+    return st;
+}
+
+APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
+                                                appm_diag *diag)
+{
+    appm__light l;
+    appm_status st;
+    appm__diag_clear(diag);
+    if (!scene || !radiance) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or radiance");
+    if (!appm__finite_nonneg3(radiance))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
+                          "environment: radiance must be finite and >= 0");
+    memset(&l, 0, sizeof l);
+    l.kind = APPM__LIGHT_ENV;
+    l.value = appm__v((float)radiance[0], (float)radiance[1], (float)radiance[2]);
+    st = appm__scene_relight(scene, scene->env, &l, diag); /* replaces the one there, if any */
+    if (st == APPM_OK) scene->env_auto = 0;
+    return st;
+}
+
 /* ---- 12.1 Renderer ----------------------------------------------------------- */
 
 static void appm__renderer_free_parts(appm_renderer *r)
@@ -4831,6 +5741,10 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
+    if (scene->env_auto && c.log) /* once per renderer: the stand-in light is worth a word */
+        c.log(c.log_user, scene->name, 0,
+              "nothing in the model emits light: it is lit by a constant white environment of "
+              "radiance 1 (add lights to choose others)");
     *out = c;
     return APPM_OK;
 }

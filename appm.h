@@ -247,6 +247,25 @@ APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len,
 
 APPM_API void appm_scene_destroy(appm_scene *scene);
 
+/* Lights for any scene, added after loading (a model downloaded from the web
+ * rarely has an emissive material).  Call them before creating a renderer from
+ * the scene, never while one exists: they are the only calls that change a
+ * loaded scene.  A bare OBJ in which nothing emits and that has no light loads
+ * with a constant white environment of radiance 1 as a stand-in (each renderer
+ * made from it logs one warning saying so); the first light added through
+ * these calls replaces that stand-in.
+ *
+ * appm_scene_add_point_light: a point light at `position` (scene units) with
+ * radiant intensity `intensity` (W/sr per channel, finite, >= 0); any number.
+ * appm_scene_set_environment: a constant environment of `radiance` arriving
+ * from every unoccluded direction; replaces the scene's environment, if any.
+ * Both return APPM_ERR_INVALID_ARG for non-finite or negative values and leave
+ * the scene as it was on any error. */
+APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double position[3],
+                                                const double intensity[3], appm_diag *diag);
+APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
+                                                appm_diag *diag);
+
 typedef struct appm_scene_info {
     uint64_t triangles;       /* after fan triangulation, degenerate ones dropped */
     uint64_t dropped_triangles;
@@ -273,11 +292,29 @@ typedef struct appm_image {
     float *rgb;               /* width * height * 3 floats, row 0 at the top */
 } appm_image;
 
-/* Writes by extension: `.pfm` (linear float RGB, bit exact), `.ppm` (P6) or `.png`
- * (8-bit sRGB after multiplying by `exposure`; 0 means 1).  The file appears
- * under its name only once it is complete (written to a temporary, then renamed). */
+/* Writes by extension: `.pfm` (linear float RGB, bit exact), `.exr` (OpenEXR,
+ * linear RGB, 32-bit float, ZIP compressed, bit exact), `.ppm` (P6) or `.png`
+ * (8-bit sRGB after multiplying by `exposure`; 0 means 1; deflate compressed
+ * with a per-row filter choice).  The file appears under its name only once it
+ * is complete (written to a temporary, then renamed).  Writing a PNG or EXR
+ * allocates about 0.5 MiB plus a few rows (malloc; appm_image_write_ex takes an
+ * allocator). */
 APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
                                       appm_diag *diag);
+
+/* The choices of appm_image_write_ex; all zero = appm_image_write's defaults. */
+typedef struct appm_write_options {
+    double exposure;      /* .png, .ppm: multiply before the sRGB curve (0 means 1)        */
+    int exr_half;         /* .exr: 16-bit half floats (finite values beyond +-65504 clamp  */
+                          /*       to it); 0: 32-bit float                                 */
+    int exr_uncompressed; /* .exr: no compression; 0: ZIP (lossless, 16 lines a block)     */
+} appm_write_options;
+
+/* appm_image_write with options (opt may be NULL) and the allocator of cfg
+ * (cfg may be NULL: malloc/free). */
+APPM_API appm_status appm_image_write_ex(const char *path, const appm_image *img,
+                                         const appm_write_options *opt, const appm_config *cfg,
+                                         appm_diag *diag);
 
 /* Reads a PFM (either byte order, colour or grey).  The pixels come from
  * cfg->allocator (cfg may be NULL); free them with appm_image_free(). */

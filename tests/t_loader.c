@@ -450,11 +450,16 @@ static void test_missing_mtl(void)
     logbuf lb;
     appm_status st;
     int w;
-    /* Bare: the warning, then no light at all (the face fell back to the
-     * default material), which is an error. */
+    /* Bare: the warning, and no light at all (the face fell back to the
+     * default material), so the white environment stands in. */
     st = load(FIX "missing-mtl.obj", &s, &d, &lb);
-    CHECK(st == APPM_ERR_PARSE);
-    CHECK(strstr(d.message, "light") != NULL);
+    CHECK(st == APPM_OK);
+    if (s) {
+        appm_scene_info in;
+        appm_scene_get_info(s, &in);
+        CHECK(in.lights_environment == 1 && in.lights_point == 0 && in.lights_area == 0);
+        appm_scene_destroy(s);
+    }
     w = log_find(&lb, "does-not-exist.mtl");
     CHECK_MSG(w >= 0, "no warning about the missing .mtl (%d warnings)", lb.n);
     if (w >= 0) {
@@ -654,14 +659,18 @@ static void test_scene_file_errors(void)
     appm_diag d;
     /* on failure the output pointer is cleared, not left dangling */
     s = (appm_scene *)&d;
-    CHECK(appm_scene_load(FIX "no-light.obj", NULL, &s, NULL) == APPM_ERR_PARSE);
+    CHECK(appm_scene_load(FIX "no-such-file.obj", NULL, &s, NULL) == APPM_ERR_IO);
     CHECK(s == NULL);
     CHECK_ERR(load(FIX "unknown-keyword.scene", &s, &d, NULL), d, APPM_ERR_PARSE, 3, "unknown-keyword.scene");
     CHECK(strstr(d.message, "sphere") != NULL);
     CHECK_ERR(load(FIX "missing-mesh.scene", &s, &d, NULL), d, APPM_ERR_IO, 3, "missing-mesh.scene");
     CHECK(strstr(d.message, "no-such-mesh.obj") != NULL);
-    CHECK_ERR(load(FIX "no-light.obj", &s, &d, NULL), d, APPM_ERR_PARSE, 0, "no-light.obj");
-    CHECK(strstr(d.message, "light") != NULL);
+    /* a bare OBJ without light gets the white environment; a .scene without
+     * light is still an error */
+    CHECK(load(FIX "no-light.obj", &s, &d, NULL) == APPM_OK);
+    appm_scene_destroy(s);
+    CHECK(load_scene_text("mesh ../fixtures/no-light.obj\n", &s, &d) == APPM_ERR_PARSE);
+    CHECK(strstr(d.message, "no light") != NULL);
     CHECK(s == NULL);
     /* an error inside a mesh of a scene names the OBJ and its line, not the scene */
     CHECK(load_scene_text("camera eye 0 0 5 target 0 0 0\nmesh ../fixtures/nan-vertex.obj\n", &s, &d) ==
