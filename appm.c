@@ -4862,9 +4862,10 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
  *     (1/J) (-A_p / r_p^4 + lambda rho_p) + 2 B_p r_p^2 = 0,
  *     lambda = pi sum_q v_q / C_u   (v_q: per-pass variance of pixel q; C_u = C / gamma),
  * so in flat regions the radius stops at r_cap^4 = A_p / (lambda rho_p)
- * (appm__appm_cap); the radius is min(r_opt, r_cap).  sum_q v_q is P times
- * the median spread (the few pixels whose spread overstates their error -
- * stratified jitter over a light's edge - would otherwise set the price).
+ * (appm__appm_cap); the radius is min(r_opt, r_cap).  sum_q v_q is n times
+ * the median spread of the n gathering pixels (the few pixels whose spread
+ * overstates their error - stratified jitter over a light's edge - would
+ * otherwise set the price).
  *
  * Pooling (algorithm.md 4.12).  dI^2 - Var(dI) averaged over the 5x5
  * neighbours on the same surface within h (appm__pool_di2), then floored. */
@@ -5005,17 +5006,19 @@ static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
  * one gathered photon takes. */
 static void appm__appm_pass_begin(appm_renderer *r)
 {
-    size_t i, npix = (size_t)r->w * r->h;
+    size_t i, n = 0, npix = (size_t)r->w * r->h;
+    float *tmp = r->image; /* scratch: the image is rebuilt on request */
     double j1 = (double)r->pass - 1.0, var = 0.0, G = 0.0, C;
     r->appm.price = 0.0;
     if (r->pass <= APPM__WARMUP) return;
     appm__parallel_for(r->threads, r->h, appm__pool_task, r);
-    for (i = 0; i < npix; ++i) {
+    for (i = 0; i < npix; ++i) { /* the spread of the pixels that gather (others: none to speak of) */
         const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
-        r->image[i] = (float)(r->pix[i].wm2 / (j1 - 1.0));
+        float v = (float)(r->pix[i].wm2 / (j1 - 1.0));
+        if (r->vp[i].segs > 0 && r->vp[i].segs < r->max_depth) tmp[n++] = v - v == 0.0f ? v : 0.0f;
         G += (double)(a->k[APPM__COMP_DIFFUSE].N + a->k[APPM__COMP_CAUSTIC].N) / j1;
     }
-    var = (double)npix * appm__select(r->image, npix, npix / 2);
+    if (n > 0) var = (double)n * appm__select(tmp, n, n / 2);
     C = APPM__TAU * ((double)npix + (double)r->M) + G;
     if (var > 0.0 && var < HUGE_VAL && C > 0.0) r->appm.price = APPM__PI * var / C;
 }
