@@ -3931,8 +3931,8 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
  * where it was stored was specular (the paths L S+ D of Jensen's caustic map
  * and the specular tail of longer ones), diffuse otherwise.
  */
-static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
-                              appm__v3 gamma, unsigned segs, unsigned comp)
+static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
+                                   appm__v3 gamma, unsigned segs, unsigned comp)
 {
     appm__photon *p;
     appm__v3 n = appm__dot(wi, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
@@ -3954,6 +3954,13 @@ static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf 
     p->segs = (uint8_t)(segs > 255 ? 255 : segs);
     p->comp = (uint8_t)comp;
     return 1;
+}
+
+/* The same for a photon of the diffuse component. */
+APPM__UNUSED static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
+                                           appm__v3 gamma, unsigned segs)
+{
+    return appm__store_photon_comp(r, task, sf, wi, gamma, segs, APPM__COMP_DIFFUSE);
 }
 
 /* Traces photon path `index`; returns 0 if the task's region is full. */
@@ -3992,7 +3999,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
                 r->dropped[worker]++;
                 break;
             }
-            if (!appm__store_photon(r, task, &sf, wi, gamma, segs, comp)) return 0;
+            if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp)) return 0;
         }
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
         appm__rng_float3(&rng, u3);
