@@ -4359,7 +4359,8 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
 #define APPM__RHI 8.0                            /* upper bound, times max(r1, r_auto) j^(-1/6) */
 #define APPM__CF_SPLIT (APPM__CF / 2.0)          /* c_f of each component (10.3) */
-#define APPM__POOL 2                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
+#define APPM__POOL 1                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
+#define APPM__VAR_CLIP 0.99                      /* 10.3: spreads above this quantile are clipped */
 #define APPM__TAU 18.0                           /* cost of an eye or photon path / gathered photon */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
@@ -4869,12 +4870,12 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
  *     (1/J) (-A_p / r_p^4 + lambda rho_p) + 2 B_p r_p^2 = 0,
  *     lambda = pi sum_q v_q / C_u   (v_q: per-pass variance of pixel q; C_u = C / gamma),
  * so in flat regions the radius stops at r_cap^4 = A_p / (lambda rho_p)
- * (appm__appm_cap); the radius is min(r_opt, r_cap).  sum_q v_q is n times
- * the median spread of the n gathering pixels (the few pixels whose spread
- * overstates their error - stratified jitter over a light's edge - would
- * otherwise set the price).
+ * (appm__appm_cap); the radius is min(r_opt, r_cap).  sum_q v_q is summed
+ * over the pixels that gather, each spread clipped at the 99th percentile:
+ * the few pixels whose spread overstates their error (stratified jitter over
+ * a light's edge) would otherwise set the price.
  *
- * Pooling (algorithm.md 4.12).  dI^2 - Var(dI) averaged over the 5x5
+ * Pooling (algorithm.md 4.12).  dI^2 - Var(dI) averaged over the 3x3
  * neighbours on the same surface within h (appm__pool_di2), then floored. */
 
 /* -- appm (Kaplanyan-Dachsbacher 2013) with two photon components (10.3): the
@@ -4957,51 +4958,59 @@ static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const
     appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e) + appm__lumd(ec));
 }
 
-/* 10.4: dI^2 of pixel i's component c pooled over the pixels of the
+/* 10.4: dI^2 of each component of pixel i (into out) pooled over the pixels of the
  * (2 APPM__POOL + 1)^2 window whose visible points this pass lie within h of
  * its own on the same surface (normals within 25 degrees) and that have seen
  * APPM__KMIN photons of the component: the mean of their unbiased estimates
  * dI_q^2 - Var(dI_q), floored at APPM__DI_FLOOR times the mean dI_q^2. */
-static double appm__pool_di2(const appm_renderer *r, size_t i, int c, uint64_t n, double h)
+static void appm__pool_di2(const appm_renderer *r, size_t i, uint64_t n, double h, double *out)
 {
     const appm__vp *v = &r->vp[i];
     int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
-    double sum = 0.0, sq = 0.0, m = 0.0;
+    double sum[APPM__NCOMP] = {0.0, 0.0}, sq[APPM__NCOMP] = {0.0, 0.0}, m[APPM__NCOMP] = {0.0, 0.0};
+    int c;
     for (dy = -APPM__POOL; dy <= APPM__POOL; ++dy)
         for (dx = -APPM__POOL; dx <= APPM__POOL; ++dx) {
             int64_t x = x0 + dx, y = y0 + dy;
             size_t q;
-            const appm__appm_state *p;
+            const appm__appm_px *a;
             appm__v3 d;
             if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
             q = (size_t)(y * (int64_t)r->w + x);
-            p = &((const appm__appm_px *)appm__state(r, q))->k[c];
+            a = (const appm__appm_px *)appm__state(r, q);
             d = appm__sub(r->vp[q].x, v->x);
-            if (q != i && (r->vp[q].segs == 0 || p->N < APPM__KMIN || !((double)appm__dot(d, d) < h * h) ||
+            if (q != i && (r->vp[q].segs == 0 || !((double)appm__dot(d, d) < h * h) ||
                            !(appm__dot(r->vp[q].n, v->n) > 0.9f)))
                 continue;
-            sum += appm__di2_unbiased(p, n);
-            sq += p->dI * p->dI;
-            m += 1.0;
+            for (c = 0; c < APPM__NCOMP; ++c) {
+                const appm__appm_state *p = &a->k[c];
+                if (q != i && p->N < APPM__KMIN) continue;
+                sum[c] += appm__di2_unbiased(p, n);
+                sq[c] += p->dI * p->dI;
+                m[c] += 1.0;
+            }
         }
-    sum /= m;
-    sq *= APPM__DI_FLOOR / m;
-    return sum > sq ? sum : sq;
+    for (c = 0; c < APPM__NCOMP; ++c) {
+        double s = sum[c] / m[c], f = sq[c] * APPM__DI_FLOOR / m[c];
+        out[c] = s > f ? s : f;
+    }
 }
 
-/* Fills r->appm.di2 for pass j (before the radii; the state after j - 1 passes). */
+/* Fills r->appm.di2 for pass j (before the radii; the state after j - 1
+ * passes): the pixels with a visible point and a component that adapts. */
 static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
     uint64_t n = appm__lap_count(r->pass - 1);
     double h = appm__lap_h(r->r_auto, r->pass);
     uint32_t x;
-    int c;
     (void)worker;
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
-        for (c = 0; c < APPM__NCOMP; ++c)
-            r->appm.di2[APPM__NCOMP * i + (size_t)c] = r->vp[i].segs ? appm__pool_di2(r, i, c, n, h) : -1.0;
+        const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
+        double *out = &r->appm.di2[APPM__NCOMP * i];
+        out[0] = out[1] = -1.0;
+        if (r->vp[i].segs && (a->k[0].N >= APPM__KMIN || a->k[1].N >= APPM__KMIN)) appm__pool_di2(r, i, n, h, out);
     }
 }
 
@@ -5025,7 +5034,10 @@ static void appm__appm_pass_begin(appm_renderer *r)
         if (r->vp[i].segs > 0 && r->vp[i].segs < r->max_depth) tmp[n++] = v - v == 0.0f ? v : 0.0f;
         G += (double)(a->k[APPM__COMP_DIFFUSE].N + a->k[APPM__COMP_CAUSTIC].N) / j1;
     }
-    if (n > 0) var = (double)n * appm__select(tmp, n, n / 2);
+    if (n > 0) { /* sum_q v_q with the top 1 % clipped at the 99th percentile */
+        double top = appm__select(tmp, n, (size_t)(APPM__VAR_CLIP * (double)(n - 1)));
+        for (i = 0; i < n; ++i) var += tmp[i] < top ? tmp[i] : top;
+    }
     C = APPM__TAU * ((double)npix + (double)r->M) + G;
     if (var > 0.0 && var < HUGE_VAL && C > 0.0) r->appm.price = APPM__PI * var / C;
 }
