@@ -3671,10 +3671,6 @@ struct appm_renderer {
         double R2;       /* r_j^2 of the next gather */
         double R;        /* the radius of the last gather */
     } ppm;               /* Knaus-Zwicker's global radius (section 10) */
-    struct {
-        double price;    /* lambda of 10.3: the price of a gathered photon this pass; 0: none */
-        double *di2;     /* 10.4: per pixel and component, dI^2 pooled over neighbours (scratch) */
-    } appm;
     double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
     unsigned threads, max_depth;
     uint64_t seed, pass;
@@ -4329,21 +4325,18 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      shrinks as j^(-1/6) (the plug-in constant would be 2; algorithm.md 4.3
  *      and the toy of 4.9).  Safeguards (4.7): KZ radius r_1 j^(-1/6) while warming up; while a
  *      pixel has seen fewer than 8 photons its radius doubles each pass; the
- *      change per pass limited to [1/2, 2]; r bounded by [0.1 min(r_1, r_auto),
- *      8 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), bounds
- *      that shrink at the optimal rate.  The Laplacian bandwidth is a fixed
+ *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_auto),
+ *      2 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), so the clamps
+ *      shrink at the optimal rate.  The Laplacian bandwidth is a fixed
  *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
  *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
  *      noise of its estimate.
  *      Beyond the paper (algorithm.md 4.10 - 4.12, section 10.3 below): the
  *      photons are split into a caustic and a diffuse component, each with
  *      its own statistics and radius (c_f halved: the minimiser of a bound on
- *      the coupled MSE); a radius stops growing where the photons it would
- *      gather cost more time than the error they remove is worth (a price per
- *      gathered photon, which replaced the upper clamp 2 max(r_1, r_auto)
- *      j^(-1/6) measured below); dI^2 is pooled over neighbouring pixels.
+ *      the coupled MSE); dI^2 is pooled over neighbouring pixels.
  *
- *      The former upper clamp and h were measured at equal time (CornellBox-Sphere,
+ *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
  *      256x256, 30 s, 2 threads; RMSE against the path-traced reference):
  *      RHI 4, kappa 2: 0.00795 (378 passes); RHI 2: 0.00736 (417); RHI 1.5:
  *      0.00723 (428); RHI 2, kappa 1.5: 0.00708 (435).  A wide radius in flat
@@ -4357,11 +4350,9 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__WARMUP 4                           /* passes on the KZ schedule */
 #define APPM__KMIN 8.0                           /* photons before adapting */
 #define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
-#define APPM__RHI 8.0                            /* upper bound, times max(r1, r_auto) j^(-1/6) */
+#define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
 #define APPM__CF_SPLIT (APPM__CF / 2.0)          /* c_f of each component (10.3) */
 #define APPM__POOL 1                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
-#define APPM__VAR_CLIP 0.99                      /* 10.3: spreads above this quantile are clipped */
-#define APPM__TAU 18.0                           /* cost of an eye or photon path / gathered photon */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
@@ -4392,6 +4383,7 @@ typedef struct appm__appm_state { /* the statistics of one photon component */
     double R;       /* radius r_j of the last gather */
     double R2sum;   /* sum of r_j^2, for the bias estimate */
     uint64_t N;     /* photons found so far */
+    double dI2p;    /* 10.4: dI^2 pooled over neighbours after the last Laplacian pass (0: none) */
 } appm__appm_state;
 
 typedef struct appm__appm_px { /* appm's per-pixel state: one record per photon component */
@@ -4582,24 +4574,26 @@ static double appm__di2(const appm__appm_state *p, uint64_t n)
 
 /* The lower and upper bounds of the radius of pass j: [RLO min(r1, r_auto),
  * RHI max(r1, r_auto)] j^(-1/6). */
-static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, double *hi)
+static void appm__appm_bounds_sj(double r1, double r_auto, double sj, double *lo, double *hi)
 {
-    double sj = pow((double)j, -1.0 / 6.0);
     *lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * sj;
     *hi = APPM__RHI * (r1 > r_auto ? r1 : r_auto) * sj;
 }
 
+static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, double *hi)
+{
+    appm__appm_bounds_sj(r1, r_auto, pow((double)j, -1.0 / 6.0), lo, hi);
+}
+
 /* Radius for pass j from one component's statistics after j-1 passes; r1 is
  * the initial radius, r_auto the automatic one, cf the constant of the radius
- * formula and cap the radius beyond which widening costs more time than it
- * saves (10.3; 0: none).  Never NaN, 0 or inf: every path ends inside the
- * bounds of appm__appm_bounds. */
+ * formula, di2 the dI^2 to use (< 0 or NaN: the component's own, appm__di2).
+ * Never NaN, 0 or inf: every path ends inside the bounds of appm__appm_bounds. */
 static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j, const appm__appm_state *p,
-                                double cf, double cap, double di2)
+                                double cf, double di2)
 {
-    double lo, hi, rad = r1 * pow((double)j, -1.0 / 6.0);
-    appm__appm_bounds(r1, r_auto, j, &lo, &hi);
-    if (cap > 0.0 && cap < hi) hi = cap > lo ? cap : lo;
+    double lo, hi, sj = pow((double)j, -1.0 / 6.0), rad = r1 * sj;
+    appm__appm_bounds_sj(r1, r_auto, sj, &lo, &hi);
     if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* too few photons seen to estimate anything: widen, as a k-nearest-
          * neighbour radius would, instead of waiting at a radius that may be
@@ -4688,9 +4682,9 @@ static void appm__appm_update(appm__appm_state *p, uint64_t pass, const double *
  *   bias        the estimated bias of the pixel (luminance), for the error
  *   aux_value   the RADIUS and LAPLACIAN maps (and the per-component radii)
  * and, where a method needs them:
- *   pass_begin  once, before the radii (global quantities the radius hooks read)
- *   radius_c    per pixel: the caustic component's radius (appm__vp.rc; without
- *               it rc is 0 and every photon gathers with r) */
+ *   radius_c    per pixel: the caustic component's radius (appm__vp.rc; < 0:
+ *               the same as the radius; without the hook rc is 0 and every
+ *               photon gathers with r) */
 enum {
     APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
     APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
@@ -4720,7 +4714,6 @@ typedef struct appm__estimator {
     int (*photon_term)(const appm_renderer *r, const void *st, double j, double *out);
     double (*bias)(const void *st, double j);
     double (*aux_value)(const appm_renderer *r, const void *st, appm_aux which);
-    void (*pass_begin)(appm_renderer *r);
     float (*radius_c)(const appm_renderer *r, const void *st);
 } appm__estimator;
 
@@ -4865,18 +4858,13 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
  * component with c_f / 2 (APPM__CF_SPLIT): exact for equal biases, 5 % of MSE
  * off when one dominates.
  *
- * Price (algorithm.md 4.11).  With J = T / C passes in time T and a pass cost
- * C = t0 + gamma pi sum_p rho_p r_p^2, d(sum_p MSE_p)/d(r_p^2) = 0 gives
- *     (1/J) (-A_p / r_p^4 + lambda rho_p) + 2 B_p r_p^2 = 0,
- *     lambda = pi sum_q v_q / C_u   (v_q: per-pass variance of pixel q; C_u = C / gamma),
- * so in flat regions the radius stops at r_cap^4 = A_p / (lambda rho_p)
- * (appm__appm_cap); the radius is min(r_opt, r_cap).  sum_q v_q is summed
- * over the pixels that gather, each spread clipped at the 99th percentile:
- * the few pixels whose spread overstates their error (stratified jitter over
- * a light's edge) would otherwise set the price.
+ * A price per gathered photon in place of the upper clamp (algorithm.md
+ * 4.11) was derived and measured, and lost at equal time on the scenes
+ * measured: it is not used.
  *
  * Pooling (algorithm.md 4.12).  dI^2 - Var(dI) averaged over the 3x3
- * neighbours on the same surface within h (appm__pool_di2), then floored. */
+ * neighbours on the same surface within h (appm__pool_di2), then floored;
+ * computed after each Laplacian pass and kept in the state (dI2p). */
 
 /* -- appm (Kaplanyan-Dachsbacher 2013) with two photon components (10.3): the
  *    radius of section 10.1 per component, the recursive means of
@@ -4887,37 +4875,15 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
 #define APPM__KFIELDS(c, x) \
     {"I" x, APPM__KOFF(c, I), 3, 0}, {"S" x, APPM__KOFF(c, S), 1, 0}, {"dI" x, APPM__KOFF(c, dI), 1, 0}, \
         {"dI_w" x, APPM__KOFF(c, dI_w), 1, 0}, {"dI_m2" x, APPM__KOFF(c, dI_m2), 1, 0}, \
-        {"R" x, APPM__KOFF(c, R), 1, 0}, {"R2sum" x, APPM__KOFF(c, R2sum), 1, 0}, {"N" x, APPM__KOFF(c, N), 1, 1}
+        {"R" x, APPM__KOFF(c, R), 1, 0}, {"R2sum" x, APPM__KOFF(c, R2sum), 1, 0}, {"N" x, APPM__KOFF(c, N), 1, 1}, \
+        {"dI2p" x, APPM__KOFF(c, dI2p), 1, 0}
 static const appm__field appm__appm_fields[] = {APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"),
                                                 APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c")};
 
-/* Photons per unit area and pass that a gather at this pixel visits, all
- * components together (each count over the sum of its kernel areas). */
-static double appm__appm_density(const appm__appm_px *a)
-{
-    double rho = 0.0;
-    int c;
-    for (c = 0; c < APPM__NCOMP; ++c)
-        if (a->k[c].R2sum > 0.0) rho += (double)a->k[c].N / (APPM__PI * a->k[c].R2sum);
-    return rho;
-}
-
-/* The radius at which component c's gather stops paying for itself (10.3):
- * r^4 = A / (lambda rho), A = R(K) S / M; 0 when there is no price yet. */
-static double appm__appm_cap(const appm_renderer *r, const appm__appm_px *a, int c)
-{
-    double rho = appm__appm_density(a), A = APPM__RK * a->k[c].S / (double)r->M, x2;
-    if (!(r->appm.price > 0.0) || !(rho > 0.0) || !(A > 0.0)) return 0.0;
-    x2 = A / (r->appm.price * rho);
-    return x2 > 0.0 && x2 < HUGE_VAL ? sqrt(sqrt(x2)) : 0.0;
-}
-
 static double appm__appm_comp_radius(const appm_renderer *r, const appm__appm_px *a, int c)
 {
-    size_t i = (size_t)((const unsigned char *)a - r->state) / sizeof(appm__appm_px);
-    double di2 = r->appm.di2 && r->pass > APPM__WARMUP ? r->appm.di2[APPM__NCOMP * i + (size_t)c] : -1.0;
-    return appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, &a->k[c], APPM__CF_SPLIT, appm__appm_cap(r, a, c),
-                             di2);
+    const appm__appm_state *p = &a->k[c];
+    return appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, p, APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
 }
 
 static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
@@ -4926,12 +4892,13 @@ static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
 }
 
 /* The caustic radius; until the pixel has seen APPM__KMIN caustic photons it
- * is the diffuse one: widening in search of caustic light that may not exist
- * would widen every gather of a scene without any. */
+ * is the diffuse one (returned as -1: "the same"): widening in search of
+ * caustic light that may not exist would widen every gather of a scene
+ * without any. */
 static float appm__appm_radius_caustic(const appm_renderer *r, const void *st)
 {
     const appm__appm_px *a = (const appm__appm_px *)st;
-    if (a->k[APPM__COMP_CAUSTIC].N < APPM__KMIN) return appm__appm_radius_hook(r, st);
+    if (a->k[APPM__COMP_CAUSTIC].N < APPM__KMIN) return -1.0f;
     return (float)appm__appm_comp_radius(r, a, APPM__COMP_CAUSTIC);
 }
 
@@ -4996,59 +4963,36 @@ static void appm__pool_di2(const appm_renderer *r, size_t i, uint64_t n, double 
     }
 }
 
-/* Fills r->appm.di2 for pass j (before the radii; the state after j - 1
- * passes): the pixels with a visible point and a component that adapts. */
+/* After a Laplacian pass j, each pixel's pooled dI^2 (appm__appm_state.dI2p)
+ * from the state after j passes and this pass's visible points; read by the
+ * radii of the passes up to the next Laplacian pass.  Each pixel writes only
+ * its own dI2p, which no pixel reads here. */
 static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
-    uint64_t n = appm__lap_count(r->pass - 1);
-    double h = appm__lap_h(r->r_auto, r->pass);
+    uint64_t n = appm__lap_count(r->pass);
+    double h = r->lap_h, out[APPM__NCOMP];
     uint32_t x;
     (void)worker;
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
-        const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
-        double *out = &r->appm.di2[APPM__NCOMP * i];
-        out[0] = out[1] = -1.0;
-        if (r->vp[i].segs && (a->k[0].N >= APPM__KMIN || a->k[1].N >= APPM__KMIN)) appm__pool_di2(r, i, n, h, out);
+        appm__appm_px *a = (appm__appm_px *)appm__state(r, i);
+        int c;
+        if (!r->vp[i].segs || (a->k[0].N < APPM__KMIN && a->k[1].N < APPM__KMIN)) continue;
+        appm__pool_di2(r, i, n, h, out);
+        for (c = 0; c < APPM__NCOMP; ++c) a->k[c].dI2p = out[c];
     }
-}
-
-/* The price of a gathered photon for pass j (10.3), from the state after j-1
- * passes (so a resumed render computes the same):
- *   lambda = pi sum_q v_q / C,   C = tau (P + M) + G,
- * v_q the per-pass variance of pixel q, G the photons gathered per pass and
- * tau (P + M) the rest of a pass (eye and photon paths), in units of the time
- * one gathered photon takes. */
-static void appm__appm_pass_begin(appm_renderer *r)
-{
-    size_t i, n = 0, npix = (size_t)r->w * r->h;
-    float *tmp = r->image; /* scratch: the image is rebuilt on request */
-    double j1 = (double)r->pass - 1.0, var = 0.0, G = 0.0, C;
-    r->appm.price = 0.0;
-    if (r->pass <= APPM__WARMUP) return;
-    appm__parallel_for(r->threads, r->h, appm__pool_task, r);
-    for (i = 0; i < npix; ++i) { /* the spread of the pixels that gather (others: none to speak of) */
-        const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
-        float v = (float)(r->pix[i].wm2 / (j1 - 1.0));
-        if (r->vp[i].segs > 0 && r->vp[i].segs < r->max_depth) tmp[n++] = v - v == 0.0f ? v : 0.0f;
-        G += (double)(a->k[APPM__COMP_DIFFUSE].N + a->k[APPM__COMP_CAUSTIC].N) / j1;
-    }
-    if (n > 0) { /* sum_q v_q with the top 1 % clipped at the 99th percentile */
-        double top = appm__select(tmp, n, (size_t)(APPM__VAR_CLIP * (double)(n - 1)));
-        for (i = 0; i < n; ++i) var += tmp[i] < top ? tmp[i] : top;
-    }
-    C = APPM__TAU * ((double)npix + (double)r->M) + G;
-    if (var > 0.0 && var < HUGE_VAL && C > 0.0) r->appm.price = APPM__PI * var / C;
 }
 
 /* appm_stats.clamped: the fraction of this pass's gathering pixels whose
- * dominant component's radius sits at a bound of appm__appm_bounds. */
+ * dominant component's radius sits at a bound of appm__appm_bounds; after a
+ * Laplacian pass, also the pooled dI^2 (10.4). */
 static void appm__appm_pass_end(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     uint64_t n = 0, at = 0;
     double lo, hi;
+    if (r->lap_h > 0.0 && r->pass >= APPM__WARMUP) appm__parallel_for(r->threads, r->h, appm__pool_task, r);
     appm__appm_bounds(r->r1, r->r_auto, r->pass, &lo, &hi);
     for (i = 0; i < npix; ++i) {
         const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
@@ -5103,19 +5047,19 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
          APPM__AUX_BIT(APPM_AUX_RADIUS_DIFFUSE),
      sizeof(appm__appm_px), appm__appm_fields, sizeof appm__appm_fields / sizeof appm__appm_fields[0], NULL,
      appm__appm_radius_hook, appm__appm_commit, appm__appm_pass_end, appm__appm_term, appm__appm_bias,
-     appm__appm_aux, appm__appm_pass_begin, appm__appm_radius_caustic},
+     appm__appm_aux, appm__appm_radius_caustic},
     /* APPM_METHOD_PPM */
     {"ppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE),
      sizeof(appm__ppm_state), appm__ppm_fields, sizeof appm__ppm_fields / sizeof appm__ppm_fields[0],
      appm__ppm_start, appm__ppm_radius, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL, appm__ppm_aux,
-     NULL, NULL},
+     NULL},
     /* APPM_METHOD_SPPM */
     {"sppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS), sizeof(appm__sppm_state), appm__sppm_fields,
      sizeof appm__sppm_fields / sizeof appm__sppm_fields[0], appm__sppm_start, appm__sppm_radius,
-     appm__sppm_commit, NULL, appm__sppm_term, NULL, appm__sppm_aux, NULL, NULL},
+     appm__sppm_commit, NULL, appm__sppm_term, NULL, appm__sppm_aux, NULL},
     /* APPM_METHOD_PT: section 11; its whole path sum is the "direct" term */
     {"pt", APPM__CAP_ERROR, APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_ERROR), 0, NULL, 0, NULL,
-     NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL}};
+     NULL, NULL, NULL, NULL, NULL, NULL, NULL}};
 
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
@@ -5724,7 +5668,6 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->task_failed);
     appm__free(&r->mem, r->dest);
     appm__free(&r->mem, r->state);
-    appm__free(&r->mem, r->appm.di2);
     appm__pmap_free(&r->pmap, &r->mem);
 }
 
@@ -5813,8 +5756,6 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
     if (r->est->state_size) r->state = (unsigned char *)appm__alloc(&r->mem, npix, r->est->state_size);
-    if (r->est->caps & APPM__CAP_LAPLACIAN)
-        r->appm.di2 = (double *)appm__alloc(&r->mem, npix, APPM__NCOMP * sizeof(double));
     if (r->est->caps & APPM__CAP_PHOTONS) {
         r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks, sizeof *r->chunk);
         r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
@@ -5825,7 +5766,6 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }
     if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) ||
-        ((r->est->caps & APPM__CAP_LAPLACIAN) && !r->appm.di2) ||
         ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
@@ -5865,6 +5805,7 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
         size_t i = (size_t)row * r->w + x;
         r->vp[i].r = r->est->radius(r, appm__state(r, i));
         r->vp[i].rc = r->est->radius_c ? r->est->radius_c(r, appm__state(r, i)) : 0.0f;
+        if (r->vp[i].rc < 0.0f) r->vp[i].rc = r->vp[i].r;
     }
 }
 
@@ -5948,7 +5889,6 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
     }
     r->lap_h = (est->caps & APPM__CAP_LAPLACIAN) && appm__lap_pass(r->pass) ? appm__lap_h(r->r_auto, r->pass)
                                                                              : 0.0;
-    if (est->pass_begin) est->pass_begin(r);
     appm__parallel_for(r->threads, r->h, appm__radius_task, r);
     cell = appm__median_gather_radius(r);
     t[0] = appm__seconds();
