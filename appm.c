@@ -4846,7 +4846,7 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
     return ((const appm__sppm_state *)st)->R;
 }
 
-/* ---- 10.3 Photon components, the price of a gathered photon, pooled dI^2 ------
+/* ---- 10.3 Photon components and pooled dI^2 ------------------------------------
  *
  * Components (algorithm.md 4.10).  The pixel's photon term is I = I_c + I_d,
  * caustic and diffuse photons gathered with radii r_c, r_d; independent noise,
