@@ -3,7 +3,9 @@
 #   make test         every test, normal build and ASan+UBSan build, plus the CLI
 #   make test-long    the slow statistical tests (more samples)
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
-#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset
+#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
+#                     make bench-sampler: --sampler qmc against random on every scene
+#   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 # Without make:  cc -std=c99 -O2 appm.c main.c -lm -pthread -o appm
@@ -18,7 +20,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick fuzz clean
+.PHONY: all test test-long portability dynamic bench bench-quick bench-bvh bench-sampler fuzz clean
 
 all: appm
 
@@ -68,6 +70,12 @@ bench: appm
 
 bench-quick: appm
 	sh bench/run.sh quick
+
+bench-bvh:
+	sh bench/bvh.sh
+
+bench-sampler: appm
+	sh bench/sampler.sh
 
 fuzz:
 	sh tests/fuzz/run.sh
