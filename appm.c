@@ -4442,13 +4442,14 @@ static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi
 /* Everything a pass computes for a pixel stays here until the gather commits
  * it to the pixel's state, so a pass that fails (out of memory in the photon
  * pass) leaves no trace and can simply be run again. */
-typedef struct appm__vp { /* visible point of one pixel in the current pass: 60 bytes */
+typedef struct appm__vp { /* visible point of one pixel in the current pass: 64 bytes */
     appm__v3 x;           /* position */
     appm__v3 n;           /* unit geometric normal on the eye's side */
     appm__v3 wf;          /* W f = W albedo / pi: multiplies each photon's gamma */
     appm__v3 ld;          /* this pass's emission + direct light */
     float footprint;      /* width of the pixel at x, scene units */
-    float r;              /* appm: the radius of this pass */
+    float r;              /* the radius of this pass (appm: of the diffuse photons) */
+    float rc;             /* appm: the caustic photons' radius of this pass; 0: none */
     uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
     uint8_t pad[3];
 } appm__vp;
@@ -4467,8 +4468,14 @@ typedef struct appm__photon { /* 32 bytes */
     int16_t wi[2];   /* incident direction (towards where it came from), octahedral */
     int8_t n[2];     /* geometric normal on the side it arrived from, octahedral */
     uint8_t segs;    /* light-path segments from the light to here */
-    uint8_t pad;
+    uint8_t comp;    /* photon component (section 10): APPM__COMP_CAUSTIC if the last
+                      * bounce before it was stored was specular (L S+ D), else 0 */
 } appm__photon;
+
+/* Photon components: appm keeps statistics and a radius per component. */
+#define APPM__COMP_DIFFUSE 0
+#define APPM__COMP_CAUSTIC 1
+#define APPM__NCOMP 2
 
 typedef struct appm__chunk_rec { /* where one chunk of photon paths left its photons */
     uint32_t start, count;
@@ -4775,9 +4782,12 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
  * / max(gamma)) and divide by q.  A region that fills up marks its task failed;
  * the store then grows (on the calling thread, outside the loop) and the pass
  * is traced again - the photons do not change, only where they are kept.
+ * Each photon records its component: caustic when the bounce that sent it to
+ * where it was stored was specular (the paths L S+ D of Jensen's caustic map
+ * and the specular tail of longer ones), diffuse otherwise.
  */
-static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
-                              appm__v3 gamma, unsigned segs)
+static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
+                                   appm__v3 gamma, unsigned segs, unsigned comp)
 {
     appm__photon *p;
     appm__v3 n = appm__dot(wi, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
@@ -4797,8 +4807,15 @@ static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf 
     p->n[0] = (int8_t)appm__quant(a, 127.0f);
     p->n[1] = (int8_t)appm__quant(b, 127.0f);
     p->segs = (uint8_t)(segs > 255 ? 255 : segs);
-    p->pad = 0;
+    p->comp = (uint8_t)comp;
     return 1;
+}
+
+/* The same for a photon of the diffuse component. */
+APPM__UNUSED static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
+                                           appm__v3 gamma, unsigned segs)
+{
+    return appm__store_photon_comp(r, task, sf, wi, gamma, segs, APPM__COMP_DIFFUSE);
 }
 
 /* Traces photon path `index`; returns 0 if the task's region is full. */
@@ -4810,7 +4827,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     appm__ray ray;
     appm__v3 gamma;
     uint32_t skip;
-    unsigned segs = 0;
+    unsigned segs = 0, comp = APPM__COMP_DIFFUSE; /* the component of a photon stored next */
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
     float ue[5];
     appm__sampler_photon(&smp, r->sobol, r->chains, r->seed, r->pass, r->M, index);
@@ -4840,7 +4857,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
                 r->dropped[worker]++;
                 break;
             }
-            if (!appm__store_photon(r, task, &sf, wi, gamma, segs)) return 0;
+            if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp)) return 0;
         }
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
         /* the roulette: nearly always after a diffuse or mirror bounce (albedo < 1),
@@ -4856,6 +4873,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
             g2 = appm__scale(g2, 1.0f / q);
         }
         gamma = g2;
+        comp = bs.specular ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE;
         appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
         skip = sf.tri;
     }
@@ -5178,6 +5196,10 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
  *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
  *      noise of its estimate.
+ *      Beyond the paper (algorithm.md 4.10 - 4.12, section 10.3 below): the
+ *      photons are split into a caustic and a diffuse component, each with
+ *      its own statistics and radius (c_f halved: the minimiser of a bound on
+ *      the coupled MSE); dI^2 is pooled over neighbouring pixels.
  *
  *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
  *      256x256, 30 s, 2 threads; RMSE against the path-traced reference):
@@ -5194,6 +5216,8 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__KMIN 8.0                           /* photons before adapting */
 #define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
 #define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
+#define APPM__CF_SPLIT (APPM__CF / 2.0)          /* c_f of each component (10.3) */
+#define APPM__POOL 1                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
@@ -5215,7 +5239,7 @@ typedef struct appm__sppm_state {
     double R;       /* R: radius of the next gather */
 } appm__sppm_state;
 
-typedef struct appm__appm_state {
+typedef struct appm__appm_state { /* the statistics of one photon component */
     double I[3];    /* running mean I_j of the photon term */
     double S;       /* running mean of the kernel second moment s_j */
     double dI;      /* weighted running mean of the per-pass Laplacians */
@@ -5224,7 +5248,12 @@ typedef struct appm__appm_state {
     double R;       /* radius r_j of the last gather */
     double R2sum;   /* sum of r_j^2, for the bias estimate */
     uint64_t N;     /* photons found so far */
+    double dI2p;    /* 10.4: dI^2 pooled over neighbours after the last Laplacian pass (0: none) */
 } appm__appm_state;
+
+typedef struct appm__appm_px { /* appm's per-pixel state: one record per photon component */
+    appm__appm_state k[APPM__NCOMP]; /* [APPM__COMP_DIFFUSE], [APPM__COMP_CAUSTIC] */
+} appm__appm_px;
 
 typedef struct appm__gather {
     appm__v3 x, n, t, b; /* visible point, normal, tangent frame */
@@ -5238,7 +5267,15 @@ typedef struct appm__gather {
     double s;            /* sum of K lum(Psi)^2 */
     double dl;           /* sum of D_h lum(Psi) */
     uint64_t count;      /* photons inside R */
+    /* appm: with Rc > 0 the caustic photons gather with their own radius Rc
+     * into these sums, and the ones above hold the diffuse photons only */
+    float Rc, Rc2;       /* caustic kernel radius (0: one component) and its square */
+    double ce[3], cs, cdl;
+    uint64_t ccount;
 } appm__gather;
+
+static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, float dx, float dy,
+                              float dz, double q, double *e, double *s, double *dl, uint64_t *count);
 
 static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
 {
@@ -5256,17 +5293,28 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
     }
     q = 0.2126 * g->wf.x * p->power[0] + 0.7152 * g->wf.y * p->power[1] +
         0.0722 * g->wf.z * p->power[2];
+    if (p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f) {
+        appm__gather_sums(g, p, d2, g->Rc2, dx, dy, dz, q, g->ce, &g->cs, &g->cdl, &g->ccount);
+        return;
+    }
+    appm__gather_sums(g, p, d2, R2, dx, dy, dz, q, g->e, &g->s, &g->dl, &g->count);
+}
+
+/* One photon's share of a gather's sums (e, s, dl, count: one component's). */
+static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, float dx, float dy,
+                              float dz, double q, double *e, double *s, double *dl, uint64_t *count)
+{
     if (d2 < R2) {
         double k = 1.0;
         if (g->biweight) {
             double u = 1.0 - (double)d2 / R2;
             k = u * u;
-            g->s += k * q * q;
+            *s += k * q * q;
         }
-        g->e[0] += k * p->power[0];
-        g->e[1] += k * p->power[1];
-        g->e[2] += k * p->power[2];
-        g->count++;
+        e[0] += k * p->power[0];
+        e[1] += k * p->power[1];
+        e[2] += k * p->power[2];
+        (*count)++;
     }
     if (g->h > 0.0f) {
         /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
@@ -5284,7 +5332,7 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
             if (c[k] < 1.0) sum += (1.0 - c[k]) * (1.0 - c[k]);
         if (a < 1.0) sum -= 4.0 * (1.0 - a) * (1.0 - a);
         v = sum * q;
-        g->dl += v;
+        *dl += v;
     }
 }
 
@@ -5298,6 +5346,8 @@ static void appm__gather_visit(void *ctx, const appm__photon *p)
 static void appm__gather_query(const appm__pmap *m, appm__gather *g)
 {
     float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h;
+    if (g->Rc > Rg) Rg = g->Rc;
+    g->Rc2 = g->Rc * g->Rc;
     g->R2 = g->R * g->R;
     g->Rg2 = Rg * Rg;
     appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
@@ -5321,6 +5371,21 @@ static uint64_t appm__lap_count(uint64_t j)
     return j <= APPM__WARMUP ? j : APPM__WARMUP + (j - APPM__WARMUP) / APPM__LAP_EVERY;
 }
 
+/* One component's sums (kernel radius R) into its estimates. */
+static void appm__sums_finish(const appm__gather *g, double R, const double *se, double ss, double sdl, uint64_t count,
+                              double invM, double *e, double *s, double *dl)
+{
+    double norm = (g->biweight ? 3.0 : 1.0) / (APPM__PI * R * R);
+    e[0] = e[1] = e[2] = *s = *dl = 0.0;
+    if (count > 0) {
+        e[0] = g->wf.x * se[0] * norm * invM;
+        e[1] = g->wf.y * se[1] * norm * invM;
+        e[2] = g->wf.z * se[2] * norm * invM;
+        *s = ss * norm * invM;
+    }
+    if (g->h > 0.0f) *dl = sdl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
+}
+
 /* Turns the sums of a gather into this pass's estimates:
  *   e  = (1/M) sum_i k_R(x - y_i) Psi_i          (the photon term of Ihat_j)
  *   s  = (1/M) sum_i k_R(x - y_i) lum(Psi_i)^2   (the second moment s_j)
@@ -5329,15 +5394,13 @@ static uint64_t appm__lap_count(uint64_t j)
  * (biweight) applied here, once, instead of per photon. */
 static void appm__gather_finish(const appm__gather *g, double invM, double *e, double *s, double *dl)
 {
-    double R = g->R, norm = (g->biweight ? 3.0 : 1.0) / (APPM__PI * R * R);
-    e[0] = e[1] = e[2] = *s = *dl = 0.0;
-    if (g->count > 0) {
-        e[0] = g->wf.x * g->e[0] * norm * invM;
-        e[1] = g->wf.y * g->e[1] * norm * invM;
-        e[2] = g->wf.z * g->e[2] * norm * invM;
-        *s = g->s * norm * invM;
-    }
-    if (g->h > 0.0f) *dl = g->dl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
+    appm__sums_finish(g, g->R, g->e, g->s, g->dl, g->count, invM, e, s, dl);
+}
+
+/* The same for the caustic component's sums (radius Rc). */
+static void appm__gather_finish_caustic(const appm__gather *g, double invM, double *e, double *s, double *dl)
+{
+    appm__sums_finish(g, g->Rc, g->ce, g->cs, g->cdl, g->ccount, invM, e, s, dl);
 }
 
 /* ---- 10.1 The adaptive radius (docs/algorithm.md 4.3 - 4.7) ----------------- */
@@ -5353,6 +5416,15 @@ static double appm__r_opt(double S, double dI2, double MN, double cf)
     return (r6 > 0.0 && r6 < HUGE_VAL) ? pow(r6, 1.0 / 6.0) : 0.0;
 }
 
+/* dI^2 - Var(dI): an unbiased estimate of the square of the true Laplacian
+ * (may be negative); see appm__di2. */
+static double appm__di2_unbiased(const appm__appm_state *p, uint64_t n)
+{
+    double c = p->dI * p->dI;
+    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
+    return c;
+}
+
 /* dI^2 for the radius formula.  The square of a noisy mean overestimates the
  * square of its expectation: E[dI^2] = dI_true^2 + Var(dI).  So the variance of
  * the weighted mean is taken off, keeping at least APPM__DI_FLOOR of dI^2: where
@@ -5361,27 +5433,42 @@ static double appm__r_opt(double S, double dI2, double MN, double cf)
  * sum M2 estimates (n - 1) c, and the mean's variance is c / sum(w). */
 static double appm__di2(const appm__appm_state *p, uint64_t n)
 {
-    double d2 = p->dI * p->dI, c = d2;
-    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
+    double d2 = p->dI * p->dI, c = appm__di2_unbiased(p, n);
     return c > APPM__DI_FLOOR * d2 ? c : APPM__DI_FLOOR * d2;
 }
 
-/* Radius for pass j from the pixel's statistics after j-1 passes; r1 is the
- * initial radius, r_auto the automatic one.  Never NaN, 0 or inf: every
- * path ends inside [RLO min(r1, r_auto), RHI max(r1, r_auto)] j^(-1/6). */
-static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j, const appm__appm_state *p)
+/* The lower and upper bounds of the radius of pass j: [RLO min(r1, r_auto),
+ * RHI max(r1, r_auto)] j^(-1/6). */
+static void appm__appm_bounds_sj(double r1, double r_auto, double sj, double *lo, double *hi)
 {
-    double sj = pow((double)j, -1.0 / 6.0), rk = r1 * sj, rad = rk;
-    double lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * sj, hi = APPM__RHI * (r1 > r_auto ? r1 : r_auto) * sj;
+    *lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * sj;
+    *hi = APPM__RHI * (r1 > r_auto ? r1 : r_auto) * sj;
+}
+
+static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, double *hi)
+{
+    appm__appm_bounds_sj(r1, r_auto, pow((double)j, -1.0 / 6.0), lo, hi);
+}
+
+/* Radius for pass j from one component's statistics after j-1 passes; r1 is
+ * the initial radius, r_auto the automatic one, cf the constant of the radius
+ * formula, di2 the dI^2 to use (< 0 or NaN: the component's own, appm__di2).
+ * Never NaN, 0 or inf: every path ends inside the bounds of appm__appm_bounds. */
+static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j, const appm__appm_state *p,
+                                double cf, double di2)
+{
+    double lo, hi, sj = pow((double)j, -1.0 / 6.0), rad = r1 * sj;
+    appm__appm_bounds_sj(r1, r_auto, sj, &lo, &hi);
     if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* too few photons seen to estimate anything: widen, as a k-nearest-
          * neighbour radius would, instead of waiting at a radius that may be
          * the reason so few photons arrive */
         rad = 2.0 * p->R;
-        return rad > hi ? hi : rad;
+        return rad > hi ? hi : (rad >= lo ? rad : lo);
     }
     if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
-        rad = appm__r_opt(p->S, appm__di2(p, appm__lap_count(j - 1)), (double)M * (double)j, APPM__CF);
+        if (!(di2 >= 0.0)) di2 = appm__di2(p, appm__lap_count(j - 1));
+        rad = appm__r_opt(p->S, di2, (double)M * (double)j, cf);
         if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
         if (p->R > 0.0) {
             if (rad < 0.5 * p->R) rad = 0.5 * p->R;
@@ -5505,7 +5592,11 @@ static void appm__appm_update(appm__appm_state *p, uint64_t pass, const double *
  * and on request:
  *   photon_term the photon part of the pixel value after j passes (0: none)
  *   bias        the estimated bias of the pixel (luminance), for the error
- *   aux_value   the RADIUS and LAPLACIAN maps */
+ *   aux_value   the RADIUS and LAPLACIAN maps (and the per-component radii)
+ * and, where a method needs them:
+ *   radius_c    per pixel: the caustic component's radius (appm__vp.rc; < 0:
+ *               the same as the radius; without the hook rc is 0 and every
+ *               photon gathers with r) */
 enum {
     APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
     APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
@@ -5535,6 +5626,7 @@ typedef struct appm__estimator {
     int (*photon_term)(const appm_renderer *r, const void *st, double j, double *out);
     double (*bias)(const void *st, double j);
     double (*aux_value)(const appm_renderer *r, const void *st, appm_aux which);
+    float (*radius_c)(const appm_renderer *r, const void *st);
 } appm__estimator;
 
 /* The state of pixel i. */
@@ -5545,15 +5637,20 @@ static void *appm__state(const appm_renderer *r, size_t i)
 
 /* This pass's estimates from a gather (appm__gather_finish); a NaN or inf
  * among them is counted as dropped and the pass contributes 0 instead. */
-static void appm__gather_estimates(appm_renderer *r, const appm__gather *g, unsigned worker, double *e, double *s,
-                                   double *dl)
+static void appm__drop_nonfinite(appm_renderer *r, unsigned worker, double *e, double *s, double *dl)
 {
-    appm__gather_finish(g, 1.0 / (double)r->M, e, s, dl);
     if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && *s - *s == 0.0 &&
           *dl - *dl == 0.0)) {
         r->dropped[worker]++;
         e[0] = e[1] = e[2] = *s = *dl = 0.0;
     }
+}
+
+static void appm__gather_estimates(appm_renderer *r, const appm__gather *g, unsigned worker, double *e, double *s,
+                                   double *dl)
+{
+    appm__gather_finish(g, 1.0 / (double)r->M, e, s, dl);
+    appm__drop_nonfinite(r, worker, e, s, dl);
 }
 
 /* -- ppm (Knaus-Zwicker 2011): one global radius, r_{j+1}^2 = r_j^2 (j + alpha) / (j + 1)
@@ -5661,41 +5758,195 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
     return ((const appm__sppm_state *)st)->R;
 }
 
-/* -- appm (Kaplanyan-Dachsbacher 2013): the radius of section 10.1, the
- *    recursive means of appm__appm_update, bias (mu2 r^2 / 2) dI. */
-static const appm__field appm__appm_fields[] = {
-    {"I", offsetof(appm__appm_state, I), 3, 0},         {"S", offsetof(appm__appm_state, S), 1, 0},
-    {"dI", offsetof(appm__appm_state, dI), 1, 0},       {"dI_w", offsetof(appm__appm_state, dI_w), 1, 0},
-    {"dI_m2", offsetof(appm__appm_state, dI_m2), 1, 0}, {"R", offsetof(appm__appm_state, R), 1, 0},
-    {"R2sum", offsetof(appm__appm_state, R2sum), 1, 0}, {"N", offsetof(appm__appm_state, N), 1, 1}};
+/* ---- 10.3 Photon components and pooled dI^2 ------------------------------------
+ *
+ * Components (algorithm.md 4.10).  The pixel's photon term is I = I_c + I_d,
+ * caustic and diffuse photons gathered with radii r_c, r_d; independent noise,
+ * so MSE = sum_k A_k / r_k^2 + (b_c r_c^2 + b_d r_d^2)^2, A_k = R(K) S_k / (M j),
+ * b_k = mu2 dI_k / 2.  The bias terms add before squaring, so the radii are
+ * coupled; the joint minimiser diverges where b_c b_d < 0 (the biases cancel)
+ * and that sign is what a noisy Laplacian cannot tell.  (a + b)^2 <= 2a^2 + 2b^2
+ * bounds the MSE by a separable sum whose minimiser is 4.3's formula per
+ * component with c_f / 2 (APPM__CF_SPLIT): exact for equal biases, 5 % of MSE
+ * off when one dominates.
+ *
+ * A price per gathered photon in place of the upper clamp (algorithm.md
+ * 4.11) was derived and measured, and lost at equal time on the scenes
+ * measured: it is not used.
+ *
+ * Pooling (algorithm.md 4.12).  dI^2 - Var(dI) averaged over the 3x3
+ * neighbours on the same surface within h (appm__pool_di2), then floored;
+ * computed after each Laplacian pass and kept in the state (dI2p). */
+
+/* -- appm (Kaplanyan-Dachsbacher 2013) with two photon components (10.3): the
+ *    radius of section 10.1 per component, the recursive means of
+ *    appm__appm_update per component; the pixel is their sum, and so is its
+ *    bias (mu2 / 2) sum_k r_k^2 dI_k. */
+#define APPM__KOFF(c, f) \
+    (offsetof(appm__appm_px, k) + (c) * sizeof(appm__appm_state) + offsetof(appm__appm_state, f))
+#define APPM__KFIELDS(c, x) \
+    {"I" x, APPM__KOFF(c, I), 3, 0}, {"S" x, APPM__KOFF(c, S), 1, 0}, {"dI" x, APPM__KOFF(c, dI), 1, 0}, \
+        {"dI_w" x, APPM__KOFF(c, dI_w), 1, 0}, {"dI_m2" x, APPM__KOFF(c, dI_m2), 1, 0}, \
+        {"R" x, APPM__KOFF(c, R), 1, 0}, {"R2sum" x, APPM__KOFF(c, R2sum), 1, 0}, {"N" x, APPM__KOFF(c, N), 1, 1}, \
+        {"dI2p" x, APPM__KOFF(c, dI2p), 1, 0}
+static const appm__field appm__appm_fields[] = {APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"),
+                                                APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c")};
+
+static double appm__appm_comp_radius(const appm_renderer *r, const appm__appm_px *a, int c)
+{
+    const appm__appm_state *p = &a->k[c];
+    return appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, p, APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
+}
 
 static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
 {
-    return (float)appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, (const appm__appm_state *)st);
+    return (float)appm__appm_comp_radius(r, (const appm__appm_px *)st, APPM__COMP_DIFFUSE);
+}
+
+/* The caustic radius; until the pixel has seen APPM__KMIN caustic photons it
+ * is the diffuse one (returned as -1: "the same"): widening in search of
+ * caustic light that may not exist would widen every gather of a scene
+ * without any. */
+static float appm__appm_radius_caustic(const appm_renderer *r, const void *st)
+{
+    const appm__appm_px *a = (const appm__appm_px *)st;
+    if (a->k[APPM__COMP_CAUSTIC].N < APPM__KMIN) return -1.0f;
+    return (float)appm__appm_comp_radius(r, a, APPM__COMP_CAUSTIC);
+}
+
+/* The component with the larger photon term (ties: diffuse): the one whose
+ * radius the RADIUS map shows and clamped= counts. */
+static int appm__appm_dominant(const appm__appm_px *a)
+{
+    return appm__lumd(a->k[APPM__COMP_CAUSTIC].I) > appm__lumd(a->k[APPM__COMP_DIFFUSE].I) ? APPM__COMP_CAUSTIC
+                                                                                          : APPM__COMP_DIFFUSE;
 }
 
 static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
                               unsigned worker)
 {
-    appm__appm_state *a = (appm__appm_state *)st;
-    double e[3], s, dl, hr = g->h / r->r_auto;
-    a->R = vp->r;
+    appm__appm_px *a = (appm__appm_px *)st;
+    double e[3], s, dl, ec[3], sc, dlc, hr = g->h / r->r_auto, w = g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0;
+    a->k[APPM__COMP_DIFFUSE].R = vp->r;
+    a->k[APPM__COMP_CAUSTIC].R = vp->rc;
     appm__gather_estimates(r, g, worker, e, &s, &dl);
-    appm__appm_update(a, r->pass, e, s, dl, g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g->count);
-    appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e));
+    appm__gather_finish_caustic(g, 1.0 / (double)r->M, ec, &sc, &dlc);
+    appm__drop_nonfinite(r, worker, ec, &sc, &dlc);
+    appm__appm_update(&a->k[APPM__COMP_DIFFUSE], r->pass, e, s, dl, w, g->count);
+    appm__appm_update(&a->k[APPM__COMP_CAUSTIC], r->pass, ec, sc, dlc, w, g->ccount);
+    appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e) + appm__lumd(ec));
 }
 
+/* 10.4: dI^2 of each component of pixel i (into out) pooled over the pixels of the
+ * (2 APPM__POOL + 1)^2 window whose visible points this pass lie within h of
+ * its own on the same surface (normals within 25 degrees) and that have seen
+ * APPM__KMIN photons of the component: the mean of their unbiased estimates
+ * dI_q^2 - Var(dI_q), floored at APPM__DI_FLOOR times the mean dI_q^2. */
+static void appm__pool_di2(const appm_renderer *r, size_t i, uint64_t n, double h, double *out)
+{
+    const appm__vp *v = &r->vp[i];
+    int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
+    double sum[APPM__NCOMP] = {0.0, 0.0}, sq[APPM__NCOMP] = {0.0, 0.0}, m[APPM__NCOMP] = {0.0, 0.0};
+    int c;
+    for (dy = -APPM__POOL; dy <= APPM__POOL; ++dy)
+        for (dx = -APPM__POOL; dx <= APPM__POOL; ++dx) {
+            int64_t x = x0 + dx, y = y0 + dy;
+            size_t q;
+            const appm__appm_px *a;
+            appm__v3 d;
+            if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
+            q = (size_t)(y * (int64_t)r->w + x);
+            a = (const appm__appm_px *)appm__state(r, q);
+            d = appm__sub(r->vp[q].x, v->x);
+            if (q != i && (r->vp[q].segs == 0 || !((double)appm__dot(d, d) < h * h) ||
+                           !(appm__dot(r->vp[q].n, v->n) > 0.9f)))
+                continue;
+            for (c = 0; c < APPM__NCOMP; ++c) {
+                const appm__appm_state *p = &a->k[c];
+                if (q != i && p->N < APPM__KMIN) continue;
+                sum[c] += appm__di2_unbiased(p, n);
+                sq[c] += p->dI * p->dI;
+                m[c] += 1.0;
+            }
+        }
+    for (c = 0; c < APPM__NCOMP; ++c) {
+        double s = sum[c] / m[c], f = sq[c] * APPM__DI_FLOOR / m[c];
+        out[c] = s > f ? s : f;
+    }
+}
+
+/* After a Laplacian pass j, each pixel's pooled dI^2 (appm__appm_state.dI2p)
+ * from the state after j passes and this pass's visible points; read by the
+ * radii of the passes up to the next Laplacian pass.  Each pixel writes only
+ * its own dI2p, which no pixel reads here. */
+static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    uint64_t n = appm__lap_count(r->pass);
+    double h = r->lap_h, out[APPM__NCOMP];
+    uint32_t x;
+    (void)worker;
+    for (x = 0; x < r->w; ++x) {
+        size_t i = (size_t)row * r->w + x;
+        appm__appm_px *a = (appm__appm_px *)appm__state(r, i);
+        int c;
+        if (!r->vp[i].segs || (a->k[0].N < APPM__KMIN && a->k[1].N < APPM__KMIN)) continue;
+        appm__pool_di2(r, i, n, h, out);
+        for (c = 0; c < APPM__NCOMP; ++c) a->k[c].dI2p = out[c];
+    }
+}
+
+/* appm_stats.clamped: the fraction of this pass's gathering pixels whose
+ * dominant component's radius sits at a bound of appm__appm_bounds; after a
+ * Laplacian pass, also the pooled dI^2 (10.4). */
+static void appm__appm_pass_end(appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    uint64_t n = 0, at = 0;
+    double lo, hi;
+    if (r->lap_h > 0.0 && r->pass >= APPM__WARMUP) appm__parallel_for(r->threads, r->h, appm__pool_task, r);
+    appm__appm_bounds(r->r1, r->r_auto, r->pass, &lo, &hi);
+    for (i = 0; i < npix; ++i) {
+        const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
+        double R;
+        if (r->vp[i].segs == 0 || r->vp[i].segs >= r->max_depth) continue;
+        R = a->k[appm__appm_dominant(a)].R;
+        n++;
+        at += (R <= lo * (1.0 + 1e-6) || R >= hi * (1.0 - 1e-6)) ? 1u : 0u;
+    }
+    r->stats.clamped = n ? (double)at / (double)n : 0.0;
+}
+
+static int appm__appm_term(const appm_renderer *r, const void *st, double j, double *out)
+{
+    const appm__appm_px *a = (const appm__appm_px *)st;
+    int c;
+    (void)r;
+    (void)j;
+    for (c = 0; c < 3; ++c) out[c] = a->k[APPM__COMP_DIFFUSE].I[c] + a->k[APPM__COMP_CAUSTIC].I[c];
+    return 1;
+}
+
+/* The bias terms of the components add (before any squaring: 10.3). */
 static double appm__appm_bias(const void *st, double j)
 {
-    const appm__appm_state *a = (const appm__appm_state *)st;
-    return 0.5 * APPM__MU2 * a->dI * (a->R2sum / j);
+    const appm__appm_px *a = (const appm__appm_px *)st;
+    double b = 0.0;
+    int c;
+    for (c = 0; c < APPM__NCOMP; ++c) b += 0.5 * APPM__MU2 * a->k[c].dI * (a->k[c].R2sum / j);
+    return b;
 }
 
 static double appm__appm_aux(const appm_renderer *r, const void *st, appm_aux which)
 {
-    const appm__appm_state *a = (const appm__appm_state *)st;
+    const appm__appm_px *a = (const appm__appm_px *)st;
     (void)r;
-    return which == APPM_AUX_LAPLACIAN ? a->dI : a->R;
+    switch (which) {
+    case APPM_AUX_LAPLACIAN: return a->k[APPM__COMP_DIFFUSE].dI + a->k[APPM__COMP_CAUSTIC].dI;
+    case APPM_AUX_RADIUS_CAUSTIC: return a->k[APPM__COMP_CAUSTIC].R;
+    case APPM_AUX_RADIUS_DIFFUSE: return a->k[APPM__COMP_DIFFUSE].R;
+    default: return a->k[appm__appm_dominant(a)].R;
+    }
 }
 
 #define APPM__AUX_BIT(k) (1u << (k))
@@ -5704,20 +5955,23 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
     /* APPM_METHOD_APPM */
     {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_LAPLACIAN | APPM__CAP_ERROR,
      APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_LAPLACIAN) |
-         APPM__AUX_BIT(APPM_AUX_ERROR),
-     sizeof(appm__appm_state), appm__appm_fields, sizeof appm__appm_fields / sizeof appm__appm_fields[0], NULL,
-     appm__appm_radius_hook, appm__appm_commit, NULL, appm__ppm_term, appm__appm_bias, appm__appm_aux},
+         APPM__AUX_BIT(APPM_AUX_ERROR) | APPM__AUX_BIT(APPM_AUX_RADIUS_CAUSTIC) |
+         APPM__AUX_BIT(APPM_AUX_RADIUS_DIFFUSE),
+     sizeof(appm__appm_px), appm__appm_fields, sizeof appm__appm_fields / sizeof appm__appm_fields[0], NULL,
+     appm__appm_radius_hook, appm__appm_commit, appm__appm_pass_end, appm__appm_term, appm__appm_bias,
+     appm__appm_aux, appm__appm_radius_caustic},
     /* APPM_METHOD_PPM */
     {"ppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE),
      sizeof(appm__ppm_state), appm__ppm_fields, sizeof appm__ppm_fields / sizeof appm__ppm_fields[0],
-     appm__ppm_start, appm__ppm_radius, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL, appm__ppm_aux},
+     appm__ppm_start, appm__ppm_radius, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL, appm__ppm_aux,
+     NULL},
     /* APPM_METHOD_SPPM */
     {"sppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS), sizeof(appm__sppm_state), appm__sppm_fields,
      sizeof appm__sppm_fields / sizeof appm__sppm_fields[0], appm__sppm_start, appm__sppm_radius,
-     appm__sppm_commit, NULL, appm__sppm_term, NULL, appm__sppm_aux},
+     appm__sppm_commit, NULL, appm__sppm_term, NULL, appm__sppm_aux, NULL},
     /* APPM_METHOD_PT: section 11; its whole path sum is the "direct" term */
     {"pt", APPM__CAP_ERROR, APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_ERROR), 0, NULL, 0, NULL,
-     NULL, NULL, NULL, NULL, NULL, NULL}};
+     NULL, NULL, NULL, NULL, NULL, NULL, NULL}};
 
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
@@ -5739,6 +5993,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.max_p = r->max_depth - vp->segs;
             g.biweight = (est->caps & APPM__CAP_BIWEIGHT) != 0;
             g.R = vp->r;
+            g.Rc = vp->rc;
             g.h = (float)r->lap_h;
             appm__gather_query(&r->pmap, &g);
         }
@@ -6476,6 +6731,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     }
     r->stats.threads = r->threads;
     r->stats.est_relerr = -1.0;
+    r->stats.clamped = -1.0;
     r->mem.diag = &r->diag;
     *out = r;
     return APPM_OK;
@@ -6504,6 +6760,8 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
         r->vp[i].r = r->est->radius(r, appm__state(r, i));
+        r->vp[i].rc = r->est->radius_c ? r->est->radius_c(r, appm__state(r, i)) : 0.0f;
+        if (r->vp[i].rc < 0.0f) r->vp[i].rc = r->vp[i].r;
     }
 }
 
@@ -6536,7 +6794,7 @@ static float appm__median_gather_radius(appm_renderer *r)
     for (i = 0; i < npix; ++i) {
         double g;
         if (r->vp[i].segs == 0) continue;
-        g = (double)r->vp[i].r;
+        g = (double)r->vp[i].r > r->vp[i].rc ? (double)r->vp[i].r : (double)r->vp[i].rc;
         tmp[n++] = (float)(h2 > g ? h2 : g);
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
@@ -6693,6 +6951,8 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
         double var = appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass), v;
         switch (which) {
         case APPM_AUX_RADIUS:
+        case APPM_AUX_RADIUS_CAUSTIC:
+        case APPM_AUX_RADIUS_DIFFUSE:
         case APPM_AUX_LAPLACIAN: v = r->est->aux_value(r, appm__state(r, i), which); break;
         case APPM_AUX_VARIANCE: v = var; break;
         default: /* the error bar |bias| + 1.645 sigma */

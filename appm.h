@@ -98,14 +98,16 @@
  *        its first diffuse vertex x with weight W; direct light at x by next-event
  *        estimation (shadow rays).
  *     2. radius: r = [c R(K) S / (M j mu2^2 dI^2)]^(1/6) from the pixel's running
- *        second moment S and Laplacian dI, clamped to [0.1 min(r1, r_auto),
- *        2 max(r1, r_auto)] j^(-1/6) (r_auto: 2 pixel widths, as cfg.radius).
+ *        second moment S and Laplacian dI, per photon component (caustic:
+ *        photons whose last bounce was specular; diffuse: the rest), clamped
+ *        to [0.1 min(r1, r_auto), 2 max(r1, r_auto)] j^(-1/6) (r_auto: 2 pixel
+ *        widths, as cfg.radius).
  *     3. photon pass: M photon paths from the lights (chosen by power), stored at
  *        diffuse hits, binned into a hash grid.
  *     4. gather: per pixel, I += (1/j) ((1/M) sum_i k_r(x - y_i) W f gamma_i - I);
  *        S and dI are updated from the same photons (dI by a 5-point finite
  *        difference of kernel estimates with bandwidth h ~ j^(-1/8)).
- *     The pixel value is mean(direct) + I.
+ *     The pixel value is mean(direct) + I_caustic + I_diffuse.
  *
  * REFERENCES
  *     A. Kaplanyan, C. Dachsbacher. Adaptive Progressive Photon Mapping. ACM TOG
@@ -390,6 +392,8 @@ typedef struct appm_stats {
                                     /* root mean over pixels of (bias^2 + var) /         */
                                     /* (I^2 + 0.01); var from the spread between the     */
                                     /* chains (chains >= 2) or the passes; < 0: none      */
+    double clamped;                 /* appm: fraction of gathering pixels at a radius bound
+                                       after the last pass (< 0: none)                     */
     unsigned threads;
 } appm_stats;
 
@@ -400,15 +404,21 @@ APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
  * no such map (e.g. laplacian for ppm), before the first pass, or when the map's
  * memory (allocated on the first request) cannot be had.
  *   RADIUS     the radius each pixel gathered with in the last pass (scene units;
- *              sppm: the radius R of its next gather)
+ *              sppm: the radius R of its next gather; appm: the radius of the
+ *              pixel's dominant photon component, the one with the larger term)
  *   VARIANCE   the estimated variance of the pixel (luminance)
  *   LAPLACIAN  the estimated pixel Laplacian dI (luminance per area^2)
- *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)        */
+ *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)
+ *   RADIUS_CAUSTIC, RADIUS_DIFFUSE  appm: the radius of each photon component
+ *              (caustic: photons whose last bounce was specular; diffuse: the
+ *              rest) in the last pass                                          */
 typedef enum appm_aux {
     APPM_AUX_RADIUS = 0,
     APPM_AUX_VARIANCE,
     APPM_AUX_LAPLACIAN,
     APPM_AUX_ERROR,
+    APPM_AUX_RADIUS_CAUSTIC,
+    APPM_AUX_RADIUS_DIFFUSE,
     APPM_AUX_COUNT
 } appm_aux;
 APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which);

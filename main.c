@@ -130,6 +130,7 @@ static const char *const RENDER_HELP =
     "  --reference REF.pfm   compare with this image after every pass\n"
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
     "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
+    "                        (appm also PREFIX-radius-{caustic,diffuse}: each component's radius)\n"
     "  --checkpoint FILE     save the whole render state to FILE (atomically) every 10 s of\n"
     "                        wall time, or every --checkpoint-every N passes, and at the end\n"
     "  --checkpoint-every N  with --checkpoint: every N passes instead of every 10 s\n"
@@ -634,8 +635,9 @@ static int cmd_render(int argc, char **argv)
             goto done;
         }
         if (o.aux) {
-            static const char *const names[APPM_AUX_COUNT] = {"radius", "variance", "laplacian", "error"};
-            static const int modes[APPM_AUX_COUNT] = {0, 1, 2, 1};
+            static const char *const names[APPM_AUX_COUNT] = {"radius",         "variance",      "laplacian",
+                                                              "error",          "radius-caustic", "radius-diffuse"};
+            static const int modes[APPM_AUX_COUNT] = {0, 1, 2, 1, 0, 0};
             int k;
             for (k = 0; k < APPM_AUX_COUNT; ++k) {
                 const float *a = appm_renderer_aux(r, (appm_aux)k);
@@ -654,6 +656,7 @@ static int cmd_render(int argc, char **argv)
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
                (unsigned long long)st.photons_stored);
         if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
+        if (st.clamped >= 0) printf(" clamped=%.4f", st.clamped);
         printf(" sampler=%s", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
         if (o.cfg.sampler == APPM_SAMPLER_QMC) printf(" chains=%u", o.cfg.chains ? o.cfg.chains : 1u);
         printf(" cpu_s=%.3f", (double)(clock() - c0) / CLOCKS_PER_SEC);

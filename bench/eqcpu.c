@@ -1,0 +1,59 @@
+/* bench/eqcpu.c - one equal-CPU-time run, for comparisons on a shared machine.
+ *
+ *   cc -std=c99 -O2 bench/eqcpu.c appm.c -o bench/eqcpu -lm -pthread
+ *   bench/eqcpu SCENE METHOD SEED BUDGET RADIUS ALPHA REF_A.pfm REF_B.pfm MASK [REF_MSE]
+ *
+ * Renders 64x64 with 2 threads, pass after pass, until the process has used
+ * BUDGET seconds of CPU time (both threads counted): wall time is meaningless
+ * when other jobs share the cores.  RADIUS and ALPHA 0 mean the defaults.  The
+ * reference is the mean of two independent renders A and B, and its own noise
+ * E[(A - B)^2] / 4 is subtracted from the measured MSE (or, with A and B the same
+ * file, REF_MSE from its .mse file).  "rmse_masked" counts only the pixels whose
+ * reference luminance is below MASK (a light seen directly excluded). */
+#include "../appm.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+#include <time.h>
+static double lum(const float *p) { return 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]; }
+int main(int argc, char **argv)
+{
+    appm_scene *s; appm_diag d; appm_config cfg; appm_renderer *r; appm_image A, B, img; appm_stats st;
+    double budget, mask, se = 0, sm = 0, na = 0, nm = 0, nse = 0, nsm = 0; size_t i, n;
+    clock_t c0;
+    if (argc < 10) { fprintf(stderr, "usage: scene method seed budget radius alpha refA refB mask\n"); return 2; }
+    if (appm_scene_load(argv[1], NULL, &s, &d) != APPM_OK) { printf("%s\n", d.message); return 1; }
+    appm_config_init(&cfg);
+    appm_method_parse(argv[2], &cfg.method);
+    cfg.seed = (uint64_t)atoll(argv[3]); budget = atof(argv[4]); cfg.radius = atof(argv[5]); cfg.alpha = atof(argv[6]);
+    mask = atof(argv[9]);
+    cfg.width = cfg.height = 64; cfg.threads = 2;
+    if (appm_image_read_pfm(argv[7], NULL, &A, &d) != APPM_OK || appm_image_read_pfm(argv[8], NULL, &B, &d) != APPM_OK) { printf("%s\n", d.message); return 1; }
+    if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) { printf("%s\n", d.message); return 1; }
+    c0 = clock();
+    while ((double)(clock() - c0) / CLOCKS_PER_SEC < budget) appm_renderer_pass(r);
+    appm_renderer_image(r, &img); appm_renderer_stats(r, &st);
+    n = (size_t)img.width * img.height;
+    for (i = 0; i < n; ++i) {
+        float ref[3]; int c; double rl;
+        for (c = 0; c < 3; ++c) ref[c] = 0.5f * (A.rgb[3 * i + c] + B.rgb[3 * i + c]);
+        rl = lum(ref);
+        for (c = 0; c < 3; ++c) {
+            double e = img.rgb[3 * i + c] - ref[c], q = A.rgb[3 * i + c] - B.rgb[3 * i + c];
+            double q2 = argc > 10 ? atof(argv[10]) : q * q / 4; /* the reference's noise */
+            se += e * e; nse += q2; na++;
+            if (rl < mask) { sm += e * e; nsm += q2; nm++; }
+        }
+    }
+    printf("passes=%llu cpu=%.2f wall=%.2f rmse=%.6f rmse_masked=%.6f clamped=%.4f masked_px=%.0f\n",
+           (unsigned long long)st.passes, (double)(clock() - c0) / CLOCKS_PER_SEC, st.seconds,
+           (se - nse) / na > 0 ? sqrt((se - nse) / na) : 0.0, nm > 0 && (sm - nsm) / nm > 0 ? sqrt((sm - nsm) / nm) : 0.0,
+#ifdef NO_CLAMPED
+           -1.0,
+#else
+           st.clamped,
+#endif
+           nm / 3);
+    return 0;
+}
