@@ -3,7 +3,8 @@
 #   make test         every test, normal build and ASan+UBSan build, plus the CLI
 #   make test-long    the slow statistical tests (more samples)
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
-#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset
+#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
+#                     make bench-glossy: CornellBox-Glossy alone
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 # Without make:  cc -std=c99 -O2 appm.c main.c -lm -pthread -o appm
@@ -18,7 +19,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick fuzz clean
+.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy fuzz clean
 
 all: appm
 
@@ -56,6 +57,9 @@ bench: appm
 
 bench-quick: appm
 	sh bench/run.sh quick
+
+bench-glossy: appm
+	sh bench/run.sh glossy
 
 fuzz:
 	sh tests/fuzz/run.sh
