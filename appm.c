@@ -2907,9 +2907,10 @@ static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi
  *
  * Every pass traces one eye path per pixel: a uniformly jittered point in the
  * pixel (box filter) and on the lens, then through mirrors and glass until the
- * first diffuse vertex x.  There the path stops and becomes the pixel's visible
- * point for this pass (stochastic PPM: a new x every pass, so anti-aliasing,
- * depth of field and glossy-free caustic paths all converge).  What the path
+ * first diffuse or glossy vertex x (section 7.3).  There the path stops and
+ * becomes the pixel's visible point for this pass (stochastic PPM: a new x
+ * every pass, so anti-aliasing, depth of field and caustic paths all
+ * converge).  What the path
  * meets on the way is added to the pixel's direct term:
  *   emission Le of every surface hit on its front side (the light seen
  *   directly, or in a mirror), and at x the direct light by next-event
