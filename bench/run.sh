@@ -5,8 +5,9 @@
 #                             the first time)
 #   sh bench/run.sh full      five scenes, the full ppm grid, throughput and scaling
 #   sh bench/run.sh refs      only the references of the full suite (the slow part)
-#   sh bench/run.sh glossy    only CornellBox-Glossy of the full suite (its reference
-#                             the first time: about 4 minutes on 2 cores)
+#   sh bench/run.sh glossy    only CornellBox-Glossy of the full suite (its reference,
+#                             the first time, is 2 x 67 M path-traced paths: 10 minutes
+#                             on 2 loaded cores, then 6 runs of 10 s)
 #
 # For every scene: a reference (rendered once by a long path-tracing run and
 # cached in bench/ref/ with the exact command in NAME.cmd; never committed),
