@@ -1379,6 +1379,18 @@ static void appm__mtl_finish(appm__loader *L, appm__material *m, int illum, int 
         appm__warn(L, (uint64_t)1 << 62, line, "MTL statement 'Ns' is not modelled without Ks > 0, ignored");
 }
 
+/* The Phong exponent: (0, 1e5] (interface contract, section 2). */
+static appm_status appm__mtl_ns(appm__loader *L, const char **s, const char *e, unsigned line, appm__material *m)
+{
+    double v;
+    appm_status st = appm__numbers(L, s, e, line, "Ns", &v, 1);
+    if (st != APPM_OK) return st;
+    if (!(v > 0.0) || v > APPM__NS_MAX)
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "Phong exponent Ns %g is not in (0, 1e5]", v);
+    m->ns = (float)v;
+    return APPM_OK;
+}
+
 static appm_status appm__mtl_parse(appm__loader *L, const char *buf, size_t len)
 {
     appm__lines it;
@@ -1452,11 +1464,7 @@ static appm_status appm__mtl_parse(appm__loader *L, const char *buf, size_t len)
                                   "index of refraction Ni %g is not in (0, 100]", v[0]);
             cur->ior = (float)v[0];
         } else if (appm__token_is(ts, te, "Ns")) {
-            if ((st = appm__numbers(L, &s, e, it.line, "Ns", v, 1)) != APPM_OK) return st;
-            if (!(v[0] > 0.0) || v[0] > APPM__NS_MAX)
-                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line,
-                                  "Phong exponent Ns %g is not in (0, 1e5]", v[0]);
-            cur->ns = (float)v[0];
+            if ((st = appm__mtl_ns(L, &s, e, it.line, cur)) != APPM_OK) return st;
             have_ns = 1;
         } else if (appm__token_is(ts, te, "illum")) {
             if ((st = appm__numbers(L, &s, e, it.line, "illum", v, 1)) != APPM_OK) return st;
@@ -3995,6 +4003,27 @@ static float appm__mis(float a, float b)
     return a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f;
 }
 
+/* Next-event estimate at a diffuse or glossy path vertex with throughput W
+ * (side: wo's side of the geometric normal), weighted by the power heuristic
+ * against the BSDF sampling that could have found the same light. */
+static appm__v3 appm__pt_direct(const appm_scene *s, const appm__surf *sf, const appm__material *m, appm__v3 wo,
+                                float side, appm__v3 W, appm__rng *rng)
+{
+    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side);
+    float u0 = appm__rng_float(rng), u1 = appm__rng_float(rng), u2 = appm__rng_float(rng), c, w;
+    appm__light_sample ls;
+    if (!appm__sample_light(s, sf, ns, u0, u1, u2, &ls)) return appm__v(0, 0, 0);
+    c = appm__dot(ls.wi, ns);
+    if (!(c > 0.0f) || !(appm__dot(ls.wi, ng) > 0.0f) || appm__occluded(s, &ls.shadow, sf->tri, ls.skip))
+        return appm__v(0, 0, 0);
+    if (m->kind == APPM__MAT_GLOSSY) { /* MIS against the mixture pdf of section 6.1 */
+        w = ls.pdf > 0.0f ? appm__mis(ls.pdf, appm__bsdf_pdf(m, ns, ls.wi, wo)) : 1.0f;
+        return appm__scale(appm__mul(appm__mul(W, appm__bsdf_f(m, ns, ls.wi, wo)), ls.li), c * w);
+    }
+    w = ls.pdf > 0.0f ? appm__mis(ls.pdf, c * (float)APPM__INV_PI) : 1.0f;
+    return appm__scale(appm__mul(appm__mul(W, m->color), ls.li), c * (float)APPM__INV_PI * w);
+}
+
 static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
 {
     const appm_scene *s = r->scene;
@@ -4035,26 +4064,9 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
             L = appm__add(L, appm__scale(appm__mul(W, m->ke), w));
         }
         if ((m->kind == APPM__MAT_DIFFUSE || m->kind == APPM__MAT_GLOSSY) && segs + 1 <= r->max_depth) {
-            float side = appm__dot(wo, sf.ng) >= 0.0f ? 1.0f : -1.0f, c;
-            appm__v3 ns = appm__scale(sf.ns, side), ng = appm__scale(sf.ng, side);
-            float u0 = appm__rng_float(&rng), u1 = appm__rng_float(&rng), u2 = appm__rng_float(&rng);
-            appm__light_sample ls;
-            if (appm__sample_light(s, &sf, ns, u0, u1, u2, &ls)) {
-                c = appm__dot(ls.wi, ns);
-                if (c > 0.0f && appm__dot(ls.wi, ng) > 0.0f &&
-                    !appm__occluded(s, &ls.shadow, sf.tri, ls.skip)) {
-                    if (m->kind == APPM__MAT_GLOSSY) { /* MIS against the mixture pdf of section 6.1 */
-                        float w = ls.pdf > 0.0f ? appm__mis(ls.pdf, appm__bsdf_pdf(m, ns, ls.wi, wo)) : 1.0f;
-                        L = appm__add(L, appm__scale(appm__mul(appm__mul(W, appm__bsdf_f(m, ns, ls.wi, wo)),
-                                                               ls.li), c * w));
-                    } else {
-                        float w = ls.pdf > 0.0f ? appm__mis(ls.pdf, c * (float)APPM__INV_PI) : 1.0f;
-                        L = appm__add(L, appm__scale(appm__mul(appm__mul(W, m->color), ls.li),
-                                                     c * (float)APPM__INV_PI * w));
-                    }
-                }
-            }
-            prev_ns = ns;
+            float side = appm__dot(wo, sf.ng) >= 0.0f ? 1.0f : -1.0f;
+            prev_ns = appm__scale(sf.ns, side);
+            L = appm__add(L, appm__pt_direct(s, &sf, m, wo, side, W, &rng));
         }
         appm__rng_float3(&rng, u3);
         if (!appm__bsdf_sample_dir(m, &sf, wo, u3[0], u3[1], u3[2], APPM__RADIANCE, &bs))

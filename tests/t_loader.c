@@ -180,6 +180,28 @@ typedef struct cornell_case {
     int scene_camera;         /* loaded through a .scene with a camera statement */
 } cornell_case;
 
+/* CornellBox-Glossy's two glossy materials after the Kd + Ks <= 1 scaling. */
+static void check_glossy_box(const appm_scene *s)
+{
+    uint32_t m, nsph = 0, nfloor = 0;
+    for (m = 1; m < s->nmat; ++m) {
+        const appm__material *mt = &s->mat[m];
+        if (mt->kind != APPM__MAT_GLOSSY) continue;
+        if (mt->ns == 32.0f) { /* sphere: Kd 0.486 0.631 0.663, Ks 0.7 */
+            nsph++;
+            CHECK_NEAR(mt->color.x, 0.486 / 1.186, 1e-6);
+            CHECK_NEAR(mt->ks.x, 0.7 / 1.186, 1e-6);
+            CHECK_NEAR(mt->color.z + mt->ks.z, 1.0, 1e-6);
+        } else if (mt->ns == 80.0f) { /* floor: Kd 0.725 0.71 0.68, Ks 0.3 (sums <= 1.025) */
+            nfloor++;
+            CHECK_NEAR(mt->color.x, 0.725 / 1.025, 1e-6);
+            CHECK_NEAR(mt->color.z, 0.68, 1e-6); /* 0.98: not scaled */
+            CHECK_NEAR(mt->ks.z, 0.3, 1e-6);
+        }
+    }
+    CHECK_MSG(nsph == 1 && nfloor == 1, "%u sphere, %u floor materials", nsph, nfloor);
+}
+
 static void test_cornell(void)
 {
     /* The light quad of every box spans x in [-0.24, 0.23] and z in [-0.22, 0.16]:
@@ -233,25 +255,7 @@ static void test_cornell(void)
         CHECK_MSG(log_count(&lb, "'Ka'") == 1, "%s: %d Ka warnings", c->path, log_count(&lb, "'Ka'"));
         CHECK_MSG(log_count(&lb, "Kd + Ks") == (c->glossy ? 1 : 0), "%s: %d Kd + Ks warnings", c->path,
                   log_count(&lb, "Kd + Ks"));
-        if (c->glossy) {
-            uint32_t m, nsph = 0, nfloor = 0;
-            for (m = 1; m < s->nmat; ++m) {
-                const appm__material *mt = &s->mat[m];
-                if (mt->kind != APPM__MAT_GLOSSY) continue;
-                if (mt->ns == 32.0f) { /* sphere: Kd 0.486 0.631 0.663, Ks 0.7 */
-                    nsph++;
-                    CHECK_NEAR(mt->color.x, 0.486 / 1.186, 1e-6);
-                    CHECK_NEAR(mt->ks.x, 0.7 / 1.186, 1e-6);
-                    CHECK_NEAR(mt->color.z + mt->ks.z, 1.0, 1e-6);
-                } else if (mt->ns == 80.0f) { /* floor: Kd 0.725 0.71 0.68, Ks 0.3 (sums <= 1.025) */
-                    nfloor++;
-                    CHECK_NEAR(mt->color.x, 0.725 / 1.025, 1e-6);
-                    CHECK_NEAR(mt->color.z, 0.68, 1e-6); /* 0.98: not scaled */
-                    CHECK_NEAR(mt->ks.z, 0.3, 1e-6);
-                }
-            }
-            CHECK_MSG(nsph == 1 && nfloor == 1, "%u sphere, %u floor materials", nsph, nfloor);
-        }
+        if (c->glossy) check_glossy_box(s);
         CHECK_MSG(!log_has_repeats(&lb), "%s: a warning kind was sent twice", c->path);
         if (log_find(&lb, "'Ka'") >= 0)
             CHECK(strstr(lb.file[log_find(&lb, "'Ka'")], ".mtl") != NULL);
@@ -890,6 +894,48 @@ static void test_mtl_mapping(void)
     appm_scene_destroy(s);
 }
 
+/* Glossy materials: Ns at its limits, Kd + Ks scaling, defaults, warnings. */
+static void test_mtl_glossy(void)
+{
+    appm_scene *s;
+    appm_diag d;
+    logbuf lb;
+    /* Glossy: Ns at the limits, Kd + Ks > 1 scaled per channel keeping the
+     * ratio (one warning for the file), Ns reset to 1 at each newmtl, and Ns
+     * without Ks > 0 a warning (the material stays diffuse). */
+    CHECK(load_mem(TRI_LIGHT,
+                   "newmtl light\nKe 1 1 1\nKd 0.5 0.5 0.5\nKs 0.25 0.75 1.5\nNs 100000\n"
+                   "newmtl g2\nKd 0.9 0.1 0\nKs 0.3 0.3 0.3\nNs 0.001\n"
+                   "newmtl g3\nKs 0.1 0 0\n"
+                   "newmtl d\nKs 0 0 0\nNs 50\n",
+                   &s, &d, &lb) == APPM_OK);
+    if (s) {
+        const appm__material *m = &s->mat[1];
+        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 1e5f);
+        CHECK_NEAR(m->color.x, 0.5, 1e-7);          /* 0.75: unchanged */
+        CHECK_NEAR(m->ks.x, 0.25, 1e-7);
+        CHECK_NEAR(m->color.y, 0.5 / 1.25, 1e-7);   /* 1.25: scaled */
+        CHECK_NEAR(m->ks.y, 0.75 / 1.25, 1e-7);
+        CHECK_NEAR(m->color.z, 0.5 / 1.5, 1e-7);    /* Ks 1.5 clamped to 1 first */
+        CHECK_NEAR(m->ks.z, 1.0 / 1.5, 1e-7);
+        m = &s->mat[2];
+        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 0.001f);
+        CHECK_NEAR(m->color.x, 0.9 / 1.2, 1e-7);
+        CHECK_NEAR(m->ks.x, 0.3 / 1.2, 1e-7);
+        CHECK_NEAR(m->color.y, 0.1, 1e-7);
+        m = &s->mat[3];
+        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 1.0f);
+        CHECK(same_v3(m->color, appm__v(0.8f, 0.8f, 0.8f)) && same_v3(m->ks, appm__v(0.1f, 0, 0)));
+        CHECK(s->mat[4].kind == APPM__MAT_DIFFUSE);
+    }
+    CHECK(log_count(&lb, "Kd + Ks") == 1);
+    CHECK(log_count(&lb, "'Ns'") == 1);
+    if (log_find(&lb, "'Ns'") >= 0) CHECK(strstr(lb.msg[log_find(&lb, "'Ns'")], "Ks > 0") != NULL);
+    CHECK(log_count(&lb, "clamped") == 1);
+    CHECK(!log_has_repeats(&lb));
+    appm_scene_destroy(s);
+}
+
 static void test_mtl_values(void)
 {
     appm_scene *s;
@@ -950,40 +996,6 @@ static void test_mtl_values(void)
         CHECK(check_write_file(objpath, "mtllib loader-bad-ni.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl light\nf 1 2 3\n"));
         CHECK_ERR(load(objpath, &s, &d, NULL), d, APPM_ERR_PARSE, 3, "loader-bad-ni.mtl");
     }
-    /* Glossy: Ns at the limits, Kd + Ks > 1 scaled per channel keeping the
-     * ratio (one warning for the file), Ns reset to 1 at each newmtl, and Ns
-     * without Ks > 0 a warning (the material stays diffuse). */
-    CHECK(load_mem(TRI_LIGHT,
-                   "newmtl light\nKe 1 1 1\nKd 0.5 0.5 0.5\nKs 0.25 0.75 1.5\nNs 100000\n"
-                   "newmtl g2\nKd 0.9 0.1 0\nKs 0.3 0.3 0.3\nNs 0.001\n"
-                   "newmtl g3\nKs 0.1 0 0\n"
-                   "newmtl d\nKs 0 0 0\nNs 50\n",
-                   &s, &d, &lb) == APPM_OK);
-    if (s) {
-        const appm__material *m = &s->mat[1];
-        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 1e5f);
-        CHECK_NEAR(m->color.x, 0.5, 1e-7);          /* 0.75: unchanged */
-        CHECK_NEAR(m->ks.x, 0.25, 1e-7);
-        CHECK_NEAR(m->color.y, 0.5 / 1.25, 1e-7);   /* 1.25: scaled */
-        CHECK_NEAR(m->ks.y, 0.75 / 1.25, 1e-7);
-        CHECK_NEAR(m->color.z, 0.5 / 1.5, 1e-7);    /* Ks 1.5 clamped to 1 first */
-        CHECK_NEAR(m->ks.z, 1.0 / 1.5, 1e-7);
-        m = &s->mat[2];
-        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 0.001f);
-        CHECK_NEAR(m->color.x, 0.9 / 1.2, 1e-7);
-        CHECK_NEAR(m->ks.x, 0.3 / 1.2, 1e-7);
-        CHECK_NEAR(m->color.y, 0.1, 1e-7);
-        m = &s->mat[3];
-        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 1.0f);
-        CHECK(same_v3(m->color, appm__v(0.8f, 0.8f, 0.8f)) && same_v3(m->ks, appm__v(0.1f, 0, 0)));
-        CHECK(s->mat[4].kind == APPM__MAT_DIFFUSE);
-    }
-    CHECK(log_count(&lb, "Kd + Ks") == 1);
-    CHECK(log_count(&lb, "'Ns'") == 1);
-    if (log_find(&lb, "'Ns'") >= 0) CHECK(strstr(lb.msg[log_find(&lb, "'Ns'")], "Ks > 0") != NULL);
-    CHECK(log_count(&lb, "clamped") == 1);
-    CHECK(!log_has_repeats(&lb));
-    appm_scene_destroy(s);
     /* Material state is reset at each newmtl (tinyobjloader #391). */
     CHECK(load_mem(TRI_LIGHT, "newmtl a\nillum 5\nKs 0.3 0.3 0.3\nKd 0.1 0.1 0.1\nNi 2\nKe 1 1 1\n"
                               "newmtl light\nKe 1 0 0\nnewmtl c\nillum 7\n",
@@ -1317,6 +1329,7 @@ int main(void)
     test_mtl_before_newmtl();
     test_mtl_mapping();
     test_mtl_values();
+    test_mtl_glossy();
     test_obj_ignored_warnings();
     test_scene_statements();
     test_scene_malformed();
