@@ -3191,7 +3191,8 @@ static void appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__surf *s
     vp->x = sf->p;
     vp->n = appm__dot(wo, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
     vp->wf = appm__scale(appm__mul(W, m->color), (float)APPM__INV_PI);
-    vp->wg = appm__v(0, 0, 0);
+    vp->wg = vp->rd = appm__v(0, 0, 0);
+    vp->ns = 0.0f;
     if (m->kind == APPM__MAT_GLOSSY) {
         appm__v3 ns = appm__dot(wo, sf->ng) >= 0.0f ? sf->ns : appm__neg(sf->ns);
         vp->wg = appm__scale(appm__mul(W, m->ks), (m->ns + 2.0f) * (float)(0.5 * APPM__INV_PI));
