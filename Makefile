@@ -34,13 +34,25 @@ build/san/%: tests/%.c $(DEPS)
 	@mkdir -p build/san
 	$(CC) $(WARN) $(SAN) $< -o $@ $(LDLIBS)
 
+# the CLI with every local variable pre-filled (where the compiler can), so that
+# tests/cli.sh sees a read of a never-written variable
+build/appm-pattern: appm.c appm.h main.c
+	@mkdir -p build
+	$(CC) $(WARN) $(CFLAGS) -ftrivial-auto-var-init=pattern appm.c main.c -o $@ $(LDLIBS) 2>/dev/null || \
+	$(CC) $(WARN) $(CFLAGS) appm.c main.c -o $@ $(LDLIBS)
+
+build/quickstart: examples/quickstart.c appm.c appm.h
+	@mkdir -p build
+	$(CC) $(WARN) $(CFLAGS) -I. examples/quickstart.c appm.c -o $@ $(LDLIBS)
+
 build/embed: examples/embed.c appm.c appm.h
 	@mkdir -p build
 	$(CC) $(WARN) $(CFLAGS) examples/embed.c appm.c -o $@ $(LDLIBS)
 
-test: appm build/embed $(TESTS) $(STESTS)
+test: appm build/embed build/appm-pattern build/quickstart $(TESTS) $(STESTS)
 	@mkdir -p tests/out
-	@sh tests/run.sh $(TESTS) $(foreach t,$(STESTS),"APPM_TEST_QUICK=1 $(t)") "sh tests/cli.sh ./appm build/embed"
+	@sh tests/run.sh $(TESTS) $(foreach t,$(STESTS),"APPM_TEST_QUICK=1 $(t)") "APPM_PATTERN=build/appm-pattern sh tests/cli.sh ./appm build/embed" \
+		"sh tests/alone.sh build/t_image build/t_loader" "sh tests/quickstart.sh build/quickstart"
 
 test-long: $(TESTS)
 	@mkdir -p tests/out

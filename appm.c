@@ -8,8 +8,9 @@
  *                             parallel loop over a mutex-guarded task counter
  *   2. Core utilities         diagnostics, the one allocation wrapper, growable
  *                             arrays, float3 math, the PCG32 random streams
- *   3. Image I/O              PFM read/write, PPM (P6), PNG (stored deflate),
- *                             sRGB transfer, write-to-temporary-then-rename
+ *   3. Image I/O              PFM read/write, PPM (P6), PNG and OpenEXR with
+ *                             their own deflate (LZ77 + Huffman), sRGB transfer,
+ *                             write-to-temporary-then-rename
  *   4. OBJ/MTL and scenes     locale-free number parser, OBJ/MTL/`.scene`
  *                             readers with file:line errors, scene assembly
  *   5. BVH                    binned-SAH build, watertight ray/triangle test,
@@ -282,7 +283,7 @@ static void appm__parallel_for(unsigned threads, uint32_t count, appm__task_fn f
 
 static const char *const appm__status_text[APPM_STATUS_COUNT] = {
     "ok", "out of memory", "input/output error", "malformed input",
-    "invalid argument", "not supported by this build", "cancelled"};
+    "invalid argument"};
 
 APPM_API const char *appm_status_string(appm_status s)
 {
@@ -569,9 +570,10 @@ static void appm__rng_float3(appm__rng *r, float *u)
  * PFM (linear float): header "PF\n<w> <h>\n<scale>\n", then rows from the
  * BOTTOM of the picture to the top; a negative scale means little-endian floats.
  * We write the host's byte order (found with memcpy, not pointer punning) and
- * read either.  PPM (P6) and PNG are 8-bit sRGB after an exposure multiply.  The
- * PNG writer stores the pixels in uncompressed deflate blocks: no zlib, yet a
- * valid file (CRC-32 per chunk, Adler-32 over the zlib stream).  Every writer
+ * read either.  PPM (P6) and PNG are 8-bit sRGB after an exposure multiply;
+ * OpenEXR is linear float or half.  PNG and ZIP-compressed EXR use the deflate
+ * compressor of 3.1 (no zlib): CRC-32 per PNG chunk, Adler-32 over each zlib
+ * stream.  Every writer
  * writes "<name>.tmp" and renames it, so a failed write never leaves a
  * half-written file under the final name (a destination that exists and is not
  * a regular file - /dev/stdout, a FIFO - is written in place).
@@ -654,42 +656,6 @@ static void appm__png_chunk_end(appm__out *o)
     appm__put(o, b, 4);
 }
 
-/* The zlib stream of a PNG made of stored deflate blocks: each block is a
- * 5-byte header (BFINAL, LEN, ~LEN) and up to 65535 raw bytes. */
-typedef struct appm__zstore {
-    appm__out *o;
-    size_t raw, done, left_in_block;
-    uint32_t s1, s2; /* Adler-32 halves */
-} appm__zstore;
-
-static void appm__zstore_feed(appm__zstore *z, const unsigned char *p, size_t n)
-{
-    while (n > 0) {
-        size_t take, k;
-        if (z->left_in_block == 0) {
-            unsigned char b[5];
-            size_t len = z->raw - z->done < 65535 ? z->raw - z->done : 65535;
-            b[0] = (unsigned char)(z->done + len == z->raw);
-            b[1] = (unsigned char)(len & 255);
-            b[2] = (unsigned char)(len >> 8);
-            b[3] = (unsigned char)(~len & 255);
-            b[4] = (unsigned char)((~len >> 8) & 255);
-            appm__put_crc(z->o, b, 5);
-            z->left_in_block = len;
-        }
-        take = n < z->left_in_block ? n : z->left_in_block;
-        for (k = 0; k < take; ++k) {
-            z->s1 = (z->s1 + p[k]) % 65521u;
-            z->s2 = (z->s2 + z->s1) % 65521u;
-        }
-        appm__put_crc(z->o, p, take);
-        p += take;
-        n -= take;
-        z->done += take;
-        z->left_in_block -= take;
-    }
-}
-
 /* Converts row y to sRGB bytes piece by piece through a stack buffer (no heap
  * use at all) and hands each piece to `emit`. */
 #define APPM__ROW_PIECE 256
@@ -713,26 +679,607 @@ static void appm__emit_srgb_row(const appm_image *img, uint32_t y, float exposur
     }
 }
 
-static void appm__emit_png(void *ctx, const unsigned char *p, size_t n)
-{
-    appm__zstore_feed((appm__zstore *)ctx, p, n);
-}
-
 static void appm__emit_plain(void *ctx, const unsigned char *p, size_t n)
 {
     appm__put((appm__out *)ctx, p, n);
 }
 
-static void appm__write_png_body(appm__out *o, const appm_image *img, float exposure)
+/* ---- 3.1 Deflate (RFC 1951) inside a zlib stream (RFC 1950) ----------------
+ *
+ * A streaming compressor in bounded memory, allocated once per file: a 64 KiB
+ * window (two halves of 32 KiB; when the second fills, it slides down and the
+ * hash positions with it), hash chains over 3-byte prefixes, lazy matching as in
+ * zlib's deflate_slow (a match at p is emitted only if p + 1 does not start a
+ * longer one), and blocks of up to APPM__Z_SYMS symbols.  Each block is sent
+ * with the cheaper of the fixed Huffman code and a dynamic one built from its
+ * own symbol counts (lengths limited to 15 bits, code-length code to 7).  The
+ * compressed bytes go to a sink in pieces of at most APPM__Z_OUT bytes (for a PNG,
+ * one IDAT chunk each; for an EXR block, a memory buffer).
+ */
+#define APPM__Z_W 32768      /* window size: the farthest a match may reach back */
+#define APPM__Z_MINM 3
+#define APPM__Z_MAXM 258
+#define APPM__Z_HASH 32768   /* hash buckets over the next 3 bytes */
+#define APPM__Z_SYMS 16384   /* symbols per block */
+#define APPM__Z_OUT 65536    /* compressed bytes per sink call */
+/* Chain links followed per position (the effort): for PNG near zlib's level 9
+ * (4096) in size at a fraction of its time; EXR float data gains little. */
+#ifndef APPM__PNG_CHAIN
+#define APPM__PNG_CHAIN 1024
+#endif
+#define APPM__EXR_CHAIN 64
+#ifndef APPM__PNG_MINKEEP
+#define APPM__PNG_MINKEEP 6
+#endif
+/* A match may reach back at most this far, so that a chain never follows a
+ * prev[] slot already reused by a newer position (zlib's MAX_DIST). */
+#define APPM__Z_MAXDIST (APPM__Z_W - APPM__Z_MAXM - APPM__Z_MINM - 1)
+
+typedef void (*appm__sink_fn)(void *ctx, const unsigned char *p, size_t n);
+
+typedef struct appm__zlib {
+    unsigned char *win;   /* 2 W bytes: the window and the look-ahead */
+    int32_t *head, *prev; /* newest position per hash; older position per slot (-1: none) */
+    uint16_t *lit, *dist; /* the block's symbols: literal or length, and distance (0: literal) */
+    unsigned char *out;   /* APPM__Z_OUT compressed bytes waiting for the sink */
+    size_t fill, pos, nsym, nout;
+    int have_prev;        /* lazy matching: the byte at pos - 1 is not yet emitted */
+    unsigned prev_len, prev_dist;
+    unsigned max_chain;   /* chain links followed per position: the effort */
+    unsigned min_keep;    /* shorter matches are dropped (zlib's Z_FILTERED: 6) */
+    uint64_t bits;        /* bit buffer, least significant bit first */
+    unsigned nbits;
+    uint32_t s1, s2;      /* Adler-32 halves of the uncompressed data */
+    uint32_t fl[286], fd[30]; /* symbol counts of the current block */
+    appm__sink_fn sink;
+    void *ctx;
+} appm__zlib;
+
+static const uint16_t appm__len_base[29] = {3,  4,  5,  6,  7,  8,  9,  10, 11,  13,
+                                            15, 17, 19, 23, 27, 31, 35, 43, 51,  59,
+                                            67, 83, 99, 115, 131, 163, 195, 227, 258};
+static const unsigned char appm__len_extra[29] = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2,
+                                                  2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0};
+static const uint16_t appm__dist_base[30] = {1,    2,    3,    4,    5,    7,     9,     13,
+                                             17,   25,   33,   49,   65,   97,    129,   193,
+                                             257,  385,  513,  769,  1025, 1537,  2049,  3073,
+                                             4097, 6145, 8193, 12289, 16385, 24577};
+static const unsigned char appm__dist_extra[30] = {0, 0, 0, 0, 1, 1, 2, 2,  3,  3,  4,  4,  5,  5,  6,
+                                                   6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13};
+
+static unsigned appm__log2u(unsigned v)
+{
+    unsigned k = 0;
+    while (v >>= 1) k++;
+    return k;
+}
+
+/* Length 3..258 -> code index 0..28 (symbol 257 + index): four codes per
+ * power of two above 10, each with log2 - 2 extra bits. */
+static unsigned appm__len_code(unsigned len)
+{
+    unsigned l = len - 3, nb;
+    if (len == 258) return 28;
+    if (l < 8) return l;
+    nb = appm__log2u(l);
+    return 4 * (nb - 1) + ((l >> (nb - 2)) & 3u);
+}
+
+/* Distance 1..32768 -> code 0..29: two codes per power of two above 4. */
+static unsigned appm__dist_code(unsigned dist)
+{
+    unsigned d = dist - 1, nb;
+    if (d < 4) return d;
+    nb = appm__log2u(d);
+    return 2 * nb + ((d >> (nb - 1)) & 1u);
+}
+
+static appm_status appm__zlib_init(appm__zlib *z, appm__mem *m, unsigned max_chain, unsigned min_keep)
+{
+    memset(z, 0, sizeof *z);
+    z->win = (unsigned char *)appm__alloc(m, 2 * APPM__Z_W, 1);
+    z->head = (int32_t *)appm__alloc(m, APPM__Z_HASH, sizeof(int32_t));
+    z->prev = (int32_t *)appm__alloc(m, APPM__Z_W, sizeof(int32_t));
+    z->lit = (uint16_t *)appm__alloc(m, APPM__Z_SYMS, sizeof(uint16_t));
+    z->dist = (uint16_t *)appm__alloc(m, APPM__Z_SYMS, sizeof(uint16_t));
+    z->out = (unsigned char *)appm__alloc(m, APPM__Z_OUT, 1);
+    z->max_chain = max_chain;
+    z->min_keep = min_keep;
+    return z->win && z->head && z->prev && z->lit && z->dist && z->out ? APPM_OK : APPM_ERR_NOMEM;
+}
+
+static void appm__zlib_release(appm__zlib *z, appm__mem *m)
+{
+    appm__free(m, z->win);
+    appm__free(m, z->head);
+    appm__free(m, z->prev);
+    appm__free(m, z->lit);
+    appm__free(m, z->dist);
+    appm__free(m, z->out);
+    memset(z, 0, sizeof *z);
+}
+
+static void appm__zlib_flush_out(appm__zlib *z)
+{
+    if (z->nout) z->sink(z->ctx, z->out, z->nout);
+    z->nout = 0;
+}
+
+/* Appends the n low bits of v (n <= 32), first bit first. */
+static void appm__zbits(appm__zlib *z, uint32_t v, unsigned n)
+{
+    z->bits |= (uint64_t)v << z->nbits;
+    z->nbits += n;
+    while (z->nbits >= 8) {
+        z->out[z->nout++] = (unsigned char)z->bits;
+        z->bits >>= 8;
+        z->nbits -= 8;
+        if (z->nout == APPM__Z_OUT) appm__zlib_flush_out(z);
+    }
+}
+
+/* Starts a zlib stream: header 0x78 0xDA (deflate, 32K window, "best"
+ * compression; 0x78DA is a multiple of 31), empty window, Adler-32 = 1. */
+static void appm__zlib_begin(appm__zlib *z, appm__sink_fn sink, void *ctx)
+{
+    size_t i;
+    z->sink = sink;
+    z->ctx = ctx;
+    z->fill = z->pos = z->nsym = z->nout = 0;
+    z->have_prev = 0;
+    z->bits = 0;
+    z->nbits = 0;
+    z->s1 = 1;
+    z->s2 = 0;
+    for (i = 0; i < APPM__Z_HASH; ++i) z->head[i] = -1;
+    memset(z->fl, 0, sizeof z->fl);
+    memset(z->fd, 0, sizeof z->fd);
+    appm__zbits(z, 0x78, 8);
+    appm__zbits(z, 0xDA, 8);
+}
+
+static void appm__zlib_adler(appm__zlib *z, const unsigned char *p, size_t n)
+{
+    while (n > 0) { /* 5552 bytes is the most before the sums could pass 2^32 (zlib's NMAX) */
+        size_t k = n < 5552 ? n : 5552;
+        n -= k;
+        while (k--) {
+            z->s1 += *p++;
+            z->s2 += z->s1;
+        }
+        z->s1 %= 65521u;
+        z->s2 %= 65521u;
+    }
+}
+
+/* Huffman code lengths for the counts freq[0..n-1] (n <= 288), none longer
+ * than maxbits; count 0 gets length 0.  Optimal lengths come from the
+ * two-queue construction over the symbols sorted by count (leaves in one queue,
+ * merged nodes, born in non-decreasing weight, in the other).  If the longest
+ * exceeds maxbits, the excess is folded back as zlib and miniz do: clamp, then
+ * repair the Kraft sum by moving one leaf down a level at a time, and deal the
+ * lengths out again, the longest to the rarest symbols. */
+static void appm__huff_lengths(const uint32_t *freq, unsigned n, unsigned maxbits, unsigned char *len)
+{
+    uint16_t sym[288], parent[2 * 288], depth[2 * 288];
+    uint32_t w[2 * 288], kraft = 0;
+    unsigned count[33], m = 0, i, k, leaf = 0, node, next;
+    memset(len, 0, n);
+    memset(count, 0, sizeof count);
+    for (i = 0; i < n; ++i)
+        if (freq[i]) sym[m++] = (uint16_t)i;
+    if (m < 2) {
+        if (m == 1) len[sym[0]] = 1;
+        return;
+    }
+    for (i = 1; i < m; ++i) { /* stable insertion sort by count: ties keep symbol order */
+        uint16_t s = sym[i];
+        for (k = i; k > 0 && freq[sym[k - 1]] > freq[s]; --k) sym[k] = sym[k - 1];
+        sym[k] = s;
+    }
+    for (i = 0; i < m; ++i) w[i] = freq[sym[i]];
+    for (node = next = m; next < 2 * m - 1; ++next) {
+        unsigned a = (leaf < m && (node >= next || w[leaf] <= w[node])) ? leaf++ : node++;
+        unsigned b = (leaf < m && (node >= next || w[leaf] <= w[node])) ? leaf++ : node++;
+        w[next] = w[a] + w[b];
+        parent[a] = parent[b] = (uint16_t)next;
+    }
+    depth[2 * m - 2] = 0; /* the root; every parent has a larger index than its children */
+    for (i = 2 * m - 2; i-- > 0;) depth[i] = (uint16_t)(depth[parent[i]] + 1);
+    for (i = 0; i < m; ++i) count[depth[i] > 32 ? 32 : depth[i]]++;
+    for (i = maxbits + 1; i <= 32; ++i) {
+        count[maxbits] += count[i];
+        count[i] = 0;
+    }
+    for (i = 1; i <= maxbits; ++i) kraft += (uint32_t)count[i] << (maxbits - i);
+    while (kraft > (1u << maxbits)) { /* each step: one leaf fewer at maxbits, Kraft sum - 1 */
+        count[maxbits]--;
+        for (i = maxbits - 1; i > 0; --i)
+            if (count[i]) {
+                count[i]--;
+                count[i + 1] += 2;
+                break;
+            }
+        kraft--;
+    }
+    for (k = 0, i = maxbits; i >= 1; --i)
+        for (leaf = count[i]; leaf > 0; --leaf) len[sym[k++]] = (unsigned char)i;
+}
+
+/* Canonical codes from lengths (RFC 1951, 3.2.2), bit-reversed because
+ * deflate sends Huffman codes most significant bit first into an LSB-first
+ * stream. */
+static void appm__huff_codes(const unsigned char *len, unsigned n, uint16_t *code)
+{
+    unsigned count[16], next[16], i, c = 0;
+    memset(count, 0, sizeof count);
+    for (i = 0; i < n; ++i) count[len[i]]++;
+    count[0] = 0;
+    for (i = 1; i < 16; ++i) {
+        c = (c + count[i - 1]) << 1;
+        next[i] = c;
+    }
+    for (i = 0; i < n; ++i) {
+        unsigned v, r = 0, b;
+        code[i] = 0;
+        if (!len[i]) continue;
+        v = next[len[i]]++;
+        for (b = 0; b < len[i]; ++b, v >>= 1) r = (r << 1) | (v & 1u);
+        code[i] = (uint16_t)r;
+    }
+}
+
+/* The code-length sequence of a dynamic block, run-length coded: 16 repeats
+ * the previous length 3-6 times, 17 and 18 give 3-10 and 11-138 zeros.  Each
+ * entry is symbol | extra-bits value << 5; fc counts the symbols. */
+static unsigned appm__zrle(const unsigned char *lens, unsigned n, uint16_t *rle, uint32_t *fc)
+{
+    unsigned i = 0, m = 0, last = 99;
+    while (i < n) {
+        unsigned v = lens[i], run = 1, t;
+        while (i + run < n && lens[i + run] == v) run++;
+        if (v == 0 && run >= 3) {
+            t = run > 138 ? 138 : run;
+            rle[m++] = (uint16_t)(t >= 11 ? 18u | (t - 11) << 5 : 17u | (t - 3) << 5);
+            fc[t >= 11 ? 18 : 17]++;
+            last = 0;
+        } else if (v != 0 && v == last && run >= 3) {
+            t = run > 6 ? 6 : run;
+            rle[m++] = (uint16_t)(16u | (t - 3) << 5);
+            fc[16]++;
+        } else {
+            t = 1;
+            rle[m++] = (uint16_t)v;
+            fc[v]++;
+            last = v;
+        }
+        i += t;
+    }
+    return m;
+}
+
+/* A dynamic block's code tables, and what it and the fixed code would cost. */
+typedef struct appm__zplan {
+    unsigned char ll[288], dl[30], cl[19]; /* 288: the fixed code's two unused symbols count too */
+    uint16_t rle[316];
+    unsigned hlit, hdist, hclen, nrle;
+    uint64_t dyn_bits, fixed_bits;
+} appm__zplan;
+
+static const unsigned char appm__cl_order[19] = {16, 17, 18, 0, 8,  7, 9,  6, 10, 5,
+                                                 11, 4,  12, 3, 13, 2, 14, 1, 15};
+
+static unsigned appm__nonzero(const uint32_t *f, unsigned n)
+{
+    unsigned i, k = 0;
+    for (i = 0; i < n; ++i) k += f[i] != 0;
+    return k;
+}
+
+static void appm__zplan_make(appm__zlib *z, appm__zplan *pl)
+{
+    uint32_t fc[19];
+    unsigned i;
+    unsigned char lens[316];
+    z->fl[256] = 1; /* end of block */
+    /* Two used symbols at least per code, so that every code is complete (a
+     * lone length-1 code is legal in some alphabets only); a dummy costs a few
+     * header bits. */
+    if (appm__nonzero(z->fl, 286) < 2) z->fl[0] += 1;
+    if (appm__nonzero(z->fd, 30) == 1) z->fd[z->fd[0] ? 1 : 0] += 1;
+    appm__huff_lengths(z->fl, 286, 15, pl->ll);
+    appm__huff_lengths(z->fd, 30, 15, pl->dl);
+    for (pl->hlit = 286; pl->hlit > 257 && pl->ll[pl->hlit - 1] == 0; --pl->hlit) {
+    }
+    for (pl->hdist = 30; pl->hdist > 1 && pl->dl[pl->hdist - 1] == 0; --pl->hdist) {
+    }
+    memcpy(lens, pl->ll, pl->hlit);
+    memcpy(lens + pl->hlit, pl->dl, pl->hdist);
+    memset(fc, 0, sizeof fc);
+    pl->nrle = appm__zrle(lens, pl->hlit + pl->hdist, pl->rle, fc);
+    if (appm__nonzero(fc, 19) < 2) fc[fc[0] ? 1 : 0] += 1;
+    appm__huff_lengths(fc, 19, 7, pl->cl);
+    for (pl->hclen = 19; pl->hclen > 4 && pl->cl[appm__cl_order[pl->hclen - 1]] == 0; --pl->hclen) {
+    }
+    pl->dyn_bits = 3 + 5 + 5 + 4 + 3 * (uint64_t)pl->hclen;
+    pl->fixed_bits = 3;
+    for (i = 0; i < pl->nrle; ++i) {
+        unsigned s = pl->rle[i] & 31u;
+        pl->dyn_bits += pl->cl[s] + (s == 16 ? 2u : s == 17 ? 3u : s == 18 ? 7u : 0u);
+    }
+    for (i = 0; i < 286; ++i) {
+        unsigned extra = i >= 257 ? appm__len_extra[i - 257] : 0, fixed = i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8;
+        pl->dyn_bits += (uint64_t)z->fl[i] * (pl->ll[i] + extra);
+        pl->fixed_bits += (uint64_t)z->fl[i] * (fixed + extra);
+    }
+    for (i = 0; i < 30; ++i) {
+        pl->dyn_bits += (uint64_t)z->fd[i] * (pl->dl[i] + appm__dist_extra[i]);
+        pl->fixed_bits += (uint64_t)z->fd[i] * (5u + appm__dist_extra[i]);
+    }
+}
+
+/* Sends the block's symbols and its end-of-block code. */
+static void appm__zsend(appm__zlib *z, const unsigned char *ll, unsigned nll, const unsigned char *dl)
+{
+    uint16_t lc[288], dc[30];
+    size_t i;
+    appm__huff_codes(ll, nll, lc);
+    appm__huff_codes(dl, 30, dc);
+    for (i = 0; i < z->nsym; ++i) {
+        unsigned v = z->lit[i], d = z->dist[i], c;
+        if (d == 0) {
+            appm__zbits(z, lc[v], ll[v]);
+            continue;
+        }
+        c = appm__len_code(v);
+        appm__zbits(z, lc[257 + c], ll[257 + c]);
+        appm__zbits(z, v - appm__len_base[c], appm__len_extra[c]);
+        c = appm__dist_code(d);
+        appm__zbits(z, dc[c], dl[c]);
+        appm__zbits(z, d - appm__dist_base[c], appm__dist_extra[c]);
+    }
+    appm__zbits(z, lc[256], ll[256]);
+}
+
+/* Ends the current block: dynamic or fixed code, whichever is shorter. */
+static void appm__zblock(appm__zlib *z, int final)
+{
+    appm__zplan pl;
+    unsigned i;
+    appm__zplan_make(z, &pl);
+    if (pl.dyn_bits < pl.fixed_bits) {
+        uint16_t cc[19];
+        appm__zbits(z, (uint32_t)final | 2u << 1, 3); /* BFINAL, BTYPE 2: dynamic */
+        appm__zbits(z, pl.hlit - 257, 5);
+        appm__zbits(z, pl.hdist - 1, 5);
+        appm__zbits(z, pl.hclen - 4, 4);
+        for (i = 0; i < pl.hclen; ++i) appm__zbits(z, pl.cl[appm__cl_order[i]], 3);
+        appm__huff_codes(pl.cl, 19, cc);
+        for (i = 0; i < pl.nrle; ++i) {
+            unsigned s = pl.rle[i] & 31u;
+            appm__zbits(z, cc[s], pl.cl[s]);
+            if (s >= 16) appm__zbits(z, pl.rle[i] >> 5, s == 16 ? 2 : s == 17 ? 3 : 7);
+        }
+        appm__zsend(z, pl.ll, 286, pl.dl);
+    } else { /* RFC 1951, 3.2.6: 8, 9, 7, 8 bits for literal/length ranges, 5 for distances */
+        for (i = 0; i < 288; ++i) pl.ll[i] = (unsigned char)(i < 144 ? 8 : i < 256 ? 9 : i < 280 ? 7 : 8);
+        for (i = 0; i < 30; ++i) pl.dl[i] = 5;
+        appm__zbits(z, (uint32_t)final | 1u << 1, 3);
+        appm__zsend(z, pl.ll, 288, pl.dl);
+    }
+    z->nsym = 0;
+    memset(z->fl, 0, sizeof z->fl);
+    memset(z->fd, 0, sizeof z->fd);
+}
+
+static void appm__zsym(appm__zlib *z, unsigned v, unsigned dist)
+{
+    z->lit[z->nsym] = (uint16_t)v;
+    z->dist[z->nsym] = (uint16_t)dist;
+    z->nsym++;
+    if (dist == 0) {
+        z->fl[v]++;
+    } else {
+        z->fl[257 + appm__len_code(v)]++;
+        z->fd[appm__dist_code(dist)]++;
+    }
+    if (z->nsym == APPM__Z_SYMS) appm__zblock(z, 0);
+}
+
+static uint32_t appm__zhash(const unsigned char *p) /* Knuth's multiplicative hash of 3 bytes */
+{
+    uint32_t v = (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16;
+    return (v * 2654435761u) >> 17; /* 15 bits */
+}
+
+static void appm__zinsert(appm__zlib *z, size_t p)
+{
+    uint32_t h = appm__zhash(z->win + p);
+    z->prev[p & (APPM__Z_W - 1)] = z->head[h];
+    z->head[h] = (int32_t)p;
+}
+
+/* The longest match at p (already inserted) of more than `better` (and at
+ * least min_keep) and at most maxlen bytes, following at most max_chain links
+ * (a quarter of them when the match to beat is already long, as zlib's
+ * good_length).  0 if none.  A candidate is first tested at the two bytes that
+ * would make it longer than the best so far (zlib's scan_end), which rejects
+ * most of them at once. */
+static unsigned appm__zmatch(const appm__zlib *z, size_t p, unsigned maxlen, unsigned better,
+                             unsigned *dist)
+{
+    const unsigned char *s = z->win + p;
+    unsigned least = z->min_keep > APPM__Z_MINM ? z->min_keep - 1 : APPM__Z_MINM - 1; /* shorter: dropped anyway */
+    unsigned best = better < least ? least : better, found = 0;
+    unsigned chain = better >= 32 ? z->max_chain >> 2 : z->max_chain;
+    int32_t c = z->prev[p & (APPM__Z_W - 1)];
+    if (best >= maxlen) return 0;
+    while (c >= 0 && p - (size_t)c <= APPM__Z_MAXDIST && chain-- > 0) {
+        const unsigned char *q = z->win + c;
+        if (q[best] == s[best] && q[best - 1] == s[best - 1] && q[0] == s[0] && q[1] == s[1]) {
+            unsigned n = 2;
+            while (n < maxlen && q[n] == s[n]) n++;
+            if (n > best) {
+                best = n;
+                found = 1;
+                *dist = (unsigned)(p - (size_t)c);
+                if (n >= maxlen) break;
+            }
+        }
+        c = z->prev[c & (APPM__Z_W - 1)];
+    }
+    return found ? best : 0;
+}
+
+/* LZ77 with lazy evaluation over the window: runs while more than a longest
+ * match of look-ahead is there (or to the end when flushing).  Invariant
+ * after a call without flush: fill - pos <= APPM__Z_MAXM. */
+static void appm__zrun(appm__zlib *z, int flush)
+{
+    while (z->pos < z->fill && (flush || z->fill - z->pos > APPM__Z_MAXM)) {
+        size_t p = z->pos, avail = z->fill - p;
+        unsigned maxlen = avail < APPM__Z_MAXM ? (unsigned)avail : APPM__Z_MAXM, cur = 0, cdist = 0;
+        if (avail >= APPM__Z_MINM) {
+            appm__zinsert(z, p);
+            cur = appm__zmatch(z, p, maxlen, z->have_prev ? z->prev_len : 0, &cdist);
+            if (cur == APPM__Z_MINM && cdist > 4096) cur = 0; /* 3 bytes that far cost more than literals */
+            if (cur < z->min_keep) cur = 0;
+        }
+        if (z->have_prev && z->prev_len >= APPM__Z_MINM && z->prev_len >= cur) {
+            size_t end = p - 1 + z->prev_len, q;
+            appm__zsym(z, z->prev_len, z->prev_dist);
+            for (q = p + 1; q < end; ++q)
+                if (z->fill - q >= APPM__Z_MINM) appm__zinsert(z, q);
+            z->pos = end;
+            z->have_prev = 0;
+        } else {
+            if (z->have_prev) appm__zsym(z, z->win[p - 1], 0);
+            z->have_prev = 1;
+            z->prev_len = cur;
+            z->prev_dist = cdist;
+            z->pos = p + 1;
+        }
+    }
+    if (flush && z->have_prev) { /* a match there would have been emitted in the loop */
+        appm__zsym(z, z->win[z->pos - 1], 0);
+        z->have_prev = 0;
+    }
+}
+
+/* Moves the upper half of the window down; positions move with it, and those
+ * that fall out of the window become "none". */
+static void appm__zslide(appm__zlib *z)
+{
+    size_t i;
+    memcpy(z->win, z->win + APPM__Z_W, APPM__Z_W);
+    z->fill -= APPM__Z_W;
+    z->pos -= APPM__Z_W;
+    for (i = 0; i < APPM__Z_HASH; ++i) z->head[i] = z->head[i] >= APPM__Z_W ? z->head[i] - APPM__Z_W : -1;
+    for (i = 0; i < APPM__Z_W; ++i) z->prev[i] = z->prev[i] >= APPM__Z_W ? z->prev[i] - APPM__Z_W : -1;
+}
+
+static void appm__zlib_feed(appm__zlib *z, const unsigned char *p, size_t n)
+{
+    appm__zlib_adler(z, p, n);
+    while (n > 0) {
+        size_t take;
+        if (z->fill == 2 * APPM__Z_W) appm__zslide(z); /* pos >= W here, by zrun's invariant */
+        take = 2 * APPM__Z_W - z->fill;
+        if (take > n) take = n;
+        memcpy(z->win + z->fill, p, take);
+        z->fill += take;
+        p += take;
+        n -= take;
+        appm__zrun(z, 0);
+    }
+}
+
+/* Ends the stream: the rest of the input, the final block, byte alignment, the
+ * Adler-32 (most significant byte first). */
+static void appm__zlib_end(appm__zlib *z)
+{
+    appm__zrun(z, 1);
+    appm__zblock(z, 1);
+    if (z->nbits) appm__zbits(z, 0, 8 - z->nbits);
+    appm__zbits(z, z->s2 >> 8, 8);
+    appm__zbits(z, z->s2 & 255u, 8);
+    appm__zbits(z, z->s1 >> 8, 8);
+    appm__zbits(z, z->s1 & 255u, 8);
+    appm__zlib_flush_out(z);
+}
+
+/* ---- 3.2 PNG --------------------------------------------------------------- */
+
+/* The Paeth predictor (PNG specification, 9.4): whichever of the left (a),
+ * upper (b) and upper-left (c) byte is nearest to a + b - c, ties in that order. */
+static int appm__paeth(int a, int b, int c)
+{
+    int p = a + b - c, pa = p > a ? p - a : a - p, pb = p > b ? p - b : b - p, pc = p > c ? p - c : c - p;
+    return pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+}
+
+/* Filter type t (0 none, 1 sub, 2 up, 3 average, 4 Paeth) of the n bytes of
+ * `cur` against the row above `up` (zeros above the first row), 3 bytes per
+ * pixel, into out[0..n] with the type byte first.  Returns the sum of the
+ * filtered bytes read as signed magnitudes: the "minimum sum of absolute
+ * differences" guess of libpng and stb_image_write at which filter will
+ * compress best. */
+static uint64_t appm__png_filter(int t, const unsigned char *cur, const unsigned char *up, size_t n,
+                                 unsigned char *out)
+{
+    uint64_t cost = 0;
+    size_t i;
+    out[0] = (unsigned char)t;
+    for (i = 0; i < n; ++i) {
+        int a = i >= 3 ? cur[i - 3] : 0, b = up[i], c = i >= 3 ? up[i - 3] : 0, pred;
+        unsigned char v;
+        pred = t == 0 ? 0 : t == 1 ? a : t == 2 ? b : t == 3 ? (a + b) >> 1 : appm__paeth(a, b, c);
+        v = (unsigned char)(cur[i] - pred);
+        out[1 + i] = v;
+        cost += v < 128 ? v : 256u - v;
+    }
+    return cost;
+}
+
+static void appm__emit_copy(void *ctx, const unsigned char *p, size_t n)
+{
+    unsigned char **dst = (unsigned char **)ctx;
+    memcpy(*dst, p, n);
+    *dst += n;
+}
+
+/* One IDAT chunk per piece of compressed output. */
+static void appm__png_idat(void *ctx, const unsigned char *p, size_t n)
+{
+    appm__out *o = (appm__out *)ctx;
+    appm__png_chunk_begin(o, "IDAT", (uint32_t)n);
+    appm__put_crc(o, p, n);
+    appm__png_chunk_end(o);
+}
+
+/* Rows are converted to sRGB bytes, each row filtered five ways and the
+ * cheapest (by the guess above) sent to the compressor.  All buffers are
+ * allocated here, once: four rows and the compressor's window and tables. */
+static appm_status appm__write_png_body(appm__out *o, appm__mem *m, const appm_image *img,
+                                        float exposure)
 {
     static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
     const uint32_t w = img->width, h = img->height;
-    const size_t raw = (size_t)h * (1 + (size_t)w * 3); /* filter byte + RGB per row */
-    const size_t nblocks = raw / 65535 + (raw % 65535 != 0);
-    const size_t zlen = 2 + raw + 5 * nblocks + 4;
-    unsigned char b[13];
-    appm__zstore z;
+    const size_t n = (size_t)w * 3;
+    unsigned char b[13], *rows, *cur, *up, *best, *trial;
+    appm__zlib z;
+    appm_status st = appm__zlib_init(&z, m, APPM__PNG_CHAIN, APPM__PNG_MINKEEP);
     uint32_t y;
+    rows = (unsigned char *)appm__alloc(m, 4, n + 1); /* zeroed: the row above the first */
+    if (st != APPM_OK || !rows) {
+        appm__free(m, rows);
+        appm__zlib_release(&z, m);
+        return APPM_ERR_NOMEM;
+    }
+    cur = rows;
+    up = cur + (n + 1);
+    best = up + (n + 1);
+    trial = best + (n + 1);
     appm__put(o, sig, 8);
     appm__png_chunk_begin(o, "IHDR", 13);
     appm__be32(b, w);
@@ -740,29 +1287,245 @@ static void appm__write_png_body(appm__out *o, const appm_image *img, float expo
     b[8] = 8;  /* bit depth */
     b[9] = 2;  /* colour type: RGB */
     b[10] = 0; /* compression: deflate */
-    b[11] = 0; /* filter method 0 (each row then says filter type 0: none) */
+    b[11] = 0; /* filter method 0: a filter type byte leads each row */
     b[12] = 0; /* no interlace */
     appm__put_crc(o, b, 13);
     appm__png_chunk_end(o);
-    appm__png_chunk_begin(o, "IDAT", (uint32_t)zlen);
-    b[0] = 0x78; /* zlib: deflate, 32K window */
-    b[1] = 0x01; /* check bits: 0x7801 is a multiple of 31; no dictionary */
-    appm__put_crc(o, b, 2);
-    z.o = o;
-    z.raw = raw;
-    z.done = z.left_in_block = 0;
-    z.s1 = 1;
-    z.s2 = 0;
+    appm__zlib_begin(&z, appm__png_idat, o);
     for (y = 0; y < h; ++y) {
-        unsigned char filter = 0;
-        appm__zstore_feed(&z, &filter, 1);
-        appm__emit_srgb_row(img, y, exposure, appm__emit_png, &z);
+        unsigned char *dst = cur, *t;
+        uint64_t cost, c;
+        int f;
+        appm__emit_srgb_row(img, y, exposure, appm__emit_copy, &dst);
+        cost = appm__png_filter(0, cur, up, n, best);
+        for (f = 1; f <= 4; ++f)
+            if ((c = appm__png_filter(f, cur, up, n, trial)) < cost) {
+                cost = c;
+                t = best;
+                best = trial;
+                trial = t;
+            }
+        appm__zlib_feed(&z, best, n + 1);
+        t = up; /* this row is the next one's "above" */
+        up = cur;
+        cur = t;
     }
-    appm__be32(b, (z.s2 << 16) | z.s1);
-    appm__put_crc(o, b, 4);
-    appm__png_chunk_end(o);
+    appm__zlib_end(&z);
     appm__png_chunk_begin(o, "IEND", 0);
     appm__png_chunk_end(o);
+    appm__free(m, rows);
+    appm__zlib_release(&z, m);
+    return APPM_OK;
+}
+
+/* ---- 3.3 OpenEXR --------------------------------------------------------------
+ *
+ * Single-part scanline files (the OpenEXR file layout document): magic
+ * 76 2f 31 01, version 2 with no flags, the header (attributes as name, type,
+ * size, value; an empty name ends it), a table with the file offset of every
+ * block, then the blocks, each "first line, byte count, data".  Everything is
+ * little-endian.  Channels are B, G, R (the header lists them sorted by name);
+ * a block holds, line by line, all B values, then G, then R.  Linear RGB, 32-bit
+ * float or 16-bit half, uncompressed (one line per block) or ZIP (16 lines per
+ * block: the bytes are split into even and odd halves, delta coded, deflated;
+ * a block that would not shrink is stored raw, which readers recognise by its
+ * size).  The offset table precedes the blocks, so a ZIP file is compressed
+ * twice: once to learn the block sizes, once to write them - no seeking, so
+ * a pipe works too, and memory stays at one block.
+ */
+static void appm__le32(unsigned char *b, uint32_t v)
+{
+    b[0] = (unsigned char)v;
+    b[1] = (unsigned char)(v >> 8);
+    b[2] = (unsigned char)(v >> 16);
+    b[3] = (unsigned char)(v >> 24);
+}
+
+/* float -> IEEE half, round to nearest even.  Finite values beyond the half
+ * range become +-65504 (the largest half) rather than infinity; inf and NaN
+ * stay what they are. */
+static uint16_t appm__half(float f)
+{
+    uint32_t x, sign, e, mant, hm, rem, halfway, shift;
+    memcpy(&x, &f, 4);
+    sign = (x >> 16) & 0x8000u;
+    e = (x >> 23) & 255u;
+    mant = x & 0x7FFFFFu;
+    if (e == 255) return (uint16_t)(sign | 0x7C00u | (mant ? 0x200u : 0u));
+    if (e < 113) { /* below 2^-14: a half subnormal (units of 2^-24) or zero */
+        if (e < 102) return (uint16_t)sign;
+        mant |= 0x800000u;
+        shift = 126 - e;
+        hm = mant >> shift;
+        rem = mant & ((1u << shift) - 1u);
+        halfway = 1u << (shift - 1);
+        if (rem > halfway || (rem == halfway && (hm & 1u))) hm++; /* may carry into the exponent: right */
+        return (uint16_t)(sign | hm);
+    }
+    hm = mant >> 13;
+    rem = mant & 0x1FFFu;
+    e -= 112; /* rebias 127 -> 15 */
+    if (rem > 0x1000u || (rem == 0x1000u && (hm & 1u))) {
+        if (++hm == 0x400u) {
+            hm = 0;
+            e++;
+        }
+    }
+    if (e >= 31) return (uint16_t)(sign | 0x7BFFu);
+    return (uint16_t)(sign | e << 10 | hm);
+}
+
+typedef struct appm__exrw {
+    const appm_image *img;
+    int half, zip;
+    uint32_t lines;              /* scanlines per block: 1 or 16 */
+    size_t cap;                  /* bytes of the largest block, uncompressed */
+    unsigned char *raw, *tmp, *packed;
+    size_t npacked;
+    int overflow;                /* the deflated block grew past `cap` */
+    appm__zlib z;
+} appm__exrw;
+
+static void appm__exr_sink(void *ctx, const unsigned char *p, size_t n)
+{
+    appm__exrw *e = (appm__exrw *)ctx;
+    if (e->overflow || n > e->cap - e->npacked) {
+        e->overflow = 1;
+        return;
+    }
+    memcpy(e->packed + e->npacked, p, n);
+    e->npacked += n;
+}
+
+/* The block starting at line y0, as it is stored; its size in *size. */
+static const unsigned char *appm__exr_block(appm__exrw *e, uint32_t y0, size_t *size)
+{
+    const appm_image *img = e->img;
+    uint32_t y1 = y0 + e->lines < img->height ? y0 + e->lines : img->height, y, x;
+    size_t n = 0, i, half_n;
+    int c;
+    for (y = y0; y < y1; ++y)
+        for (c = 2; c >= 0; --c) /* B, G, R */
+            for (x = 0; x < img->width; ++x) {
+                float v = img->rgb[3 * ((size_t)y * img->width + x) + (size_t)c];
+                if (e->half) {
+                    uint16_t hv = appm__half(v);
+                    e->raw[n++] = (unsigned char)hv;
+                    e->raw[n++] = (unsigned char)(hv >> 8);
+                } else {
+                    uint32_t bits;
+                    memcpy(&bits, &v, 4);
+                    appm__le32(e->raw + n, bits);
+                    n += 4;
+                }
+            }
+    *size = n;
+    if (!e->zip) return e->raw;
+    half_n = (n + 1) / 2; /* even bytes first, then odd ones; then each byte minus the one before, + 128 */
+    for (i = 0; i < n; ++i) e->tmp[(i & 1u) ? half_n + i / 2 : i / 2] = e->raw[i];
+    for (i = n; i-- > 1;) e->tmp[i] = (unsigned char)(e->tmp[i] - e->tmp[i - 1] + 128);
+    e->npacked = 0;
+    e->overflow = 0;
+    appm__zlib_begin(&e->z, appm__exr_sink, e);
+    appm__zlib_feed(&e->z, e->tmp, n);
+    appm__zlib_end(&e->z);
+    if (e->overflow || e->npacked >= n) return e->raw;
+    *size = e->npacked;
+    return e->packed;
+}
+
+/* Appends one attribute (name, type, size, value) to the header buffer. */
+static size_t appm__exr_attr(unsigned char *h, size_t at, const char *name, const char *type,
+                             const void *value, uint32_t n)
+{
+    size_t ln = strlen(name) + 1, lt = strlen(type) + 1;
+    memcpy(h + at, name, ln);
+    memcpy(h + at + ln, type, lt);
+    appm__le32(h + at + ln + lt, n);
+    memcpy(h + at + ln + lt + 4, value, n);
+    return at + ln + lt + 4 + n;
+}
+
+static size_t appm__exr_header(unsigned char *h, const appm__exrw *e)
+{
+    unsigned char ch[3 * 18 + 1], box[16], one[4], zero8[8], cmp, order = 0; /* INCREASING_Y */
+    float f1 = 1.0f;
+    uint32_t bits;
+    size_t at = 8;
+    int c;
+    static const unsigned char magic[8] = {0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0};
+    memcpy(h, magic, 8);
+    memset(ch, 0, sizeof ch);
+    for (c = 0; c < 3; ++c) { /* name, pixel type (1 half, 2 float), pLinear, 3 reserved, x and y sampling */
+        unsigned char *q = ch + 18 * c;
+        q[0] = (unsigned char)"BGR"[c];
+        appm__le32(q + 2, e->half ? 1u : 2u);
+        appm__le32(q + 10, 1);
+        appm__le32(q + 14, 1);
+    }
+    memset(box, 0, sizeof box);
+    appm__le32(box + 8, e->img->width - 1);
+    appm__le32(box + 12, e->img->height - 1);
+    memcpy(&bits, &f1, 4);
+    appm__le32(one, bits);
+    memset(zero8, 0, sizeof zero8);
+    cmp = (unsigned char)(e->zip ? 3 : 0); /* ZIP_COMPRESSION : NO_COMPRESSION */
+    at = appm__exr_attr(h, at, "channels", "chlist", ch, sizeof ch);
+    at = appm__exr_attr(h, at, "compression", "compression", &cmp, 1);
+    at = appm__exr_attr(h, at, "dataWindow", "box2i", box, 16);
+    at = appm__exr_attr(h, at, "displayWindow", "box2i", box, 16);
+    at = appm__exr_attr(h, at, "lineOrder", "lineOrder", &order, 1);
+    at = appm__exr_attr(h, at, "pixelAspectRatio", "float", one, 4);
+    at = appm__exr_attr(h, at, "screenWindowCenter", "v2f", zero8, 8);
+    at = appm__exr_attr(h, at, "screenWindowWidth", "float", one, 4);
+    h[at++] = 0;
+    return at;
+}
+
+static appm_status appm__write_exr_body(appm__out *o, appm__mem *m, const appm_image *img, int half,
+                                        int zip)
+{
+    appm__exrw e;
+    unsigned char hdr[512], b[8];
+    size_t hlen, size;
+    uint32_t k, nblock;
+    uint64_t off;
+    appm_status st = APPM_OK;
+    memset(&e, 0, sizeof e);
+    e.img = img;
+    e.half = half;
+    e.zip = zip;
+    e.lines = zip ? 16 : 1;
+    e.cap = (size_t)e.lines * img->width * 3 * (half ? 2 : 4);
+    nblock = (img->height + e.lines - 1) / e.lines;
+    e.raw = (unsigned char *)appm__alloc(m, zip ? 3 : 1, e.cap);
+    if (!e.raw || (zip && (st = appm__zlib_init(&e.z, m, APPM__EXR_CHAIN, 0)) != APPM_OK)) st = APPM_ERR_NOMEM;
+    if (st == APPM_OK) {
+        if (zip) {
+            e.tmp = e.raw + e.cap;
+            e.packed = e.tmp + e.cap;
+        }
+        hlen = appm__exr_header(hdr, &e);
+        appm__put(o, hdr, hlen);
+        off = hlen + 8 * (uint64_t)nblock;
+        for (k = 0; k < nblock; ++k) { /* pass 1: the offset table */
+            appm__exr_block(&e, k * e.lines, &size);
+            appm__le32(b, (uint32_t)off);
+            appm__le32(b + 4, (uint32_t)(off >> 32));
+            appm__put(o, b, 8);
+            off += 8 + size;
+        }
+        for (k = 0; k < nblock; ++k) { /* pass 2: the blocks */
+            const unsigned char *p = appm__exr_block(&e, k * e.lines, &size);
+            appm__le32(b, k * e.lines);
+            appm__le32(b + 4, (uint32_t)size);
+            appm__put(o, b, 8);
+            appm__put(o, p, size);
+        }
+    }
+    if (zip) appm__zlib_release(&e.z, m);
+    appm__free(m, e.raw);
+    return st;
 }
 
 static void appm__write_ppm_body(appm__out *o, const appm_image *img, float exposure)
@@ -798,13 +1561,17 @@ static int appm__ends_with(const char *s, const char *suffix)
     return 1;
 }
 
-APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
-                                      appm_diag *diag)
+APPM_API appm_status appm_image_write_ex(const char *path, const appm_image *img,
+                                         const appm_write_options *opt, const appm_config *cfg,
+                                         appm_diag *diag)
 {
-    enum { PFM, PPM, PNG } kind;
+    enum { PFM, PPM, PNG, EXR } kind;
     char tmp[4096];
     int special;
+    double exposure = opt ? opt->exposure : 0.0;
     appm__out o;
+    appm__mem m;
+    appm_status st = APPM_OK;
     appm__diag_clear(diag);
     if (!path || !img || !img->rgb || img->width == 0 || img->height == 0 ||
         img->width > 32768 || img->height > 32768)
@@ -815,11 +1582,14 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
     if (appm__ends_with(path, ".pfm")) kind = PFM;
     else if (appm__ends_with(path, ".ppm")) kind = PPM;
     else if (appm__ends_with(path, ".png")) kind = PNG;
+    else if (appm__ends_with(path, ".exr")) kind = EXR;
     else
         return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0,
-                          "unknown image format (use .pfm, .ppm or .png)");
+                          "unknown image format (use .pfm, .ppm, .png or .exr)");
     if (strlen(path) + 5 > sizeof tmp)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "path too long");
+    appm__mem_init(&m, cfg);
+    m.diag = diag;
     special = appm__is_special_file(path);
     sprintf(tmp, "%s.tmp", path);
     o.f = fopen(special ? path : tmp, "wb");
@@ -828,15 +1598,27 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
     if (o.ok) {
         if (kind == PFM) appm__write_pfm_body(&o, img);
         else if (kind == PPM) appm__write_ppm_body(&o, img, (float)exposure);
-        else appm__write_png_body(&o, img, (float)exposure);
+        else if (kind == PNG) st = appm__write_png_body(&o, &m, img, (float)exposure);
+        else st = appm__write_exr_body(&o, &m, img, opt && opt->exr_half, !(opt && opt->exr_uncompressed));
         if (fclose(o.f) != 0) o.ok = 0;
+        if (st != APPM_OK) o.ok = 0;
         if (!special) {
             if (o.ok && appm__rename_replace(tmp, path) != 0) o.ok = 0;
             if (!o.ok) remove(tmp);
         }
     }
+    if (st != APPM_OK) return appm__fail(diag, st, path, 0, "out of memory writing the image");
     if (!o.ok) return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot write the image");
     return APPM_OK;
+}
+
+APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
+                                      appm_diag *diag)
+{
+    appm_write_options opt;
+    memset(&opt, 0, sizeof opt);
+    opt.exposure = exposure;
+    return appm_image_write_ex(path, img, &opt, NULL, diag);
 }
 
 /* Reads a whole file through the allocator; one extra zero byte is appended so
@@ -1100,6 +1882,7 @@ typedef struct appm__loader {
     appm__camera cam;
     int have_camera;
     uint32_t width, height;
+    int bare_obj;           /* an OBJ read as a whole scene: no light gets a white environment */
     const char *mem_mtl;    /* in-memory MTL text (appm_scene_load_obj_memory) */
     size_t mem_mtl_len;
 } appm__loader;
@@ -1133,10 +1916,15 @@ typedef struct appm__lines {
     unsigned line;
 } appm__lines;
 
-/* Next line as [*s, *e) without its terminator; comments (#...) stripped. */
+/* Next line as [*s, *e) without its terminator; comments (#...) stripped.
+ * A UTF-8 byte order mark before the first line (Windows editors write one)
+ * is skipped, in every format read line by line (.scene, .obj, .mtl). */
 static int appm__next_line(appm__lines *it, const char **s, const char **e)
 {
     const char *p = it->p, *q;
+    if (it->line == 0 && it->end - p >= 3 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB &&
+        (unsigned char)p[2] == 0xBF)
+        p += 3;
     if (p >= it->end) return 0;
     q = p;
     while (q < it->end && *q != '\n' && *q != '\r') q++;
@@ -1995,6 +2783,7 @@ struct appm_scene {
     uint32_t nlight;
     double *light_cdf;     /* nlight + 1 entries, light_cdf[nlight] == 1 */
     int env;               /* index of the environment light, or -1 */
+    int env_auto;          /* that environment is the stand-in of a bare OBJ without light */
     appm__node *node;
     uint32_t nnode, depth;
     appm__camera cam;
@@ -2784,6 +3573,33 @@ typedef struct appm__photon_start {
     uint32_t skip;      /* the emitting triangle, or UINT32_MAX */
 } appm__photon_start;
 
+/* The power Phi (W, RGB) light l emits: what appm__emit's photon weight gamma
+ * carries on average, E[gamma] = Phi / pick, so the two must agree (lights are
+ * picked by power: pick = mean(Phi) / sum of mean(Phi)).
+ *   area         Phi = pi A Le               (a Lambertian emitter)
+ *   point        Phi = 4 pi I
+ *   spot         Phi = 2 pi I [(1 - cos_inner) + (cos_inner - cos_cone) / 5]
+ *                (the d^4 ramp integrates to a fifth of its width in cos theta)
+ *   environment  Phi = 4 pi^2 R^2 L          (L through the disk of the bounding
+ *                sphere, radius R, from every direction) */
+static void appm__light_power(const appm_scene *s, const appm__light *l, double *power)
+{
+    double f;
+    if (l->kind == APPM__LIGHT_AREA) {
+        double a = (double)s->info[l->tri].area;
+        power[0] = APPM__PI * a * l->value.x;
+        power[1] = APPM__PI * a * l->value.y;
+        power[2] = APPM__PI * a * l->value.z;
+        return;
+    }
+    if (l->kind == APPM__LIGHT_POINT) f = 4.0 * APPM__PI;
+    else if (l->kind == APPM__LIGHT_SPOT) f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
+    else f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
+    power[0] = f * l->value.x;
+    power[1] = f * l->value.y;
+    power[2] = f * l->value.z;
+}
+
 /* Samples the start of a photon path: light by power, then position and direction. */
 static int appm__emit(const appm_scene *s, appm__rng *rng, appm__photon_start *ps)
 {
@@ -2950,16 +3766,11 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 88 
     uint8_t pad[3];
 } appm__vp;
 
-typedef struct appm__pixel { /* per-pixel state kept across passes: 120 bytes */
-    double ld[3];   /* sum over passes of emission + direct light (pt: of the whole path) */
-    double acc[3];  /* ppm, appm: running mean I of the photon term; sppm: tau */
-    double n;       /* sppm: accumulated photon count N; appm: photons found so far */
-    double r;       /* sppm, appm: radius of the next gather */
-    double S;       /* appm: running mean of the kernel second moment s_j */
-    double dI;      /* appm: weighted running mean of the per-pass pixel Laplacians */
-    double dI_w;    /* appm: sum of their weights (h_j / r_1)^6 */
-    double dI_m2;   /* appm: weighted Welford M2 of the per-pass Laplacians (their spread) */
-    double r2sum;   /* appm: sum of r_j^2, for the bias estimate */
+/* Per-pixel state every method keeps across passes (40 bytes).  What a method
+ * keeps beyond this (PPM's I, SPPM's tau, N, R, APPM's S, dI, ...) is its own
+ * struct in section 10, in a separate array sized by its estimator entry. */
+typedef struct appm__pixel {
+    double ld[3];      /* sum over passes of emission + direct light (pt: of the whole path) */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
 } appm__pixel;
 
@@ -2976,47 +3787,60 @@ typedef struct appm__chunk_rec { /* where one chunk of photon paths left its pho
     uint32_t start, count;
 } appm__chunk_rec;
 
-#ifndef APPM__CELL_SCALE
-#define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius */
-#endif
+/* The photon map of one pass (section 9): the photons sorted by hash bucket
+ * and the table of bucket starts.  It borrows the photons (the renderer's
+ * store, or any array) and owns only its table, so it can be built and
+ * queried without a renderer. */
+typedef struct appm__pmap {
+    appm__photon *ph;  /* borrowed; photons [cell[b], cell[b+1]) lie in bucket b */
+    size_t n;          /* photons in the map */
+    uint32_t *cell;    /* 2^bits + 1 bucket starts */
+    size_t cell_cap;   /* entries allocated (the largest table so far: memory stays flat) */
+    uint32_t bits;     /* log2 of the number of buckets */
+    float cell_size, inv_cell;
+    appm__v3 lo;       /* the grid's origin: the photons' bounding-box corner */
+} appm__pmap;
+
+#define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius (speed only) */
 #define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
+
+struct appm__estimator; /* a method's entry in the table of section 10 */
 
 struct appm_renderer {
     appm__mem mem;
     appm_diag diag;
     const appm_scene *scene;
-    appm_method method;
+    const struct appm__estimator *est; /* the method: chosen once, at creation */
     appm_direct direct;
     uint32_t w, h;
     uint64_t M;          /* photon paths per pass */
     double r1;           /* initial radius (the user's, or r_auto) */
-    double r_auto;       /* the scene's automatic radius (section 12): appm's scale */
+    double r_auto;       /* the automatic radius (section 12): appm's scale for clamps and h */
     int r1_auto;
     double alpha;
-    double ppm_r2;       /* ppm: r_j^2 of the current pass */
+    struct {
+        double R2;       /* r_j^2 of the next gather */
+        double R;        /* the radius of the last gather */
+    } ppm;               /* Knaus-Zwicker's global radius (section 10) */
+    double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
     unsigned threads, max_depth;
     uint64_t seed, pass;
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
     appm__pixel *pix;
+    unsigned char *state; /* the method's per-pixel state: w h est->state_size bytes */
     float *image;
     float *aux[APPM_AUX_COUNT];
-    int aux_valid;
     /* photon store: `tasks` regions of `cap` photons; chunk c is traced by task
      * c % tasks, so the layout does not depend on scheduling */
     appm__photon *ph;
-    size_t cap, nph;
+    size_t cap;
     uint32_t tasks, nchunks;
     appm__chunk_rec *chunk;
     uint32_t *task_used;
     int *task_failed;
-    uint32_t *dest;      /* scratch of the counting sort: one per slot of the store */
-    /* hash grid */
-    uint32_t *cell;      /* table_size + 1 bucket starts */
-    size_t cell_cap;     /* entries allocated (the largest table so far) */
-    uint32_t table_bits;
-    float cell_size, inv_cell;
-    appm__v3 grid_lo;
+    uint32_t *dest;      /* scratch of the map's counting sort: one per slot of the store */
+    appm__pmap pmap;     /* this pass's photons, compacted and sorted (section 9) */
     uint64_t dropped[APPM__MAX_THREADS];
     appm_stats stats;
     char last_error[256];
@@ -3051,16 +3875,36 @@ static int appm__quant(float v, float scale)
     return (int)(q >= 0.0f ? q + 0.5f : q - 0.5f);
 }
 
-/* The unit vector of octahedral coordinates (a, b) in [-1, 1]^2. */
-static appm__v3 appm__oct_decode(float a, float b)
+/* The inverse of appm__oct_encode before normalisation: (a, b) in [-1, 1]^2 ->
+ * a vector with |x| + |y| + |z| = 1 along the encoded direction. */
+static appm__v3 appm__oct_unpack(float a, float b)
 {
     float z = 1.0f - fabsf(a) - fabsf(b);
     if (z < 0.0f) {
-        float ta = a;
-        a = (1.0f - fabsf(b)) * (ta >= 0.0f ? 1.0f : -1.0f);
-        b = (1.0f - fabsf(ta)) * (b >= 0.0f ? 1.0f : -1.0f);
+        float t = a;
+        a = (1.0f - fabsf(b)) * (t >= 0.0f ? 1.0f : -1.0f);
+        b = (1.0f - fabsf(t)) * (b >= 0.0f ? 1.0f : -1.0f);
     }
-    return appm__normalize(appm__v(a, b, z));
+    return appm__v(a, b, z);
+}
+
+/* A photon's stored directions as unit vectors: wi (towards where it came
+ * from, 16 bits per coordinate: about 3e-5 rad), which the glossy gather reads
+ * (10), and the normal on its side (8 bits: about 1e-2 rad); the diffuse
+ * gather tests the normal without normalising. */
+#if defined(__GNUC__) || defined(__clang__)
+#define APPM__UNUSED __attribute__((unused))
+#else
+#define APPM__UNUSED
+#endif
+static appm__v3 appm__photon_wi(const appm__photon *p)
+{
+    return appm__normalize(appm__oct_unpack((float)p->wi[0] * (1.0f / 32767.0f), (float)p->wi[1] * (1.0f / 32767.0f)));
+}
+
+APPM__UNUSED static appm__v3 appm__photon_normal(const appm__photon *p)
+{
+    return appm__normalize(appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f)));
 }
 
 /* ---- 7.2 Camera rays ---------------------------------------------------------- */
@@ -3434,6 +4278,27 @@ static appm_status appm__photon_pass(appm_renderer *r)
     }
 }
 
+/* Moves the regions' chunks together so that chunk c follows chunk c - 1 (the
+ * chunks of one region are already in order; regions move down one after
+ * another).  chunk[c].start becomes the offset in the compacted array, which
+ * is what the map's build reads.  Returns the number of photons. */
+static size_t appm__store_compact(appm_renderer *r)
+{
+    size_t out = 0;
+    uint32_t t, c;
+    appm__chunk_rec *cr = r->chunk;
+    for (t = 0; t < r->tasks; ++t) {
+        size_t base = (size_t)t * r->cap;
+        for (c = t; c < r->nchunks; c += r->tasks) {
+            if (cr[c].count && base + cr[c].start != out)
+                memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
+            cr[c].start = (uint32_t)out;
+            out += cr[c].count;
+        }
+    }
+    return out;
+}
+
 /* ==== 9. HASH-GRID PHOTON MAP =============================================
  *
  * A uniform grid of cubic cells of size c, hashed into 2^k buckets (k chosen
@@ -3471,11 +4336,10 @@ static int32_t appm__grid_coord(float p, float lo, float inv_cell)
     return (int32_t)c;
 }
 
-static uint32_t appm__photon_bucket(const appm_renderer *r, const appm__photon *p)
+static uint32_t appm__pmap_bucket(const appm__pmap *m, const appm__photon *p)
 {
-    return appm__grid_hash(appm__grid_coord(p->x, r->grid_lo.x, r->inv_cell),
-                           appm__grid_coord(p->y, r->grid_lo.y, r->inv_cell),
-                           appm__grid_coord(p->z, r->grid_lo.z, r->inv_cell), r->table_bits);
+    return appm__grid_hash(appm__grid_coord(p->x, m->lo.x, m->inv_cell), appm__grid_coord(p->y, m->lo.y, m->inv_cell),
+                           appm__grid_coord(p->z, m->lo.z, m->inv_cell), m->bits);
 }
 
 /* k-th smallest of a[0..n) (quickselect, reorders a). */
@@ -3504,75 +4368,138 @@ static float appm__select(float *a, size_t n, size_t k)
     return a[k];
 }
 
-/* Builds the grid over the photons of this pass.  `cell_size` > 0. */
-static appm_status appm__grid_build(appm_renderer *r, float cell_size)
+/* Builds map `m` over photons ph[0..n) with cubic cells of size `cell_size` > 0,
+ * reordering ph in place.  `dest` is scratch for n entries.  `runs` (NULL: the
+ * whole array, in order) lists the stretches of ph in the order the photons
+ * must keep within a bucket - the photon pass's chunks in global order, so
+ * that sums over a bucket do not depend on the thread count.  Fails only for
+ * memory (the bucket table grows when a pass has more photons than any before). */
+static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon *ph, size_t n, uint32_t *dest,
+                                    const appm__chunk_rec *runs, uint32_t nruns, float cell_size)
 {
-    size_t total = 0, i, k;
+    size_t i, k;
     uint32_t c, bits = 10, nb;
     appm__bbox bb;
-    for (c = 0; c < r->nchunks; ++c) total += r->chunk[c].count;
-    while (bits < 30 && ((size_t)1 << bits) < total) bits++;
+    while (bits < 30 && ((size_t)1 << bits) < n) bits++;
     nb = 1u << bits;
-    if ((size_t)nb + 1 > r->cell_cap) { /* the table only grows: memory stays flat */
-        uint32_t *cell = (uint32_t *)appm__alloc(&r->mem, (size_t)nb + 1, sizeof *cell);
+    if ((size_t)nb + 1 > m->cell_cap) { /* the table only grows: memory stays flat */
+        uint32_t *cell = (uint32_t *)appm__alloc(mem, (size_t)nb + 1, sizeof *cell);
         if (!cell) return APPM_ERR_NOMEM;
-        appm__free(&r->mem, r->cell);
-        r->cell = cell;
-        r->cell_cap = (size_t)nb + 1;
+        appm__free(mem, m->cell);
+        m->cell = cell;
+        m->cell_cap = (size_t)nb + 1;
     }
-    r->table_bits = bits;
-    /* compact the regions so chunk c follows chunk c-1 (chunks of one region are
-     * already in order; regions are moved down one after another) */
-    {
-        size_t out = 0;
-        uint32_t t;
-        appm__chunk_rec *cr = r->chunk;
-        for (t = 0; t < r->tasks; ++t) {
-            size_t base = (size_t)t * r->cap;
-            for (c = t; c < r->nchunks; c += r->tasks) {
-                if (cr[c].count && base + cr[c].start != out)
-                    memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
-                cr[c].start = (uint32_t)out; /* now: offset in the compacted array */
-                out += cr[c].count;
-            }
-        }
-    }
-    r->nph = total;
+    m->bits = bits;
+    m->ph = ph;
+    m->n = n;
     appm__bbox_empty(&bb);
-    for (i = 0; i < total; ++i) appm__bbox_grow(&bb, appm__v(r->ph[i].x, r->ph[i].y, r->ph[i].z));
-    r->grid_lo = total ? bb.lo : appm__v(0, 0, 0);
-    r->cell_size = cell_size;
-    r->inv_cell = 1.0f / cell_size;
-    memset(r->cell, 0, ((size_t)nb + 1) * sizeof *r->cell);
+    for (i = 0; i < n; ++i) appm__bbox_grow(&bb, appm__v(ph[i].x, ph[i].y, ph[i].z));
+    m->lo = n ? bb.lo : appm__v(0, 0, 0);
+    m->cell_size = cell_size;
+    m->inv_cell = 1.0f / cell_size;
+    memset(m->cell, 0, ((size_t)nb + 1) * sizeof *m->cell);
     /* (1) counts, with each photon's bucket kept in dest[] for step (3) */
-    for (i = 0; i < total; ++i) {
-        uint32_t b = appm__photon_bucket(r, &r->ph[i]);
-        r->dest[i] = b;
-        r->cell[b + 1]++;
+    for (i = 0; i < n; ++i) {
+        uint32_t b = appm__pmap_bucket(m, &ph[i]);
+        dest[i] = b;
+        m->cell[b + 1]++;
     }
     /* (2) prefix sums: cell[b] = first slot of bucket b */
-    for (k = 0; k < nb; ++k) r->cell[k + 1] += r->cell[k];
-    /* (3) destinations, assigned walking the chunks in global order c = 0, 1, ...
-     * (the compacted array holds them region by region), with cell[] as running
-     * cursors; then cell[] is restored */
-    for (c = 0; c < r->nchunks; ++c)
-        for (i = r->chunk[c].start; i < (size_t)r->chunk[c].start + r->chunk[c].count; ++i)
-            r->dest[i] = r->cell[r->dest[i]]++;
-    for (k = nb; k > 0; --k) r->cell[k] = r->cell[k - 1];
-    r->cell[0] = 0;
+    for (k = 0; k < nb; ++k) m->cell[k + 1] += m->cell[k];
+    /* (3) destinations, assigned walking the runs in order, with cell[] as
+     * running cursors; then cell[] is restored */
+    if (!runs)
+        for (i = 0; i < n; ++i) dest[i] = m->cell[dest[i]]++;
+    for (c = 0; runs && c < nruns; ++c)
+        for (i = runs[c].start; i < (size_t)runs[c].start + runs[c].count; ++i) dest[i] = m->cell[dest[i]]++;
+    for (k = nb; k > 0; --k) m->cell[k] = m->cell[k - 1];
+    m->cell[0] = 0;
     /* (4) permute in place: each swap puts one photon in its final slot */
-    for (i = 0; i < total; ++i) {
-        while (r->dest[i] != i) {
-            uint32_t j = r->dest[i], tj;
-            appm__photon tp = r->ph[j];
-            r->ph[j] = r->ph[i];
-            r->ph[i] = tp;
-            tj = r->dest[j];
-            r->dest[j] = j;
-            r->dest[i] = tj;
+    for (i = 0; i < n; ++i) {
+        while (dest[i] != i) {
+            uint32_t j = dest[i], tj;
+            appm__photon tp = ph[j];
+            ph[j] = ph[i];
+            ph[i] = tp;
+            tj = dest[j];
+            dest[j] = j;
+            dest[i] = tj;
         }
     }
     return APPM_OK;
+}
+
+typedef void (*appm__pmap_visit)(void *ctx, const appm__photon *p);
+
+/* The photons of bucket b that lie within R of x (d2 computed as the gather
+ * does, so both agree on the boundary); with `cx` non-NULL only those whose
+ * own cell is cx (several cells can share a bucket). */
+static void appm__pmap_bucket_visit(const appm__pmap *m, uint32_t b, const int32_t *cx, appm__v3 x, float R2,
+                                    appm__pmap_visit visit, void *ctx)
+{
+    size_t i, end = m->cell[b + 1];
+    for (i = m->cell[b]; i < end; ++i) {
+        const appm__photon *p = &m->ph[i];
+        float dx = x.x - p->x, dy = x.y - p->y, dz = x.z - p->z;
+        if (!(dx * dx + dy * dy + dz * dz < R2)) continue;
+        if (cx && (appm__grid_coord(p->x, m->lo.x, m->inv_cell) != cx[0] ||
+                   appm__grid_coord(p->y, m->lo.y, m->inv_cell) != cx[1] ||
+                   appm__grid_coord(p->z, m->lo.z, m->inv_cell) != cx[2]))
+            continue;
+        visit(ctx, p);
+    }
+}
+
+/* Calls visit(ctx, p) once for every photon p with |x - p|^2 < R^2, in map
+ * order (bucket by bucket, chunk order within a bucket).  Visits every cell
+ * overlapping the box [x - R, x + R]; a query larger than the grid itself
+ * scans the array instead. */
+static void appm__pmap_query(const appm__pmap *m, appm__v3 x, float R, appm__pmap_visit visit, void *ctx)
+{
+    float R2 = R * R;
+    int32_t lo[3], hi[3], cc[3];
+    double ncells;
+    uint32_t seen[27];
+    int nseen = 0, check;
+    size_t i;
+    if (m->n == 0) return;
+    lo[0] = appm__grid_coord(x.x - R, m->lo.x, m->inv_cell);
+    lo[1] = appm__grid_coord(x.y - R, m->lo.y, m->inv_cell);
+    lo[2] = appm__grid_coord(x.z - R, m->lo.z, m->inv_cell);
+    hi[0] = appm__grid_coord(x.x + R, m->lo.x, m->inv_cell);
+    hi[1] = appm__grid_coord(x.y + R, m->lo.y, m->inv_cell);
+    hi[2] = appm__grid_coord(x.z + R, m->lo.z, m->inv_cell);
+    ncells = ((double)hi[0] - lo[0] + 1) * ((double)hi[1] - lo[1] + 1) * ((double)hi[2] - lo[2] + 1);
+    if (ncells > (double)m->n || ncells > (double)(1u << m->bits)) {
+        for (i = 0; i < m->n; ++i) {
+            const appm__photon *p = &m->ph[i];
+            float dx = x.x - p->x, dy = x.y - p->y, dz = x.z - p->z;
+            if (dx * dx + dy * dy + dz * dz < R2) visit(ctx, p);
+        }
+        return;
+    }
+    /* small queries read each bucket once (deduplicated); large ones accept a
+     * photon only in the cell it belongs to */
+    check = ncells > 27.0;
+    for (cc[2] = lo[2]; cc[2] <= hi[2]; ++cc[2])
+        for (cc[1] = lo[1]; cc[1] <= hi[1]; ++cc[1])
+            for (cc[0] = lo[0]; cc[0] <= hi[0]; ++cc[0]) {
+                uint32_t b = appm__grid_hash(cc[0], cc[1], cc[2], m->bits);
+                if (!check) {
+                    int k, dup = 0;
+                    for (k = 0; k < nseen; ++k) dup |= seen[k] == b;
+                    if (dup) continue;
+                    seen[nseen++] = b;
+                }
+                appm__pmap_bucket_visit(m, b, check ? cc : NULL, x, R2, visit, ctx);
+            }
+}
+
+static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
+{
+    appm__free(mem, m->cell);
+    m->cell = NULL;
+    m->cell_cap = 0;
 }
 
 /* ==== 10. ESTIMATORS ======================================================
@@ -3593,28 +4520,32 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
  * with k_r(d) = K(|d|/r) / r^2, mu2 the per-axis second moment, R(K) = int K^2.
  * The biweight is smooth (C1), which the finite-difference Laplacian needs.
  *
- * ppm  (Knaus-Zwicker 2011): one global radius, r_j^2 = r_1^2 prod_{k<j}
- *      (k + alpha) / (k + 1); the pixel is the plain mean over passes of
+ * The formulas, their derivations and their sources are in docs/algorithm.md,
+ * cited here by section (the papers' own equation numbers could not be
+ * checked against the papers, so they are not quoted).
+ *
+ * ppm  (Knaus-Zwicker 2011, algorithm.md 2.3): one global radius, r_j^2 = r_1^2
+ *      prod_{k<j} (k + alpha) / (k + 1); the pixel is the plain mean over passes of
  *      Ihat_j = (1/M) sum_i k_{r_j}(x_j - y_i) Psi_ji.
- * sppm (Hachisuka-Jensen 2009): per pixel N, R, tau; after a pass that found m
+ * sppm (Hachisuka-Jensen 2009, algorithm.md 2.2): per pixel N, R, tau; after a pass that found m
  *      photons with flux Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)),
  *      tau' = (tau + Phi) R'^2 / R^2; L = tau / (j M pi R^2).
- * appm (Kaplanyan-Dachsbacher 2013): per pixel and pass, the radius that
- *      minimises the estimated MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
+ * appm (Kaplanyan-Dachsbacher 2013, algorithm.md 4): per pixel and pass, the radius that
+ *      minimises the estimated MSE(r) (4.2) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
  *         r^6 = c_f R(K) S / (M j mu2^2 dI^2),   c_f = 2/3,
  *      where S is the running mean of s_j = (1/M) sum_i k_r lum(Psi_i)^2 (a
  *      second moment) and dI the running mean of the per-vertex Laplacian,
  *      estimated from the same photons by a 5-point finite difference of kernel
- *      estimates with bandwidth h (section 10.2).  c_f = 2/3 is the constant
+ *      estimates with bandwidth h (algorithm.md 4.6).  c_f = 2/3 is the constant
  *      that is optimal when every pass is averaged with weight 1/j and r_j
- *      shrinks as j^(-1/6) (the plug-in constant would be 2; see the design
- *      notes).  Safeguards: KZ radius r_1 j^(-1/6) while warming up; while a
+ *      shrinks as j^(-1/6) (the plug-in constant would be 2; algorithm.md 4.3
+ *      and the toy of 4.9).  Safeguards (4.7): KZ radius r_1 j^(-1/6) while warming up; while a
  *      pixel has seen fewer than 8 photons its radius doubles each pass; the
- *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_a),
- *      2 max(r_1, r_a)] j^(-1/6) (r_a: the automatic radius), so the clamps
+ *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_auto),
+ *      2 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), so the clamps
  *      shrink at the optimal rate.  The Laplacian bandwidth is a fixed
- *      schedule, h = 1.5 r_a j^(-1/8), estimated on every 8th pass and
- *      averaged with weights h^6 (section 10.2); dI^2 is corrected for the
+ *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
+ *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
  *      noise of its estimate.
  *
  *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
@@ -3625,31 +4556,44 @@ static appm_status appm__grid_build(appm_renderer *r, float cell_size)
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
-#ifndef APPM__CF
-#define APPM__CF (2.0 / 3.0)
-#endif
-#ifndef APPM__WARMUP
+/* The constants of the adaptive method, measured or derived as the comment
+ * above says; fixed at compile time (no build option changes them). */
+#define APPM__CF (2.0 / 3.0)                     /* c_f of the radius formula */
 #define APPM__WARMUP 4                           /* passes on the KZ schedule */
-#endif
-#ifndef APPM__KMIN
 #define APPM__KMIN 8.0                           /* photons before adapting */
-#endif
-#ifndef APPM__RLO
-#define APPM__RLO 0.1
-#endif
-#ifndef APPM__RHI
-#define APPM__RHI 2.0
-#endif
-#ifndef APPM__KAPPA
+#define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
+#define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
-#endif
-#ifndef APPM__LAP_EVERY
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
-#endif
-#ifndef APPM__DI_FLOOR
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
-#endif
 #define APPM__NORMAL_COS 0.5f
+
+/* Per-pixel state of each method (beside appm__pixel, which all share), named
+ * after its paper's symbols as pbrt-v4's SPPMPixel is.  Plain doubles and
+ * 64-bit counts only: the estimator table lists them field by field, so they
+ * can be written and read back one by one.  A method that splits the photon
+ * term into components (caustic, diffuse, ...) with statistics of their own
+ * gives its state an array of such records and lists each field. */
+typedef struct appm__ppm_state {
+    double I[3];    /* running mean I_j of the per-pass estimates Ihat_j (photon term) */
+} appm__ppm_state;
+
+typedef struct appm__sppm_state {
+    double tau[3];  /* tau: accumulated flux, rescaled to the current radius */
+    double N;       /* N: accumulated photon count (alpha-weighted, so not whole) */
+    double R;       /* R: radius of the next gather */
+} appm__sppm_state;
+
+typedef struct appm__appm_state {
+    double I[3];    /* running mean I_j of the photon term */
+    double S;       /* running mean of the kernel second moment s_j */
+    double dI;      /* weighted running mean of the per-pass Laplacians */
+    double dI_w;    /* sum of their weights (h_j / r_auto)^6 */
+    double dI_m2;   /* weighted Welford M2 of the per-pass Laplacians (their spread) */
+    double R;       /* radius r_j of the last gather */
+    double R2sum;   /* sum of r_j^2, for the bias estimate */
+    uint64_t N;     /* photons found so far */
+} appm__appm_state;
 
 typedef struct appm__gather {
     appm__v3 x, n, t, b; /* visible point, normal, tangent frame */
@@ -3659,6 +4603,7 @@ typedef struct appm__gather {
     int glossy;
     float R;             /* kernel radius */
     float h;             /* appm: Laplacian bandwidth (0: none) */
+    float R2, Rg2;       /* R^2 and max(R, 2h)^2, set by the query */
     unsigned max_p;      /* longest photon path that still counts */
     int biweight;
     double e[3];         /* sum of K-weighted gamma (scaled at the end) */
@@ -3677,21 +4622,14 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
     if (!(d2 < Rg2) || p->segs > g->max_p) return;
     { /* same surface: angle(n_photon, n) < 60 deg.  The octahedral decode without
        * its normalisation: cos >= c  <=>  dot > 0 and dot^2 >= c^2 |v|^2 */
-        float ox = (float)p->n[0] * (1.0f / 127.0f), oy = (float)p->n[1] * (1.0f / 127.0f);
-        float oz = 1.0f - fabsf(ox) - fabsf(oy), dn;
-        if (oz < 0.0f) {
-            float tx = ox;
-            ox = (1.0f - fabsf(oy)) * (tx >= 0.0f ? 1.0f : -1.0f);
-            oy = (1.0f - fabsf(tx)) * (oy >= 0.0f ? 1.0f : -1.0f);
-        }
-        pn = appm__v(ox, oy, oz);
+        float dn;
+        pn = appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f));
         dn = appm__dot(pn, g->n);
         if (!(dn > 0.0f) || dn * dn < APPM__NORMAL_COS * APPM__NORMAL_COS * appm__dot(pn, pn)) return;
     }
     wf = g->wf;
     if (g->glossy) { /* the lobe at the photon's own direction (section 6.1) */
-        appm__v3 wi = appm__oct_decode((float)p->wi[0] * (1.0f / 32767.0f), (float)p->wi[1] * (1.0f / 32767.0f));
-        float c = appm__dot(wi, g->rd);
+        float c = appm__dot(appm__photon_wi(p), g->rd);
         lobe = c > 0.0f ? powf(c > 1.0f ? 1.0f : c, g->ns) : 0.0f;
         wf = appm__add(wf, appm__scale(g->wg, lobe));
     }
@@ -3714,7 +4652,7 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
         g->count++;
     }
     if (g->h > 0.0f) {
-        /* 10.2  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
+        /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
          * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h. */
         double ih = 1.0 / g->h, a = (double)d2 * ih * ih, sum = 0.0, v;
         double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
@@ -3733,54 +4671,23 @@ static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2
     }
 }
 
-/* Visits every photon within max(R, 2h) of g->x (section 9's query). */
-static void appm__gather_query(const appm_renderer *r, appm__gather *g)
+static void appm__gather_visit(void *ctx, const appm__photon *p)
 {
-    float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h, R2 = g->R * g->R, Rg2 = Rg * Rg;
-    int32_t lo[3], hi[3], cx, cy, cz;
-    double ncells;
-    uint32_t seen[27];
-    int nseen = 0, check;
-    size_t i;
-    if (r->nph == 0) return;
-    lo[0] = appm__grid_coord(g->x.x - Rg, r->grid_lo.x, r->inv_cell);
-    lo[1] = appm__grid_coord(g->x.y - Rg, r->grid_lo.y, r->inv_cell);
-    lo[2] = appm__grid_coord(g->x.z - Rg, r->grid_lo.z, r->inv_cell);
-    hi[0] = appm__grid_coord(g->x.x + Rg, r->grid_lo.x, r->inv_cell);
-    hi[1] = appm__grid_coord(g->x.y + Rg, r->grid_lo.y, r->inv_cell);
-    hi[2] = appm__grid_coord(g->x.z + Rg, r->grid_lo.z, r->inv_cell);
-    ncells = ((double)hi[0] - lo[0] + 1) * ((double)hi[1] - lo[1] + 1) * ((double)hi[2] - lo[2] + 1);
-    if (ncells > (double)r->nph || ncells > (double)(1u << r->table_bits)) {
-        /* a query larger than the grid itself: a plain scan is cheaper */
-        for (i = 0; i < r->nph; ++i) appm__gather_photon(g, &r->ph[i], R2, Rg2);
-        return;
-    }
-    check = ncells > 27.0;
-    for (cz = lo[2]; cz <= hi[2]; ++cz)
-        for (cy = lo[1]; cy <= hi[1]; ++cy)
-            for (cx = lo[0]; cx <= hi[0]; ++cx) {
-                uint32_t b = appm__grid_hash(cx, cy, cz, r->table_bits), end = r->cell[b + 1];
-                if (!check) {
-                    int k, dup = 0;
-                    for (k = 0; k < nseen; ++k) dup |= seen[k] == b;
-                    if (dup) continue;
-                    seen[nseen++] = b;
-                    for (i = r->cell[b]; i < end; ++i) appm__gather_photon(g, &r->ph[i], R2, Rg2);
-                } else {
-                    for (i = r->cell[b]; i < end; ++i) {
-                        const appm__photon *p = &r->ph[i];
-                        if (appm__grid_coord(p->x, r->grid_lo.x, r->inv_cell) != cx ||
-                            appm__grid_coord(p->y, r->grid_lo.y, r->inv_cell) != cy ||
-                            appm__grid_coord(p->z, r->grid_lo.z, r->inv_cell) != cz)
-                            continue;
-                        appm__gather_photon(g, p, R2, Rg2);
-                    }
-                }
-            }
+    appm__gather *g = (appm__gather *)ctx;
+    appm__gather_photon(g, p, g->R2, g->Rg2);
+}
+
+/* Visits every photon within max(R, 2h) of g->x (section 9's query). */
+static void appm__gather_query(const appm__pmap *m, appm__gather *g)
+{
+    float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h;
+    g->R2 = g->R * g->R;
+    g->Rg2 = Rg * Rg;
+    appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
 }
 
 /* Whether pass j estimates the Laplacian.  Its gather reaches 2h (h from
- * appm__lap_h below: 1.5 r_a j^(-1/8)), several times the area of the radiance
+ * appm__lap_h below: 1.5 r_auto j^(-1/8)), several times the area of the radiance
  * kernel, so it is the expensive part of a pass.  For a fixed cost f h^2 (f: the fraction of passes that estimate it),
  * the variance of the running mean dI goes as 1 / (f h^6) = 1 / (cost h^4):
  * a wide bandwidth on a few passes beats a narrow one on every pass.  The price
@@ -3821,7 +4728,7 @@ static void appm__gather_finish(const appm__gather *g, double invM, double *e, d
     if (g->h > 0.0f) *dl = g->dl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
 }
 
-/* ---- 10.1 The adaptive radius (section 4 of the design notes) -------------- */
+/* ---- 10.1 The adaptive radius (docs/algorithm.md 4.3 - 4.7) ----------------- */
 
 /* The closed-form minimiser of MSE(r) = R(K) S / (M N r^2) + (mu2 r^2 dI / 2)^2
  * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M N mu2^2 dI^2).  Takes dI^2; returns
@@ -3840,7 +4747,7 @@ static double appm__r_opt(double S, double dI2, double MN, double cf)
  * the Laplacian is mostly noise, the radius grows (less noise, more bias)
  * instead of collapsing.  With per-pass variances c / w_j, the weighted Welford
  * sum M2 estimates (n - 1) c, and the mean's variance is c / sum(w). */
-static double appm__di2(const appm__pixel *p, uint64_t n)
+static double appm__di2(const appm__appm_state *p, uint64_t n)
 {
     double d2 = p->dI * p->dI, c = d2;
     if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
@@ -3848,25 +4755,25 @@ static double appm__di2(const appm__pixel *p, uint64_t n)
 }
 
 /* Radius for pass j from the pixel's statistics after j-1 passes; r1 is the
- * initial radius, rb the scene's automatic one.  Never NaN, 0 or inf: every
- * path ends inside [RLO min(r1, rb), RHI max(r1, rb)] j^(-1/6). */
-static double appm__appm_radius(double r1, double rb, uint64_t M, uint64_t j, const appm__pixel *p)
+ * initial radius, r_auto the automatic one.  Never NaN, 0 or inf: every
+ * path ends inside [RLO min(r1, r_auto), RHI max(r1, r_auto)] j^(-1/6). */
+static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j, const appm__appm_state *p)
 {
     double sj = pow((double)j, -1.0 / 6.0), rk = r1 * sj, rad = rk;
-    double lo = APPM__RLO * (r1 < rb ? r1 : rb) * sj, hi = APPM__RHI * (r1 > rb ? r1 : rb) * sj;
-    if (j > 1 && p->n < APPM__KMIN && p->r > 0.0) {
+    double lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * sj, hi = APPM__RHI * (r1 > r_auto ? r1 : r_auto) * sj;
+    if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* too few photons seen to estimate anything: widen, as a k-nearest-
          * neighbour radius would, instead of waiting at a radius that may be
          * the reason so few photons arrive */
-        rad = 2.0 * p->r;
+        rad = 2.0 * p->R;
         return rad > hi ? hi : rad;
     }
-    if (j > APPM__WARMUP && p->n >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
+    if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
         rad = appm__r_opt(p->S, appm__di2(p, appm__lap_count(j - 1)), (double)M * (double)j, APPM__CF);
         if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
-        if (p->r > 0.0) {
-            if (rad < 0.5 * p->r) rad = 0.5 * p->r;
-            if (rad > 2.0 * p->r) rad = 2.0 * p->r;
+        if (p->R > 0.0) {
+            if (rad < 0.5 * p->R) rad = 0.5 * p->R;
+            if (rad > 2.0 * p->R) rad = 2.0 * p->R;
         }
     }
     if (!(rad >= lo)) rad = lo; /* also catches NaN */
@@ -3874,15 +4781,15 @@ static double appm__appm_radius(double r1, double rb, uint64_t M, uint64_t j, co
     return rad;
 }
 
-/* The Laplacian bandwidth of pass j: h_j = kappa r_b j^(-1/8), a fixed schedule
- * from the scene's automatic radius r_b (section 12), shrinking more slowly than
- * r (design notes, section 4.6).  It deliberately does not follow the pixel's
+/* The Laplacian bandwidth of pass j: h_j = kappa r_auto j^(-1/8), a fixed schedule
+ * from the automatic radius r_auto (section 12), shrinking more slowly than
+ * r (docs/algorithm.md 4.6).  It deliberately does not follow the pixel's
  * adaptive radius: with h = kappa r, a sharp feature seen through a wide h
  * looks flat (|dI| falls like h^-4), which licenses a wider r, which keeps h
  * wide - a start with a large radius would never come back. */
-static double appm__lap_h(double rb, uint64_t j)
+static double appm__lap_h(double r_auto, uint64_t j)
 {
-    return APPM__KAPPA * rb * pow((double)j, -1.0 / 8.0);
+    return APPM__KAPPA * r_auto * pow((double)j, -1.0 / 8.0);
 }
 
 /* Welford update of the per-pass estimate's luminance (for the noise estimate). */
@@ -3893,49 +4800,278 @@ static void appm__welford(appm__pixel *p, uint64_t j, double v)
     p->wm2 += d * (v - p->wmean);
 }
 
-/* The recursive (Yamato) means of ppm and appm after pass j:
- *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j     and likewise S_j; dI is the
- *   weighted mean over the passes that estimate the Laplacian (weight
- *   dl_weight, 0 on the others),
- * plus the bookkeeping of the error estimate (sum of r_j^2, Welford). */
-static void appm__pixel_update(appm__pixel *p, uint64_t pass, int adaptive, const double *e,
-                               double s, double dl, double dl_weight, uint64_t count, double ld_lum)
+/* The recursive (Yamato) mean of ppm and appm after pass j:
+ *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j. */
+static void appm__mean_update(double *I, uint64_t pass, const double *e)
 {
     double j = (double)pass;
     int c;
-    for (c = 0; c < 3; ++c) p->acc[c] += (e[c] - p->acc[c]) / j;
-    if (adaptive) {
-        p->S += (s - p->S) / j;
-        if (dl_weight > 0.0) {
-            /* inverse-variance weighted mean (West 1979): a Laplacian from bandwidth
-             * h has variance ~ 1/h^6, so early passes with a small radius would
-             * otherwise drown the later, better estimates */
-            double d = dl - p->dI;
-            p->dI_w += dl_weight;
-            p->dI += d * (dl_weight / p->dI_w);
-            p->dI_m2 += dl_weight * d * (dl - p->dI);
-        }
-        p->n += (double)count;
-        p->r2sum += p->r * p->r;
-    }
-    appm__welford(p, pass, ld_lum + appm__lumd(e));
+    for (c = 0; c < 3; ++c) I[c] += (e[c] - I[c]) / j;
 }
+
+/* appm's statistics after pass j: the mean I and likewise S; dI is the weighted
+ * mean over the passes that estimate the Laplacian (weight dl_weight, 0 on the
+ * others); plus the photon count and the sum of r_j^2 of the bias estimate. */
+static void appm__appm_update(appm__appm_state *p, uint64_t pass, const double *e, double s, double dl,
+                              double dl_weight, uint64_t count)
+{
+    double j = (double)pass;
+    appm__mean_update(p->I, pass, e);
+    p->S += (s - p->S) / j;
+    if (dl_weight > 0.0) {
+        /* inverse-variance weighted mean (West 1979): a Laplacian from bandwidth
+         * h has variance ~ 1/h^6, so early passes with a small radius would
+         * otherwise drown the later, better estimates */
+        double d = dl - p->dI;
+        p->dI_w += dl_weight;
+        p->dI += d * (dl_weight / p->dI_w);
+        p->dI_m2 += dl_weight * d * (dl - p->dI);
+    }
+    p->N += count;
+    p->R2sum += p->R * p->R;
+}
+
+/* ---- 10.2 The estimator table ------------------------------------------------
+ *
+ * One entry per appm_method: what the method is (capability flags, the aux
+ * maps it provides, its per-pixel state) and what it does (hooks).  The
+ * renderer picks its entry once, in appm_renderer_create, and calls only
+ * through it; a new method is one entry plus its own functions.  Hooks that a
+ * method does not need are NULL.  Per pass j the renderer calls:
+ *   start       once, on pass 1, after r1 is known (initialise state)
+ *   radius      per pixel: the gather radius of pass j (stored in appm__vp.r)
+ *   commit      per pixel, after the gather: fold it into the state (the
+ *               direct term is already committed to appm__pixel)
+ *   pass_end    once, after the gather (global schedules)
+ * and on request:
+ *   photon_term the photon part of the pixel value after j passes (0: none)
+ *   bias        the estimated bias of the pixel (luminance), for the error
+ *   aux_value   the RADIUS and LAPLACIAN maps */
+enum {
+    APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
+    APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
+    APPM__CAP_LAPLACIAN = 4, /* gathers the Laplacian, on the passes appm__lap_pass   */
+    APPM__CAP_ERROR = 8      /* keeps an error estimate (appm_stats.est_relerr)      */
+};
+
+typedef struct appm__field { /* one field of a method's per-pixel state */
+    const char *name;
+    size_t offset;           /* bytes from the start of the state */
+    unsigned count;          /* values */
+    unsigned is_u64;         /* 1: uint64_t values, 0: doubles */
+} appm__field;
+
+typedef struct appm__estimator {
+    const char *name;        /* appm_method_name */
+    unsigned caps;           /* APPM__CAP_* */
+    unsigned aux;            /* bit (1 << k) for every map k of appm_aux it provides */
+    size_t state_size;       /* bytes of per-pixel state (0: none) */
+    const appm__field *fields;
+    unsigned nfields;
+    void (*start)(appm_renderer *r);
+    float (*radius)(const appm_renderer *r, const void *st);
+    void (*commit)(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
+                   unsigned worker);
+    void (*pass_end)(appm_renderer *r);
+    int (*photon_term)(const appm_renderer *r, const void *st, double j, double *out);
+    double (*bias)(const void *st, double j);
+    double (*aux_value)(const appm_renderer *r, const void *st, appm_aux which);
+} appm__estimator;
+
+/* The state of pixel i. */
+static void *appm__state(const appm_renderer *r, size_t i)
+{
+    return r->state + i * r->est->state_size;
+}
+
+/* This pass's estimates from a gather (appm__gather_finish); a NaN or inf
+ * among them is counted as dropped and the pass contributes 0 instead. */
+static void appm__gather_estimates(appm_renderer *r, const appm__gather *g, unsigned worker, double *e, double *s,
+                                   double *dl)
+{
+    appm__gather_finish(g, 1.0 / (double)r->M, e, s, dl);
+    if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && *s - *s == 0.0 &&
+          *dl - *dl == 0.0)) {
+        r->dropped[worker]++;
+        e[0] = e[1] = e[2] = *s = *dl = 0.0;
+    }
+}
+
+/* -- ppm (Knaus-Zwicker 2011): one global radius, r_{j+1}^2 = r_j^2 (j + alpha) / (j + 1)
+ *    (algorithm.md 2.3), the plain mean of the Ihat_j. */
+static const appm__field appm__ppm_fields[] = {{"I", offsetof(appm__ppm_state, I), 3, 0}};
+
+static void appm__ppm_start(appm_renderer *r) { r->ppm.R2 = r->r1 * r->r1; }
+
+static float appm__ppm_radius(const appm_renderer *r, const void *st)
+{
+    (void)st;
+    return (float)sqrt(r->ppm.R2);
+}
+
+static void appm__ppm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
+                             unsigned worker)
+{
+    appm__ppm_state *k = (appm__ppm_state *)st;
+    double e[3], s, dl;
+    appm__gather_estimates(r, g, worker, e, &s, &dl);
+    appm__mean_update(k->I, r->pass, e);
+    appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e));
+}
+
+static void appm__ppm_pass_end(appm_renderer *r)
+{
+    r->ppm.R = sqrt(r->ppm.R2);
+    r->ppm.R2 *= ((double)r->pass + r->alpha) / ((double)r->pass + 1.0);
+}
+
+static int appm__ppm_term(const appm_renderer *r, const void *st, double j, double *out)
+{
+    const appm__ppm_state *k = (const appm__ppm_state *)st;
+    (void)r;
+    (void)j;
+    out[0] = k->I[0];
+    out[1] = k->I[1];
+    out[2] = k->I[2];
+    return 1;
+}
+
+static double appm__ppm_aux(const appm_renderer *r, const void *st, appm_aux which)
+{
+    (void)st;
+    (void)which; /* RADIUS only */
+    return r->ppm.R;
+}
+
+/* -- sppm (Hachisuka-Jensen 2009): after a pass that found m photons with flux
+ *    Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)), tau' = (tau + Phi) R'^2 / R^2
+ *    (algorithm.md 2.2); L = tau / (j M pi R^2). */
+static const appm__field appm__sppm_fields[] = {{"tau", offsetof(appm__sppm_state, tau), 3, 0},
+                                                {"N", offsetof(appm__sppm_state, N), 1, 0},
+                                                {"R", offsetof(appm__sppm_state, R), 1, 0}};
+
+static void appm__sppm_start(appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    for (i = 0; i < npix; ++i) ((appm__sppm_state *)appm__state(r, i))->R = r->r1;
+}
+
+static float appm__sppm_radius(const appm_renderer *r, const void *st)
+{
+    (void)r;
+    return (float)((const appm__sppm_state *)st)->R;
+}
+
+static void appm__sppm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp,
+                              const appm__gather *g, unsigned worker)
+{
+    appm__sppm_state *k = (appm__sppm_state *)st;
+    double R = k->R, N_new, R_new, ratio, phi[3];
+    int c;
+    (void)px;
+    (void)vp;
+    if (g->count == 0) return;
+    N_new = k->N + r->alpha * (double)g->count;
+    R_new = R * sqrt(N_new / (k->N + (double)g->count));
+    ratio = (R_new * R_new) / (R * R);
+    phi[0] = g->wf.x * g->e[0] + g->wg.x * g->eg[0]; /* the lobe's part: 0 off glossy points */
+    phi[1] = g->wf.y * g->e[1] + g->wg.y * g->eg[1];
+    phi[2] = g->wf.z * g->e[2] + g->wg.z * g->eg[2];
+    if (phi[0] - phi[0] == 0.0 && phi[1] - phi[1] == 0.0 && phi[2] - phi[2] == 0.0) {
+        for (c = 0; c < 3; ++c) k->tau[c] = (k->tau[c] + phi[c]) * ratio;
+        k->N = N_new;
+        k->R = R_new;
+    } else {
+        r->dropped[worker]++;
+    }
+}
+
+static int appm__sppm_term(const appm_renderer *r, const void *st, double j, double *out)
+{
+    const appm__sppm_state *k = (const appm__sppm_state *)st;
+    int c;
+    if (!(k->R > 0.0)) return 0;
+    for (c = 0; c < 3; ++c) out[c] = k->tau[c] / (j * (double)r->M * APPM__PI * k->R * k->R);
+    return 1;
+}
+
+static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux which)
+{
+    (void)r;
+    (void)which; /* RADIUS only: the radius of the next gather */
+    return ((const appm__sppm_state *)st)->R;
+}
+
+/* -- appm (Kaplanyan-Dachsbacher 2013): the radius of section 10.1, the
+ *    recursive means of appm__appm_update, bias (mu2 r^2 / 2) dI. */
+static const appm__field appm__appm_fields[] = {
+    {"I", offsetof(appm__appm_state, I), 3, 0},         {"S", offsetof(appm__appm_state, S), 1, 0},
+    {"dI", offsetof(appm__appm_state, dI), 1, 0},       {"dI_w", offsetof(appm__appm_state, dI_w), 1, 0},
+    {"dI_m2", offsetof(appm__appm_state, dI_m2), 1, 0}, {"R", offsetof(appm__appm_state, R), 1, 0},
+    {"R2sum", offsetof(appm__appm_state, R2sum), 1, 0}, {"N", offsetof(appm__appm_state, N), 1, 1}};
+
+static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
+{
+    return (float)appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, (const appm__appm_state *)st);
+}
+
+static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
+                              unsigned worker)
+{
+    appm__appm_state *a = (appm__appm_state *)st;
+    double e[3], s, dl, hr = g->h / r->r_auto;
+    a->R = vp->r;
+    appm__gather_estimates(r, g, worker, e, &s, &dl);
+    appm__appm_update(a, r->pass, e, s, dl, g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g->count);
+    appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e));
+}
+
+static double appm__appm_bias(const void *st, double j)
+{
+    const appm__appm_state *a = (const appm__appm_state *)st;
+    return 0.5 * APPM__MU2 * a->dI * (a->R2sum / j);
+}
+
+static double appm__appm_aux(const appm_renderer *r, const void *st, appm_aux which)
+{
+    const appm__appm_state *a = (const appm__appm_state *)st;
+    (void)r;
+    return which == APPM_AUX_LAPLACIAN ? a->dI : a->R;
+}
+
+#define APPM__AUX_BIT(k) (1u << (k))
+
+static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
+    /* APPM_METHOD_APPM */
+    {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_LAPLACIAN | APPM__CAP_ERROR,
+     APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_LAPLACIAN) |
+         APPM__AUX_BIT(APPM_AUX_ERROR),
+     sizeof(appm__appm_state), appm__appm_fields, sizeof appm__appm_fields / sizeof appm__appm_fields[0], NULL,
+     appm__appm_radius_hook, appm__appm_commit, NULL, appm__ppm_term, appm__appm_bias, appm__appm_aux},
+    /* APPM_METHOD_PPM */
+    {"ppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE),
+     sizeof(appm__ppm_state), appm__ppm_fields, sizeof appm__ppm_fields / sizeof appm__ppm_fields[0],
+     appm__ppm_start, appm__ppm_radius, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL, appm__ppm_aux},
+    /* APPM_METHOD_SPPM */
+    {"sppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS), sizeof(appm__sppm_state), appm__sppm_fields,
+     sizeof appm__sppm_fields / sizeof appm__sppm_fields[0], appm__sppm_start, appm__sppm_radius,
+     appm__sppm_commit, NULL, appm__sppm_term, NULL, appm__sppm_aux},
+    /* APPM_METHOD_PT: section 11; its whole path sum is the "direct" term */
+    {"pt", APPM__CAP_ERROR, APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_ERROR), 0, NULL, 0, NULL,
+     NULL, NULL, NULL, NULL, NULL, NULL}};
 
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
-    const double invM = 1.0 / (double)r->M;
+    const appm__estimator *est = r->est;
     uint32_t x;
     for (x = 0; x < r->w; ++x) {
         size_t pi = (size_t)row * r->w + x;
         const appm__vp *vp = &r->vp[pi];
         appm__pixel *p = &r->pix[pi];
         appm__gather g;
-        double e[3] = {0, 0, 0}, s = 0.0, dl = 0.0;
-        int c;
         memset(&g, 0, sizeof g);
         appm__add3(p->ld, vp->ld); /* the pass has succeeded: commit its direct term */
-        if (r->method == APPM_METHOD_APPM) p->r = vp->r;
         if (vp->segs > 0 && vp->segs < r->max_depth) {
             g.x = vp->x;
             g.n = vp->n;
@@ -3946,43 +5082,12 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.rd = vp->rd;
             g.ns = vp->ns;
             g.max_p = r->max_depth - vp->segs;
-            g.biweight = r->method == APPM_METHOD_APPM;
-            g.R = r->method == APPM_METHOD_PPM ? (float)sqrt(r->ppm_r2) : (float)p->r;
-            g.h = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)
-                      ? (float)appm__lap_h(r->r_auto, r->pass)
-                      : 0.0f;
-            appm__gather_query(r, &g);
+            g.biweight = (est->caps & APPM__CAP_BIWEIGHT) != 0;
+            g.R = vp->r;
+            g.h = (float)r->lap_h;
+            appm__gather_query(&r->pmap, &g);
         }
-        if (r->method == APPM_METHOD_SPPM) {
-            if (g.count > 0) {
-                double R = p->r, n_new = p->n + r->alpha * (double)g.count;
-                double R_new = R * sqrt(n_new / (p->n + (double)g.count)), ratio = (R_new * R_new) / (R * R);
-                double phi[3];
-                phi[0] = g.wf.x * g.e[0] + g.wg.x * g.eg[0];
-                phi[1] = g.wf.y * g.e[1] + g.wg.y * g.eg[1];
-                phi[2] = g.wf.z * g.e[2] + g.wg.z * g.eg[2];
-                if (phi[0] - phi[0] == 0.0 && phi[1] - phi[1] == 0.0 && phi[2] - phi[2] == 0.0) {
-                    for (c = 0; c < 3; ++c) p->acc[c] = (p->acc[c] + phi[c]) * ratio;
-                    p->n = n_new;
-                    p->r = R_new;
-                } else {
-                    r->dropped[worker]++;
-                }
-            }
-            continue;
-        }
-        appm__gather_finish(&g, invM, e, &s, &dl);
-        if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && s - s == 0.0 &&
-              dl - dl == 0.0)) {
-            r->dropped[worker]++;
-            e[0] = e[1] = e[2] = s = dl = 0.0;
-        }
-        {
-            double hr = g.h / r->r_auto;
-            appm__pixel_update(p, r->pass, r->method == APPM_METHOD_APPM, e, s, dl,
-                               g.h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g.count,
-                               (double)appm__lum(vp->ld));
-        }
+        est->commit(r, p, appm__state(r, pi), vp, &g, worker);
     }
 }
 
@@ -4158,69 +5263,21 @@ static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
 
 static double appm__mean3(const double *v) { return (v[0] + v[1] + v[2]) / 3.0; }
 
-/* Builds the light table: one area light per emissive triangle (after the BVH
- * has fixed triangle order), then the point, spot and environment lights. */
-static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char *name)
+/* The light-choice table: each light picked with its share of the total
+ * power (the mean of the three channels), as the cumulative s->light_cdf. */
+static appm_status appm__light_table(appm_scene *s, appm_diag *diag, const char *name)
 {
-    uint32_t i, n = 0, k = 0, extra = (uint32_t)L->lights.count;
+    uint32_t i, k = s->nlight;
     double total = 0.0;
-    for (i = 0; i < s->ntri; ++i) n += s->mat[s->info[i].mat].emissive;
-    if (n + extra == 0)
-        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
-                          "the scene has no light (no material with Ke > 0, no light or environment)");
-    s->light = (appm__light *)appm__alloc(&s->mem, (size_t)n + extra, sizeof *s->light);
-    s->light_cdf = (double *)appm__alloc(&s->mem, (size_t)n + extra + 1, sizeof *s->light_cdf);
-    if (!s->light || !s->light_cdf) return APPM_ERR_NOMEM;
-    s->env = -1;
-    for (i = 0; i < s->ntri; ++i) {
-        const appm__material *m = &s->mat[s->info[i].mat];
-        appm__light *l;
-        double a = (double)s->info[i].area;
-        if (!m->emissive) continue;
-        l = &s->light[k];
-        l->kind = APPM__LIGHT_AREA;
-        l->tri = i;
-        l->value = m->ke;
-        l->power[0] = APPM__PI * a * m->ke.x; /* Phi = pi A Le for a Lambertian emitter */
-        l->power[1] = APPM__PI * a * m->ke.y;
-        l->power[2] = APPM__PI * a * m->ke.z;
-        s->info[i].light = (int32_t)k++;
-    }
-    for (i = 0; i < extra; ++i) {
-        appm__light *l = &s->light[k];
-        *l = ((appm__light *)L->lights.data)[i];
-        if (l->kind == APPM__LIGHT_POINT) {
-            l->power[0] = 4.0 * APPM__PI * l->value.x;
-            l->power[1] = 4.0 * APPM__PI * l->value.y;
-            l->power[2] = 4.0 * APPM__PI * l->value.z;
-        } else if (l->kind == APPM__LIGHT_SPOT) {
-            /* 2 pi I [ (1 - cos_inner) + (cos_inner - cos_cone) / 5 ]: the d^4 ramp
-             * integrates to a fifth of its width in cos(theta) */
-            double f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
-            l->power[0] = f * l->value.x;
-            l->power[1] = f * l->value.y;
-            l->power[2] = f * l->value.z;
-        } else { /* environment: L through the disk of the bounding sphere from all directions */
-            double f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
-            if (s->env >= 0)
-                return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
-            s->env = (int)k;
-            l->power[0] = f * l->value.x;
-            l->power[1] = f * l->value.y;
-            l->power[2] = f * l->value.z;
-        }
-        k++;
-    }
-    s->nlight = k;
     for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
     if (!(total > 0.0) || !(total < HUGE_VAL))
-        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
     /* Lights are picked by power, so every photon starts with about the total
      * power in each channel: at most 3 times it (a channel against the mean of
      * three), 15 times for a spot whose falloff spans its whole cone.  Photon
      * weights are floats: beyond FLT_MAX / 16 every photon would overflow. */
     if (total > FLT_MAX / 16.0)
-        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
                           "the lights emit %g W, more than a photon's single-precision weight can "
                           "carry (%g W): use larger units or a smaller Ke",
                           total, FLT_MAX / 16.0);
@@ -4231,6 +5288,55 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
     }
     s->light_cdf[k] = 1.0;
     return APPM_OK;
+}
+
+/* Builds the light table: one area light per emissive triangle (after the BVH
+ * has fixed triangle order), then the point, spot and environment lights.  A
+ * bare OBJ in which nothing emits gets a constant white environment of
+ * radiance 1 (marked, so that the first light added to the scene replaces it). */
+static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char *name)
+{
+    uint32_t i, n = 0, k = 0, extra = (uint32_t)L->lights.count;
+    for (i = 0; i < s->ntri; ++i) n += s->mat[s->info[i].mat].emissive;
+    if (n + extra == 0 && L->bare_obj && s->ntri > 0) {
+        appm__light *l = (appm__light *)appm__array_push(L->mem, &L->lights);
+        if (!l) return APPM_ERR_NOMEM;
+        l->kind = APPM__LIGHT_ENV;
+        l->value = appm__v(1.0f, 1.0f, 1.0f);
+        extra = 1;
+        s->env_auto = 1;
+    }
+    if (n + extra == 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
+                          "the scene has no light (no material with Ke > 0, no light or environment)");
+    s->light = (appm__light *)appm__alloc(&s->mem, (size_t)n + extra, sizeof *s->light);
+    s->light_cdf = (double *)appm__alloc(&s->mem, (size_t)n + extra + 1, sizeof *s->light_cdf);
+    if (!s->light || !s->light_cdf) return APPM_ERR_NOMEM;
+    s->env = -1;
+    for (i = 0; i < s->ntri; ++i) {
+        const appm__material *m = &s->mat[s->info[i].mat];
+        appm__light *l;
+        if (!m->emissive) continue;
+        l = &s->light[k];
+        l->kind = APPM__LIGHT_AREA;
+        l->tri = i;
+        l->value = m->ke;
+        appm__light_power(s, l, l->power);
+        s->info[i].light = (int32_t)k++;
+    }
+    for (i = 0; i < extra; ++i) {
+        appm__light *l = &s->light[k];
+        *l = ((appm__light *)L->lights.data)[i];
+        if (l->kind == APPM__LIGHT_ENV) {
+            if (s->env >= 0)
+                return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
+            s->env = (int)k;
+        }
+        appm__light_power(s, l, l->power);
+        k++;
+    }
+    s->nlight = k;
+    return appm__light_table(s, L->diag, name);
 }
 
 /* Loader arrays -> scene: exact-size copies, bounds, BVH, lights, camera. */
@@ -4340,11 +5446,13 @@ static appm_status appm__scene_load(const char *path, int text_kind, const char 
     appm__copy_str(s->name, sizeof s->name, path);
     if (st == APPM_OK) {
         if (text_kind == APPM__TEXT_OBJ) {
+            L.bare_obj = 1;
             st = appm__obj_parse(&L, text, text_len, path);
         } else if (text_kind == APPM__TEXT_SCENE) {
             st = appm__scene_parse(&L, text, text_len, path);
         } else if (appm__ends_with(path, ".obj")) {
             L.file = NULL;
+            L.bare_obj = 1;
             st = appm__obj_load(&L, path, 0);
         } else {
             char *buf;
@@ -4453,6 +5561,112 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
     info->peak_bytes = s->mem.peak;
 }
 
+/* Lights added to a loaded scene.  The light arrays are rebuilt one entry
+ * larger (or smaller), through the scene's own allocator, and the choice table
+ * is recomputed; the arrays are untouched when the call fails.  `drop` is the
+ * index of a light to leave out (-1: none), `add` the light to append (NULL:
+ * none). */
+static appm_status appm__scene_relight(appm_scene *s, int drop, const appm__light *add, appm_diag *diag)
+{
+    uint32_t n = s->nlight - (drop >= 0) + (add != NULL), i, k = 0;
+    appm__mem *m = &s->mem;
+    appm__light *nl;
+    double *cdf;
+    appm__light *old = s->light;
+    double *old_cdf = s->light_cdf;
+    uint32_t old_n = s->nlight;
+    int old_env = s->env;
+    appm_status st;
+    if (n == 0) return appm__fail(diag, APPM_ERR_INVALID_ARG, s->name, 0, "the scene would have no light");
+    m->diag = diag;
+    nl = (appm__light *)appm__alloc(m, n, sizeof *nl);
+    cdf = (double *)appm__alloc(m, (size_t)n + 1, sizeof *cdf);
+    m->diag = NULL;
+    if (!nl || !cdf) {
+        appm__free(m, nl);
+        appm__free(m, cdf);
+        return APPM_ERR_NOMEM;
+    }
+    s->env = -1;
+    for (i = 0; i < old_n; ++i) {
+        if ((int)i == drop) continue;
+        if (old[i].kind == APPM__LIGHT_ENV) s->env = (int)k;
+        nl[k++] = old[i]; /* area lights come first and are never dropped: triangle indices hold */
+    }
+    if (add) {
+        nl[k] = *add;
+        appm__light_power(s, &nl[k], nl[k].power);
+        if (add->kind == APPM__LIGHT_ENV) s->env = (int)k;
+        k++;
+    }
+    s->light = nl;
+    s->light_cdf = cdf;
+    s->nlight = k;
+    if ((st = appm__light_table(s, diag, s->name)) != APPM_OK) {
+        s->light = old;
+        s->light_cdf = old_cdf;
+        s->nlight = old_n;
+        s->env = old_env;
+        appm__free(m, nl);
+        appm__free(m, cdf);
+        return st;
+    }
+    appm__free(m, old);
+    appm__free(m, old_cdf);
+    return APPM_OK;
+}
+
+static int appm__finite_nonneg3(const double *v)
+{
+    int i;
+    for (i = 0; i < 3; ++i)
+        if (!(v[i] >= 0.0 && v[i] <= FLT_MAX)) return 0;
+    return 1;
+}
+
+APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double position[3],
+                                                const double intensity[3], appm_diag *diag)
+{
+    appm__light l;
+    appm_status st;
+    int i, drop;
+    appm__diag_clear(diag);
+    if (!scene || !position || !intensity)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or light");
+    for (i = 0; i < 3; ++i)
+        if (!(fabs(position[i]) <= FLT_MAX))
+            return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0, "point light: position is not finite");
+    if (!appm__finite_nonneg3(intensity))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
+                          "point light: intensity must be finite and >= 0");
+    memset(&l, 0, sizeof l);
+    l.kind = APPM__LIGHT_POINT;
+    l.pos = appm__v((float)position[0], (float)position[1], (float)position[2]);
+    l.value = appm__v((float)intensity[0], (float)intensity[1], (float)intensity[2]);
+    drop = scene->env_auto ? scene->env : -1;
+    st = appm__scene_relight(scene, drop, &l, diag);
+    if (st == APPM_OK) scene->env_auto = 0;
+    return st;
+}
+
+APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
+                                                appm_diag *diag)
+{
+    appm__light l;
+    appm_status st;
+    appm__diag_clear(diag);
+    if (!scene || !radiance) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or radiance");
+    if (!appm__finite_nonneg3(radiance))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
+                          "environment: radiance must be finite and >= 0");
+    memset(&l, 0, sizeof l);
+    l.kind = APPM__LIGHT_ENV;
+    l.value = appm__v((float)radiance[0], (float)radiance[1], (float)radiance[2]);
+    st = appm__scene_relight(scene, scene->env, &l, diag); /* replaces the one there, if any */
+    if (st == APPM_OK) scene->env_auto = 0;
+    return st;
+}
+
 /* ---- 12.1 Renderer ----------------------------------------------------------- */
 
 static void appm__renderer_free_parts(appm_renderer *r)
@@ -4467,22 +5681,16 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->task_used);
     appm__free(&r->mem, r->task_failed);
     appm__free(&r->mem, r->dest);
-    appm__free(&r->mem, r->cell);
+    appm__free(&r->mem, r->state);
+    appm__pmap_free(&r->pmap, &r->mem);
 }
 
-APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
-                                          appm_renderer **out, appm_diag *diag)
+/* The options of a renderer of `scene`: cfg (NULL: all defaults) with every 0
+ * replaced by its default, validated.  APPM_ERR_INVALID_ARG for an absurd one. */
+static appm_status appm__config_resolve(const appm_scene *scene, const appm_config *cfg, appm_config *out,
+                                        appm_diag *diag)
 {
-    appm__mem m;
-    appm_renderer *r;
     appm_config c;
-    size_t npix;
-    appm_diag local;
-    if (!diag) diag = &local;
-    appm__diag_clear(diag);
-    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
-    *out = NULL;
-    if (!scene) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene");
     if (cfg) c = *cfg;
     else memset(&c, 0, sizeof c);
     if (c.width == 0) c.width = scene->width;
@@ -4490,7 +5698,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     if (c.width > 32768 || c.height > 32768)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "image size %ux%u is above 32768",
                           (unsigned)c.width, (unsigned)c.height);
-    if ((int)c.method < 0 || c.method > APPM_METHOD_PT)
+    if ((int)c.method < 0 || c.method >= APPM_METHOD_COUNT)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown method %d", (int)c.method);
     if ((int)c.direct < 0 || c.direct > APPM_DIRECT_PHOTONS)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown direct-light mode");
@@ -4512,6 +5720,30 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
+    if (scene->env_auto && c.log) /* once per renderer: the stand-in light is worth a word */
+        c.log(c.log_user, scene->name, 0,
+              "nothing in the model emits light: it is lit by a constant white environment of "
+              "radiance 1 (add lights to choose others)");
+    *out = c;
+    return APPM_OK;
+}
+
+APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
+                                          appm_renderer **out, appm_diag *diag)
+{
+    appm__mem m;
+    appm_renderer *r;
+    appm_config c;
+    appm_status st;
+    size_t npix;
+    appm_diag local;
+    if (!diag) diag = &local;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
+    *out = NULL;
+    if (!scene) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene");
+    memset(&c, 0, sizeof c); /* filled below; gcc cannot see that on every path */
+    if ((st = appm__config_resolve(scene, cfg, &c, diag)) != APPM_OK) return st;
     appm__mem_init(&m, &c);
     m.diag = diag;
     r = (appm_renderer *)appm__alloc(&m, 1, sizeof *r);
@@ -4519,7 +5751,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->mem = m;
     r->mem.diag = diag;
     r->scene = scene;
-    r->method = c.method;
+    r->est = &appm__estimators[c.method];
     r->direct = c.direct;
     r->w = c.width;
     r->h = c.height;
@@ -4537,7 +5769,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->vp = (appm__vp *)appm__alloc(&r->mem, npix, sizeof *r->vp);
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
-    if (r->method != APPM_METHOD_PT) {
+    if (r->est->state_size) r->state = (unsigned char *)appm__alloc(&r->mem, npix, r->est->state_size);
+    if (r->est->caps & APPM__CAP_PHOTONS) {
         r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks, sizeof *r->chunk);
         r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
         r->task_failed = (int *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_failed);
@@ -4546,8 +5779,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }
-    if (!r->vp || !r->pix || !r->image ||
-        (r->method != APPM_METHOD_PT && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
+    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) ||
+        ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
         fm = r->mem;
@@ -4575,6 +5808,7 @@ APPM_API const char *appm_renderer_last_error(const appm_renderer *r)
     return r ? r->last_error : "";
 }
 
+/* Every pixel's gather radius of this pass, from its method (10.2). */
 static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
@@ -4582,7 +5816,7 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
     (void)worker;
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
-        r->vp[i].r = (float)appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, &r->pix[i]);
+        r->vp[i].r = r->est->radius(r, appm__state(r, i));
     }
 }
 
@@ -4605,103 +5839,112 @@ static double appm__default_radius(appm_renderer *r)
     return rad;
 }
 
-/* Median of the gather radii of the pixels that have a visible point. */
+/* Median of the gather reaches (the radius, or the Laplacian's 2h) of the
+ * pixels that have a visible point: section 9's cell size is a multiple of it. */
 static float appm__median_gather_radius(appm_renderer *r)
 {
     size_t n = 0, i, npix = (size_t)r->w * r->h;
     float *tmp = r->image; /* scratch: the image is rebuilt on request */
-    const double h2 = r->method == APPM_METHOD_APPM && appm__lap_pass(r->pass)
-                          ? 2.0 * appm__lap_h(r->r_auto, r->pass) /* the Laplacian's reach */
-                          : 0.0;
+    const double h2 = 2.0 * r->lap_h;
     for (i = 0; i < npix; ++i) {
         double g;
         if (r->vp[i].segs == 0) continue;
-        g = r->method == APPM_METHOD_PPM ? sqrt(r->ppm_r2)
-            : r->method == APPM_METHOD_APPM ? (double)r->vp[i].r
-                                            : r->pix[i].r;
+        g = (double)r->vp[i].r;
         tmp[n++] = (float)(h2 > g ? h2 : g);
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);
     return APPM__CELL_SCALE * appm__select(tmp, n, n / 2);
 }
 
+/* The photon part of pixel i's value after j passes into out[3]; 0: none. */
+static int appm__photon_term(const appm_renderer *r, size_t i, double j, double *out)
+{
+    return r->est->photon_term && r->est->photon_term(r, appm__state(r, i), j, out);
+}
+
+/* The estimated relative error of the image (appm_stats.est_relerr):
+ *   sqrt( mean over pixels of (bias^2 + Var) / (I^2 + 0.01) ),
+ * Var from the Welford spread of the per-pass estimates, divided by j. */
 static void appm__estimate_error(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     double j = (double)r->pass, sum = 0.0;
-    if (r->pass < 2 || (r->method != APPM_METHOD_APPM && r->method != APPM_METHOD_PT)) {
+    if (r->pass < 2 || !(r->est->caps & APPM__CAP_ERROR)) {
         r->stats.est_relerr = -1.0;
         return;
     }
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = p->wm2 / ((j - 1.0) * j), bias = 0.0, I;
-        if (r->method == APPM_METHOD_APPM) {
-            bias = 0.5 * APPM__MU2 * p->dI * (p->r2sum / j);
-            I = appm__lumd(p->ld) / j + appm__lumd(p->acc);
-        } else {
-            I = appm__lumd(p->ld) / j;
-        }
+        double var = p->wm2 / ((j - 1.0) * j), bias = 0.0, I, t[3];
+        if (r->est->bias) bias = r->est->bias(appm__state(r, i), j);
+        I = appm__lumd(p->ld) / j;
+        if (appm__photon_term(r, i, j, t)) I += appm__lumd(t);
         sum += (bias * bias + var) / (I * I + 0.01);
     }
     r->stats.est_relerr = sqrt(sum / (double)npix);
 }
 
+/* One photon-mapping pass (eye pass, radii, photon pass, map, gather); times
+ * t[0..2] at the ends of the radii, the photon pass and the map.  On failure
+ * nothing is committed: the pixel state changes only in the gather. */
+static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
+{
+    const appm__estimator *est = r->est;
+    appm_status st;
+    float cell;
+    appm__parallel_for(r->threads, r->h, appm__eye_task, r);
+    if (r->pass == 1) {
+        r->r_auto = appm__default_radius(r);
+        if (r->r1_auto) r->r1 = r->r_auto;
+        if (est->start) est->start(r);
+    }
+    r->lap_h = (est->caps & APPM__CAP_LAPLACIAN) && appm__lap_pass(r->pass) ? appm__lap_h(r->r_auto, r->pass)
+                                                                             : 0.0;
+    appm__parallel_for(r->threads, r->h, appm__radius_task, r);
+    cell = appm__median_gather_radius(r);
+    t[0] = appm__seconds();
+    st = appm__photon_pass(r);
+    t[1] = appm__seconds();
+    if (st == APPM_OK)
+        st = appm__pmap_build(&r->pmap, &r->mem, r->ph, appm__store_compact(r), r->dest, r->chunk, r->nchunks,
+                              cell > 0.0f ? cell : 1.0f);
+    if (st != APPM_OK) return st;
+    t[2] = appm__seconds();
+    appm__parallel_for(r->threads, r->h, appm__gather_task, r);
+    if (est->pass_end) est->pass_end(r);
+    r->stats.photons_emitted += r->M;
+    r->stats.photons_stored = r->pmap.n;
+    return APPM_OK;
+}
+
 APPM_API appm_status appm_renderer_pass(appm_renderer *r)
 {
-    double t0, t1, t2, t3, t4;
+    double t0, t[3], t4;
     appm_status st;
     unsigned k;
     if (!r) return APPM_ERR_INVALID_ARG;
     appm__diag_clear(&r->diag);
     t0 = appm__seconds();
     r->pass++;
-    r->aux_valid = 0;
-    if (r->method == APPM_METHOD_PT) {
+    if (!(r->est->caps & APPM__CAP_PHOTONS)) {
         appm__parallel_for(r->threads, r->h, appm__pt_task, r);
-        t1 = t2 = t3 = appm__seconds();
-    } else {
-        float cell;
-        appm__parallel_for(r->threads, r->h, appm__eye_task, r);
-        if (r->pass == 1) {
-            size_t i, npix = (size_t)r->w * r->h;
-            r->r_auto = appm__default_radius(r);
-            if (r->r1_auto) r->r1 = r->r_auto;
-            r->ppm_r2 = r->r1 * r->r1;
-            if (r->method == APPM_METHOD_SPPM)
-                for (i = 0; i < npix; ++i) r->pix[i].r = r->r1;
-        }
-        if (r->method == APPM_METHOD_APPM) appm__parallel_for(r->threads, r->h, appm__radius_task, r);
-        cell = appm__median_gather_radius(r);
-        t1 = appm__seconds();
-        st = appm__photon_pass(r);
-        t2 = appm__seconds();
-        if (st == APPM_OK) st = appm__grid_build(r, cell > 0.0f ? cell : 1.0f);
-        if (st != APPM_OK) {
-            r->pass--;
-            if (st == APPM_ERR_NOMEM && r->diag.status == APPM_OK)
-                appm__fail(&r->diag, st, NULL, 0, "out of memory in the photon pass");
-            appm__copy_str(r->last_error, sizeof r->last_error, r->diag.message);
-            return st;
-        }
-        t3 = appm__seconds();
-        appm__parallel_for(r->threads, r->h, appm__gather_task, r);
-        if (r->method == APPM_METHOD_PPM) {
-            r->stats.initial_radius = r->r1;
-            r->ppm_r2 *= ((double)r->pass + r->alpha) / ((double)r->pass + 1.0);
-        }
-        r->stats.photons_emitted += r->M;
-        r->stats.photons_stored = r->nph;
+        t[0] = t[1] = t[2] = appm__seconds();
+    } else if ((st = appm__photon_method_pass(r, t)) != APPM_OK) {
+        r->pass--;
+        if (st == APPM_ERR_NOMEM && r->diag.status == APPM_OK)
+            appm__fail(&r->diag, st, NULL, 0, "out of memory in the photon pass");
+        appm__copy_str(r->last_error, sizeof r->last_error, r->diag.message);
+        return st;
     }
     t4 = appm__seconds();
     r->stats.passes = r->pass;
     r->stats.eye_paths += (uint64_t)r->w * r->h;
     r->stats.initial_radius = r->r1;
     r->stats.seconds += t4 - t0;
-    r->stats.seconds_eye += t1 - t0;
-    r->stats.seconds_photons += t2 - t1;
-    r->stats.seconds_grid += t3 - t2;
-    r->stats.seconds_gather += t4 - t3;
+    r->stats.seconds_eye += t[0] - t0;
+    r->stats.seconds_photons += t[1] - t[0];
+    r->stats.seconds_grid += t[2] - t[1];
+    r->stats.seconds_gather += t4 - t[2];
     r->stats.dropped_samples = 0;
     for (k = 0; k < APPM__MAX_THREADS; ++k) r->stats.dropped_samples += r->dropped[k];
     r->stats.memory_bytes = r->mem.live;
@@ -4710,6 +5953,7 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
     return APPM_OK;
 }
 
+/* Pixel value after j passes: mean direct term + the method's photon term. */
 APPM_API void appm_renderer_image(appm_renderer *r, appm_image *out)
 {
     size_t i, npix;
@@ -4722,14 +5966,11 @@ APPM_API void appm_renderer_image(appm_renderer *r, appm_image *out)
     j = r->pass ? (double)r->pass : 1.0;
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        int c;
+        double t[3];
+        int c, has = appm__photon_term(r, i, j, t);
         for (c = 0; c < 3; ++c) {
             double v = p->ld[c] / j;
-            if (r->method == APPM_METHOD_SPPM) {
-                if (p->r > 0.0) v += p->acc[c] / (j * (double)r->M * APPM__PI * p->r * p->r);
-            } else if (r->method != APPM_METHOD_PT) {
-                v += p->acc[c];
-            }
+            if (has) v += t[c];
             r->image[3 * i + c] = (float)v;
         }
     }
@@ -4751,10 +5992,7 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
     double j;
     float *a;
     if (!r || (int)which < 0 || which >= APPM_AUX_COUNT || r->pass == 0) return NULL;
-    if (which == APPM_AUX_LAPLACIAN && r->method != APPM_METHOD_APPM) return NULL;
-    if (which == APPM_AUX_RADIUS && r->method == APPM_METHOD_PT) return NULL;
-    if ((which == APPM_AUX_VARIANCE || which == APPM_AUX_ERROR) && r->method == APPM_METHOD_SPPM) return NULL;
-    if (which == APPM_AUX_ERROR && r->method == APPM_METHOD_PPM) return NULL;
+    if (!(r->est->aux & APPM__AUX_BIT(which))) return NULL;
     npix = (size_t)r->w * r->h;
     j = (double)r->pass;
     if (!r->aux[which]) { /* allocated on first request: most renders never ask */
@@ -4767,20 +6005,32 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
         double var = r->pass > 1 ? p->wm2 / ((j - 1.0) * j) : 0.0, v;
         switch (which) {
         case APPM_AUX_RADIUS:
-            v = r->method == APPM_METHOD_PPM
-                    ? sqrt(r->ppm_r2 * ((j + 1.0) / (j + r->alpha))) /* the radius of the last pass */
-                    : p->r;
-            break;
+        case APPM_AUX_LAPLACIAN: v = r->est->aux_value(r, appm__state(r, i), which); break;
         case APPM_AUX_VARIANCE: v = var; break;
-        case APPM_AUX_LAPLACIAN: v = p->dI; break;
-        default:
+        default: /* the error bar |bias| + 1.645 sigma */
             v = 1.645 * sqrt(var);
-            if (r->method == APPM_METHOD_APPM) v += fabs(0.5 * APPM__MU2 * p->dI * (p->r2sum / j));
+            if (r->est->bias) v += fabs(r->est->bias(appm__state(r, i), j));
             break;
         }
         a[i] = (float)v;
     }
     return a;
+}
+
+APPM_API const char *appm_method_name(appm_method m)
+{
+    return (int)m >= 0 && m < APPM_METHOD_COUNT ? appm__estimators[m].name : NULL;
+}
+
+APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
+{
+    int k;
+    for (k = 0; name && k < (int)APPM_METHOD_COUNT; ++k)
+        if (strcmp(name, appm__estimators[k].name) == 0) {
+            if (out) *out = (appm_method)k;
+            return APPM_OK;
+        }
+    return APPM_ERR_INVALID_ARG;
 }
 
 /* ==== LICENSE =============================================================

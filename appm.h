@@ -14,25 +14,39 @@
  *     Two files, C99, no dependencies beyond libc and libm (threads optional).
  *
  * QUICK START
+ *     examples/quickstart.c, which make test compiles and runs (and checks
+ *     that it is, byte for byte, the program below).  Run it from the
+ *     repository root:  cc -std=c99 -I. examples/quickstart.c appm.c -lm -pthread
+ *
+ *     #include <stdio.h>
  *     #include "appm.h"
  *
- *     appm_config cfg = {0};            // zero means default, everywhere
- *     appm_scene *scene;  appm_renderer *r;  appm_diag diag;  appm_image img;
- *     int pass;
- *     if (appm_scene_load("scenes/cornell-box.scene", &cfg, &scene, &diag)) {
- *         fprintf(stderr, "%s:%u: %s\n", diag.file, diag.line, diag.message);
- *         return 1;
+ *     int main(int argc, char **argv)
+ *     {
+ *         const char *out = argc > 1 ? argv[1] : "out.png";
+ *         appm_config cfg = {0};             // zero means default, everywhere
+ *         appm_scene *scene;
+ *         appm_renderer *r;
+ *         appm_diag diag;
+ *         appm_image img;
+ *         int pass, rc = 1;
+ *         if (appm_scene_load("scenes/cornell-original.scene", &cfg, &scene, &diag)) {
+ *             fprintf(stderr, "%s:%u: %s\n", diag.file, diag.line, diag.message);
+ *             return 1;
+ *         }
+ *         cfg.width = cfg.height = 64;       // override the scene's image size
+ *         if (appm_renderer_create(scene, &cfg, &r, &diag) == APPM_OK) {
+ *             for (pass = 0; pass < 4; ++pass) appm_renderer_pass(r);
+ *             appm_renderer_image(r, &img);  // borrowed view, linear RGB
+ *             rc = appm_image_write(out, &img, 1.0, &diag) != APPM_OK;
+ *             appm_renderer_destroy(r);
+ *         }
+ *         appm_scene_destroy(scene);
+ *         return rc;
  *     }
- *     cfg.width = cfg.height = 256;     // override the scene's image size
- *     if (appm_renderer_create(scene, &cfg, &r, &diag) == APPM_OK) {
- *         for (pass = 0; pass < 16; ++pass) appm_renderer_pass(r);
- *         appm_renderer_image(r, &img);  // borrowed view, linear RGB
- *         appm_image_write("out.png", &img, 1.0, &diag);
- *         appm_renderer_destroy(r);
- *     }
- *     appm_scene_destroy(scene);
  *
- *     examples/embed.c is this program, complete.
+ *     examples/embed.c adds error handling for every call; the scene format is
+ *     in docs/scene-format.md, the algorithm in docs/algorithm.md.
  *
  * BUILDING
  *     cc -std=c99 -O2 -c appm.c -pthread          (POSIX threads, the default on Unix)
@@ -77,7 +91,8 @@
  *        its first diffuse vertex x with weight W; direct light at x by next-event
  *        estimation (shadow rays).
  *     2. radius: r = [c R(K) S / (M j mu2^2 dI^2)]^(1/6) from the pixel's running
- *        second moment S and Laplacian dI, clamped to [0.1, 2] r1 j^(-1/6).
+ *        second moment S and Laplacian dI, clamped to [0.1 min(r1, r_auto),
+ *        2 max(r1, r_auto)] j^(-1/6) (r_auto: 2 pixel widths, as cfg.radius).
  *     3. photon pass: M photon paths from the lights (chosen by power), stored at
  *        diffuse hits, binned into a hash grid.
  *     4. gather: per pixel, I += (1/j) ((1/M) sum_i k_r(x - y_i) W f gamma_i - I);
@@ -130,8 +145,6 @@ typedef enum appm_status {
     APPM_ERR_IO,          /* a file could not be opened, read or written         */
     APPM_ERR_PARSE,       /* malformed scene, OBJ, MTL or image: see appm_diag    */
     APPM_ERR_INVALID_ARG, /* NULL pointer, absurd option, NaN in input           */
-    APPM_ERR_UNSUPPORTED, /* e.g. more threads asked for than the build has       */
-    APPM_ERR_CANCELLED,   /* reserved for callbacks that ask to stop             */
     APPM_STATUS_COUNT
 } appm_status;
 
@@ -172,8 +185,16 @@ typedef enum appm_method {
     APPM_METHOD_APPM = 0, /* adaptive bandwidth, per pixel and pass (default)       */
     APPM_METHOD_PPM,      /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */
     APPM_METHOD_SPPM,     /* per-pixel N, tau, R statistics (Hachisuka-Jensen)       */
-    APPM_METHOD_PT        /* unbiased path tracer with NEE + MIS, for references    */
+    APPM_METHOD_PT,       /* unbiased path tracer with NEE + MIS, for references    */
+    APPM_METHOD_COUNT
 } appm_method;
+
+/* "appm", "ppm", "sppm", "pt"; NULL for a value that is not a method. */
+APPM_API const char *appm_method_name(appm_method m);
+
+/* The method called `name` (as appm_method_name spells it) into *out;
+ * APPM_ERR_INVALID_ARG (and *out untouched) for any other name or NULL. */
+APPM_API appm_status appm_method_parse(const char *name, appm_method *out);
 
 typedef enum appm_direct {
     APPM_DIRECT_NEE = 0,  /* direct light at the visible point by shadow rays      */
@@ -190,7 +211,8 @@ typedef struct appm_config {
     appm_direct direct;       /* APPM_DIRECT_NEE                                     */
     uint32_t width, height;   /* the scene's `image` size (512 x 512)                */
     uint64_t photons;         /* photon paths emitted per pass: width * height       */
-    double radius;            /* initial radius r1, scene units: from the scene      */
+    double radius;            /* initial radius r1, scene units: 2 pixel widths at the
+                               * visible points of the first pass (median)          */
     double alpha;             /* ppm/sppm shrinkage in (0,1]: 2/3 (1 = fixed radius)  */
     unsigned threads;         /* worker threads: all cores                           */
     uint64_t seed;            /* 0 is a valid seed and the default                   */
@@ -206,7 +228,7 @@ APPM_API void appm_config_init(appm_config *cfg);
 typedef struct appm_scene appm_scene;       /* opaque, immutable once loaded */
 typedef struct appm_renderer appm_renderer; /* opaque */
 
-/* Loads a `.scene` file or a bare `.obj` (see the scene format in README.md).
+/* Loads a `.scene` file or a bare `.obj` (the format: docs/scene-format.md).
  * Paths inside are relative to the file's folder.  Only cfg->allocator, cfg->log
  * and cfg->log_user are used; cfg may be NULL. */
 APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
@@ -221,6 +243,25 @@ APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len,
                                                 appm_diag *diag);
 
 APPM_API void appm_scene_destroy(appm_scene *scene);
+
+/* Lights for any scene, added after loading (a model downloaded from the web
+ * rarely has an emissive material).  Call them before creating a renderer from
+ * the scene, never while one exists: they are the only calls that change a
+ * loaded scene.  A bare OBJ in which nothing emits and that has no light loads
+ * with a constant white environment of radiance 1 as a stand-in (each renderer
+ * made from it logs one warning saying so); the first light added through
+ * these calls replaces that stand-in.
+ *
+ * appm_scene_add_point_light: a point light at `position` (scene units) with
+ * radiant intensity `intensity` (W/sr per channel, finite, >= 0); any number.
+ * appm_scene_set_environment: a constant environment of `radiance` arriving
+ * from every unoccluded direction; replaces the scene's environment, if any.
+ * Both return APPM_ERR_INVALID_ARG for non-finite or negative values and leave
+ * the scene as it was on any error. */
+APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double position[3],
+                                                const double intensity[3], appm_diag *diag);
+APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
+                                                appm_diag *diag);
 
 typedef struct appm_scene_info {
     uint64_t triangles;       /* after fan triangulation, degenerate ones dropped */
@@ -249,11 +290,29 @@ typedef struct appm_image {
     float *rgb;               /* width * height * 3 floats, row 0 at the top */
 } appm_image;
 
-/* Writes by extension: `.pfm` (linear float RGB, bit exact), `.ppm` (P6) or `.png`
- * (8-bit sRGB after multiplying by `exposure`; 0 means 1).  The file appears
- * under its name only once it is complete (written to a temporary, then renamed). */
+/* Writes by extension: `.pfm` (linear float RGB, bit exact), `.exr` (OpenEXR,
+ * linear RGB, 32-bit float, ZIP compressed, bit exact), `.ppm` (P6) or `.png`
+ * (8-bit sRGB after multiplying by `exposure`; 0 means 1; deflate compressed
+ * with a per-row filter choice).  The file appears under its name only once it
+ * is complete (written to a temporary, then renamed).  Writing a PNG or EXR
+ * allocates about 0.5 MiB plus a few rows (malloc; appm_image_write_ex takes an
+ * allocator). */
 APPM_API appm_status appm_image_write(const char *path, const appm_image *img, double exposure,
                                       appm_diag *diag);
+
+/* The choices of appm_image_write_ex; all zero = appm_image_write's defaults. */
+typedef struct appm_write_options {
+    double exposure;      /* .png, .ppm: multiply before the sRGB curve (0 means 1)        */
+    int exr_half;         /* .exr: 16-bit half floats (finite values beyond +-65504 clamp  */
+                          /*       to it); 0: 32-bit float                                 */
+    int exr_uncompressed; /* .exr: no compression; 0: ZIP (lossless, 16 lines a block)     */
+} appm_write_options;
+
+/* appm_image_write with options (opt may be NULL) and the allocator of cfg
+ * (cfg may be NULL: malloc/free). */
+APPM_API appm_status appm_image_write_ex(const char *path, const appm_image *img,
+                                         const appm_write_options *opt, const appm_config *cfg,
+                                         appm_diag *diag);
 
 /* Reads a PFM (either byte order, colour or grey).  The pixels come from
  * cfg->allocator (cfg may be NULL); free them with appm_image_free(). */
@@ -305,7 +364,8 @@ APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
  * floats each, borrowed until the next pass.  Returns NULL when the method keeps
  * no such map (e.g. laplacian for ppm), before the first pass, or when the map's
  * memory (allocated on the first request) cannot be had.
- *   RADIUS     the radius each pixel gathered with in the last pass (scene units)
+ *   RADIUS     the radius each pixel gathered with in the last pass (scene units;
+ *              sppm: the radius R of its next gather)
  *   VARIANCE   the estimated variance of the pixel (luminance)
  *   LAPLACIAN  the estimated pixel Laplacian dI (luminance per area^2)
  *   ERROR      the estimated error bar |bias| + 1.645 sigma (luminance)        */

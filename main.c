@@ -100,8 +100,14 @@ static const char *const HELP =
 static const char *const RENDER_HELP =
     "usage: appm render SCENE [options]\n"
     "\n"
-    "  -o, --output FILE     image to write: .pfm (linear float), .ppm or .png (8-bit sRGB)\n"
-    "                        [SCENENAME.png in the current folder]\n"
+    "  -o, --output FILE     image to write: .pfm or .exr (linear float), .ppm or .png\n"
+    "                        (8-bit sRGB) [SCENENAME.png in the current folder]\n"
+    "  --exr float|half      sample type of an .exr output [float]\n"
+    "  --exr-compression zip|none   compression of an .exr output [zip]\n"
+    "  --environment R G B   add (or replace) a constant environment light of this radiance\n"
+    "  --light point X Y Z R G B    add a point light (intensity W/sr per channel); repeatable\n"
+    "                        (a bare .obj that emits nothing and gets neither is lit by a\n"
+    "                        white environment of radiance 1, with a warning)\n"
     "  --method M            appm (adaptive radius, default) | ppm (global radius schedule,\n"
     "                        Knaus-Zwicker) | sppm (per-pixel statistics, Hachisuka-Jensen)\n"
     "                        | pt (unbiased path tracer, for references)\n"
@@ -121,6 +127,21 @@ static const char *const RENDER_HELP =
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
     "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
     "  -q, --quiet           no progress output and no warnings\n";
+
+/* "appm, ppm, sppm or pt": the library's method names, for messages. */
+static const char *method_list(char *buf, size_t size)
+{
+    size_t len = 0;
+    int m, n = (int)APPM_METHOD_COUNT;
+    buf[0] = 0;
+    for (m = 0; m < n; ++m) {
+        int k = snprintf(buf + len, size - len, "%s%s", m == 0 ? "" : (m + 1 < n ? ", " : " or "),
+                         appm_method_name((appm_method)m));
+        if (k < 0 || (size_t)k >= size - len) break;
+        len += (size_t)k;
+    }
+    return buf;
+}
 
 /* ---- Strict number parsing ---------------------------------------------- */
 
@@ -256,13 +277,41 @@ static int write_aux(const char *prefix, const char *name, const float *v, uint3
 
 /* ---- appm render ----------------------------------------------------------- */
 
+#define MAX_CLI_LIGHTS 256
+
 typedef struct render_opts {
     const char *scene, *output, *reference, *log, *aux;
     appm_config cfg;
+    appm_write_options write;
+    double lights[MAX_CLI_LIGHTS][6]; /* --light point: position, intensity */
+    int nlights, have_env;
+    double env[3];                    /* --environment */
     double time_limit, until_error, exposure;
     unsigned long long passes;
     int quiet, have_time, have_passes, have_until;
 } render_opts;
+
+/* --light point X Y Z R G B  or  --environment R G B, at argv[*i]; moves *i to
+ * the last value.  Returns -1 when fine, else the usage error's exit code. */
+static int parse_light(int argc, char **argv, int *i, render_opts *o)
+{
+    const char *a = argv[*i];
+    int env = a[2] == 'e', k, first = *i + (env ? 1 : 2), n = env ? 3 : 6;
+    double *dst = env ? o->env : o->lights[o->nlights];
+    if (!env && o->nlights == MAX_CLI_LIGHTS) return usage_error("more than %d --light options", MAX_CLI_LIGHTS);
+    if (!env && (*i + 1 >= argc || strcmp(argv[*i + 1], "point") != 0))
+        return usage_error("--light needs: point X Y Z R G B");
+    for (k = 0; k < n; ++k) {
+        if (first + k >= argc || !parse_double(argv[first + k], &dst[k]))
+            return usage_error(env ? "--environment needs three numbers R G B" : "--light needs: point X Y Z R G B");
+        if ((env || k >= 3) && dst[k] < 0)
+            return usage_error("%s: negative %s '%s'", a, env ? "radiance" : "intensity", argv[first + k]);
+    }
+    *i = first + n - 1;
+    if (env) o->have_env = 1;
+    else o->nlights++;
+    return -1;
+}
 
 static int parse_render(int argc, char **argv, render_opts *o)
 {
@@ -282,6 +331,11 @@ static int parse_render(int argc, char **argv, render_opts *o)
             o->quiet = 1;
             continue;
         }
+        if (strcmp(a, "--light") == 0 || strcmp(a, "--environment") == 0) {
+            int rc = parse_light(argc, argv, &i, o);
+            if (rc >= 0) return rc;
+            continue;
+        }
         if (a[0] != '-' || a[1] == 0) {
             if (o->scene) return usage_error("more than one scene given ('%s')", a);
             o->scene = a;
@@ -293,12 +347,20 @@ static int parse_render(int argc, char **argv, render_opts *o)
         else if (strcmp(a, "--reference") == 0) o->reference = v;
         else if (strcmp(a, "--log") == 0) o->log = v;
         else if (strcmp(a, "--aux") == 0) o->aux = v;
+        else if (strcmp(a, "--exr") == 0) {
+            if (strcmp(v, "float") == 0) o->write.exr_half = 0;
+            else if (strcmp(v, "half") == 0) o->write.exr_half = 1;
+            else return usage_error("--exr must be float or half, not '%s'", v);
+        } else if (strcmp(a, "--exr-compression") == 0) {
+            if (strcmp(v, "zip") == 0) o->write.exr_uncompressed = 0;
+            else if (strcmp(v, "none") == 0) o->write.exr_uncompressed = 1;
+            else return usage_error("--exr-compression must be zip or none, not '%s'", v);
+        }
         else if (strcmp(a, "--method") == 0) {
-            if (strcmp(v, "appm") == 0) o->cfg.method = APPM_METHOD_APPM;
-            else if (strcmp(v, "ppm") == 0) o->cfg.method = APPM_METHOD_PPM;
-            else if (strcmp(v, "sppm") == 0) o->cfg.method = APPM_METHOD_SPPM;
-            else if (strcmp(v, "pt") == 0) o->cfg.method = APPM_METHOD_PT;
-            else return usage_error("unknown method '%s' (appm, ppm, sppm or pt)", v);
+            if (appm_method_parse(v, &o->cfg.method) != APPM_OK) {
+                char names[256];
+                return usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
+            }
         } else if (strcmp(a, "--direct") == 0) {
             if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
             else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
@@ -373,6 +435,20 @@ static void default_output(const char *scene, char *out, size_t cap)
     memcpy(out + n, ".png", 5);
 }
 
+/* --environment, then the --light point lights, in command-line order. */
+static int add_cli_lights(const render_opts *o, appm_scene *scene)
+{
+    appm_diag d;
+    appm_status s;
+    int k;
+    if (o->have_env && (s = appm_scene_set_environment(scene, o->env, &d)) != APPM_OK)
+        return lib_error(s, &d, "--environment");
+    for (k = 0; k < o->nlights; ++k)
+        if ((s = appm_scene_add_point_light(scene, o->lights[k], o->lights[k] + 3, &d)) != APPM_OK)
+            return lib_error(s, &d, "--light");
+    return EXIT_OK;
+}
+
 static int cmd_render(int argc, char **argv)
 {
     render_opts o;
@@ -400,6 +476,10 @@ static int cmd_render(int argc, char **argv)
         o.have_time = 1;
     }
     if ((s = appm_scene_load(o.scene, &o.cfg, &scene, &d)) != APPM_OK) return lib_error(s, &d, o.scene);
+    if ((rc = add_cli_lights(&o, scene)) != EXIT_OK) {
+        appm_scene_destroy(scene);
+        return rc;
+    }
     if (o.reference && (s = appm_image_read_pfm(o.reference, NULL, &ref, &d)) != APPM_OK) {
         appm_scene_destroy(scene);
         return lib_error(s, &d, o.reference);
@@ -473,9 +553,11 @@ static int cmd_render(int argc, char **argv)
         if (o.have_until && st.est_relerr >= 0 && st.est_relerr < o.until_error) break;
     }
     if (progress) fprintf(stderr, "\n");
+    appm_renderer_stats(r, &st); /* also after a failed pass, even the first */
     if (rc == 0 || st.passes > 0) {
         appm_renderer_image(r, &img);
-        if ((s = appm_image_write(o.output, &img, o.exposure, &d)) != APPM_OK) {
+        o.write.exposure = o.exposure;
+        if ((s = appm_image_write_ex(o.output, &img, &o.write, NULL, &d)) != APPM_OK) {
             rc = lib_error(s, &d, o.output);
             if (rc == EXIT_INPUT) rc = EXIT_RUNTIME;
             goto done;
@@ -491,12 +573,11 @@ static int cmd_render(int argc, char **argv)
         }
     }
     if (rc == 0) {
-        static const char *const mname[4] = {"appm", "ppm", "sppm", "pt"};
         appm_renderer_stats(r, &st);
         printf("passes=%llu photons=%llu seconds=%.2f radius=%.6g output=%s method=%s threads=%u "
                "peak_bytes=%llu dropped=%llu",
                (unsigned long long)st.passes, (unsigned long long)st.photons_emitted, st.seconds,
-               st.initial_radius, o.output, mname[o.cfg.method], st.threads,
+               st.initial_radius, o.output, appm_method_name(o.cfg.method), st.threads,
                (unsigned long long)st.peak_bytes, (unsigned long long)st.dropped_samples);
         printf(" eye_s=%.3f photon_s=%.3f grid_s=%.3f gather_s=%.3f photons_stored=%llu",
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
@@ -519,6 +600,26 @@ done:
 
 /* ---- appm compare / info --------------------------------------------------- */
 
+/* Pixels of `img` with a NaN or infinite channel; the first (in reading order,
+ * row 0 at the top) into *fx, *fy.  Says so on stderr and returns their count. */
+static unsigned long report_nonfinite(const char *path, const appm_image *img)
+{
+    unsigned long n = 0, fx = 0, fy = 0, i, npix = (unsigned long)img->width * img->height;
+    for (i = 0; i < npix; ++i) {
+        const float *p = &img->rgb[3 * i];
+        int c, bad = 0;
+        for (c = 0; c < 3; ++c) bad |= !(p[c] - p[c] == 0.0f); /* NaN or inf */
+        if (bad && n++ == 0) {
+            fx = i % img->width;
+            fy = i / img->width;
+        }
+    }
+    if (n)
+        fprintf(stderr, "appm: %s: %lu pixel%s hold NaN or infinite values; the first is x=%lu y=%lu (row 0 at the top)\n",
+                path, n, n == 1 ? "" : "s", fx, fy);
+    return n;
+}
+
 static int cmd_compare(int argc, char **argv)
 {
     appm_image a, b;
@@ -538,6 +639,11 @@ static int cmd_compare(int argc, char **argv)
     if (appm_image_compare(&a, &b, &c) != APPM_OK) {
         fprintf(stderr, "appm: %s is %lux%lu but %s is %lux%lu\n", argv[2], (unsigned long)a.width,
                 (unsigned long)a.height, argv[3], (unsigned long)b.width, (unsigned long)b.height);
+        appm_image_free(NULL, &a);
+        appm_image_free(NULL, &b);
+        return EXIT_INPUT;
+    }
+    if (report_nonfinite(argv[2], &a) + report_nonfinite(argv[3], &b) > 0) {
         appm_image_free(NULL, &a);
         appm_image_free(NULL, &b);
         return EXIT_INPUT;

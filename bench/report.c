@@ -28,6 +28,8 @@
  * Exit status: 0 if at least one run was processed; 2 on bad usage or if no
  * run could be processed; 1 if an output file could not be written.
  */
+#include "../appm.h"
+
 #include <ctype.h>
 #include <errno.h>
 #include <math.h>
@@ -1042,8 +1044,7 @@ int main(int argc, char **argv)
         r.method = xstrdup(fl.f[col[1]]);
         r.config = xstrdup(fl.f[col[2]]);
         r.log = xstrdup(fl.f[col[3]]);
-        if (strcmp(r.method, "appm") && strcmp(r.method, "ppm") && strcmp(r.method, "sppm") &&
-            strcmp(r.method, "pt"))
+        if (appm_method_parse(r.method, NULL) != APPM_OK)
             complain(path, lineno, "unknown method '%s' (kept)", r.method);
         logpath = join_path(dir, r.log);
         if (load_log(&r, logpath) < 0) {

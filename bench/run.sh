@@ -26,7 +26,7 @@ mkdir -p "$out" bench/ref
 rm -f "$out"/*.csv "$out"/*.svg "$out"/*.md
 
 [ -x "$APPM" ] || { echo "bench: build ./appm first (make)"; exit 1; }
-$CC -std=c99 -O2 bench/report.c -o bench/report -lm || exit 1
+$CC -std=c99 -O2 bench/report.c appm.c -o bench/report -lm -pthread || exit 1
 $CC -std=c99 -O2 bench/refmix.c appm.c -o bench/refmix -lm -pthread || exit 1
 
 # value of key=... in a summary line

@@ -30,7 +30,7 @@ check() { # check NAME COMMAND...: passes when the command succeeds
 
 # shellcheck disable=SC2086 # CFLAGS is a list of flags
 if ! ${CC:-cc} -std=c99 -Wall -Wextra -pedantic -Werror -O2 ${CFLAGS:-} \
-    "$here/report.c" -o "$tmp/report" -lm; then
+    "$here/report.c" "$here/../appm.c" -o "$tmp/report" -lm -pthread; then
     bad "compile"
     echo "$passed passed, $failed failed"
     exit 1

@@ -15,6 +15,13 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(_WIN32)
+#include <direct.h>
+#define check_mkdir_(path) _mkdir(path)
+#else
+#include <sys/stat.h>
+#define check_mkdir_(path) mkdir(path, 0777)
+#endif
 
 static int g_pass, g_fail;
 
@@ -63,12 +70,17 @@ static inline int check_quick(void)
     return q && q[0] == '1';
 }
 
-/* A scratch folder for the test's files: tests/out/<name>/ (created by run.sh
- * and the Makefile).  check_path() returns a static buffer: copy if needed. */
+/* A scratch folder for the test's files: tests/out/<group>-<file>.  The first
+ * call creates tests/out (an existing one is fine), so a test binary also runs
+ * on its own from the repository root.  Returns a static buffer: copy if needed. */
 static inline const char *check_path(const char *group, const char *file)
 {
     static char buf[2][1024];
-    static int k;
+    static int k, made;
+    if (!made) {
+        (void)check_mkdir_("tests/out");
+        made = 1;
+    }
     k ^= 1;
     snprintf(buf[k], sizeof buf[k], "tests/out/%s-%s", group, file);
     return buf[k];

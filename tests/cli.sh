@@ -1,8 +1,9 @@
 #!/bin/sh
 # shellcheck disable=SC2016 # the awk programs in single quotes are not for the shell
-# tests/cli.sh - the command line contract (design: interface.md section 3):
+# tests/cli.sh - the command line contract (docs/scene-format.md section 3):
 # help and version, info, render to every format, exit codes and messages for
-# bad options and bad files, compare, --log, --aux, failed writes, the embed
+# bad options and bad files, compare, --log, --aux, failed writes, EXR and PNG
+# read by their reference tools, lights from the command line, the embed
 # example and SIGINT.
 #
 #   sh tests/cli.sh ./appm build/embed        (from the repository root)
@@ -194,6 +195,22 @@ check "compare a b: mae $(value mae) = 0.25" near "$(value mae)" 0.25
 check "compare a b: mean_a $(value mean_a) = 0.75" near "$(value mean_a)" 0.75
 check "compare a b: mean_b $(value mean_b) = 1" near "$(value mean_b)" 1
 
+# NaN (7fc00000) and +inf (7f800000) pixels: a 3x2 image whose pixel (1,0)
+# has a NaN and (2,1) an inf (rows stored bottom to top: the file's first row
+# is y = 1).  compare must say how many and where the first is, and exit 2.
+nan_le='\0000\0000\0300\0177'
+inf_le='\0000\0000\0200\0177'
+printf 'PF\n3 2\n-1.0\n%b' "$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le$inf_le" >"$T/nan.pfm"
+printf '%b' "$one_le$one_le$one_le$one_le$nan_le$one_le$one_le$one_le$one_le" >>"$T/nan.pfm"
+printf 'PF\n3 2\n-1.0\n%b' "$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le" >"$T/ones.pfm"
+printf '%b' "$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le$one_le" >>"$T/ones.pfm"
+run "$APPM" compare "$T/nan.pfm" "$T/ones.pfm"
+check "compare with NaN/inf exits 2 (got $rc)" [ "$rc" -eq 2 ]
+check "compare with NaN/inf: no rmse line" [ ! -s "$T/out" ]
+check "compare with NaN/inf: 2 pixels, the first at x=1 y=0" grep -q 'nan.pfm: 2 pixels hold NaN or infinite values; the first is x=1 y=0' "$T/err"
+run "$APPM" compare "$T/ones.pfm" "$T/nan.pfm"
+check "compare with NaN/inf in the reference exits 2 (got $rc)" [ "$rc" -eq 2 ]
+
 run "$APPM" compare "$T/a.pfm" "$T/a.pfm"
 check "compare a a exits 0" [ "$rc" -eq 0 ]
 check "compare a a: rmse=0 relmse=0 mae=0" grep -q '^rmse=0 relmse=0 mae=0 ' "$T/out"
@@ -279,11 +296,111 @@ check "replacing a folder leaves no temporary" [ ! -e "$T/taken.pfm.tmp" ]
 
 # ---- the embedding example ------------------------------------------------------------
 
+# ---- output formats: the reference tools read what appm writes ------------------------
+# pngcheck and the OpenEXR library's own tools (exrheader, and tests/exr/exr_ref.cpp
+# built against the library) check the files where they are installed; under CI=true
+# (.ci/run installs them) a missing one is a failure, elsewhere a skip with a note.
+
+# need TOOL: 0 if installed; otherwise a failure under CI=true, or a note
+need() {
+    command -v "$1" >/dev/null 2>&1 && return 0
+    if [ "${CI:-}" = true ]; then
+        check "$1 is installed (CI=true)" false
+    else
+        echo "note: $1 is not installed, its checks are skipped" >&2
+    fi
+    return 1
+}
+
+run "$APPM" render "$SCENE" --size 40x24 --passes 2 -q --seed 5 -o "$T/fmt.pfm"
+for kind in "float zip" "half zip" "float none" "half none"; do
+    set -- $kind
+    out=$T/fmt-$1-$2.exr
+    run "$APPM" render "$SCENE" --size 40x24 --passes 2 -q --seed 5 --exr "$1" --exr-compression "$2" -o "$out"
+    check "render -o .exr --exr $1 --exr-compression $2 exits 0" [ "$rc" -eq 0 ]
+    check "$out starts with the OpenEXR magic" [ "$(magic "$out" 4)" = 'v/1001' ]
+    if need exrheader; then
+        run exrheader "$out"
+        check "exrheader reads $out" [ "$rc" -eq 0 ]
+        case $2 in zip) c='zip, multi-scanline' ;; *) c='compression (type compression): no' ;; esac
+        case $1 in float) p='32-bit floating-point' ;; *) p='16-bit floating-point' ;; esac
+        check "exrheader: $out is $1, $2" contains "$T/out" "$c" "$p" '(0 0) - (39 23)'
+    fi
+done
+exr_ref=
+if need c++ && need pkg-config && pkg-config --exists OpenEXR 2>/dev/null; then
+    # shellcheck disable=SC2046 # pkg-config's flags are word lists
+    if c++ -O1 -o "$T/exr_ref" tests/exr/exr_ref.cpp $(pkg-config --cflags --libs OpenEXR) 2>"$T/err"; then
+        exr_ref=$T/exr_ref
+    else
+        check "tests/exr/exr_ref.cpp builds against the OpenEXR library" false
+    fi
+elif [ "${CI:-}" = true ]; then
+    check "the OpenEXR library (libopenexr-dev) is installed (CI=true)" false
+fi
+if [ -n "$exr_ref" ]; then
+    for kind in "float zip" "half zip" "float none" "half none"; do
+        set -- $kind
+        run "$exr_ref" "$T/fmt-$1-$2.exr" "$T/fmt.pfm" "$1"
+        check "the OpenEXR library reads fmt-$1-$2.exr back to the PFM's values: $(cat "$T/out")" [ "$rc" -eq 0 ]
+    done
+fi
+run "$APPM" render "$SCENE" --size 40x24 --passes 2 -q --exr double -o "$T/never.exr"
+check "--exr double is a usage error" [ "$rc" -eq 1 ]
+run "$APPM" render "$SCENE" --size 40x24 --passes 2 -q --exr-compression rle -o "$T/never.exr"
+check "--exr-compression rle is a usage error" [ "$rc" -eq 1 ]
+if need pngcheck; then
+    run pngcheck "$T/r-appm.png"
+    check "pngcheck reads the PNG" [ "$rc" -eq 0 ]
+fi
+
+# ---- any OBJ renders: the white environment, --light, --environment ------------------
+
+BUNNY=scenes/stanford-bunny.obj
+run "$APPM" render "$BUNNY" --size 32x32 --passes 2 -o "$T/bunny.png"
+check "a bare OBJ without light renders (exit $rc)" [ "$rc" -eq 0 ]
+check "... with one warning about the white environment" \
+    [ "$(grep -c 'white environment of radiance 1' "$T/err")" -eq 1 ]
+check "... and writes the image" [ -s "$T/bunny.png" ]
+run "$APPM" render "$BUNNY" --size 32x32 --passes 2 -o "$T/bunny-l.pfm" --light point 0 0.3 0.3 0.05 0.05 0.05 \
+    --light point 0.2 0.3 0 0.02 0.02 0.02
+check "--light point (twice) exits 0" [ "$rc" -eq 0 ]
+check "... without the warning" [ ! -s "$T/err" ]
+run "$APPM" info "$BUNNY"
+check "info of the bare OBJ: one environment" contains "$T/out" '0 area, 0 point, 0 spot, 1 environment'
+run "$APPM" render "$BUNNY" --size 32x32 --passes 2 -o "$T/bunny-e.pfm" --environment 0.5 0.4 0.3
+check "--environment exits 0, without the warning" [ "$rc" -eq 0 ] && [ ! -s "$T/err" ]
+run "$APPM" render "$SCENE" --size 32x32 --passes 2 -q -o "$T/cornell-el.pfm" --environment 0.1 0.1 0.1 \
+    --light point 0 1.5 0 1 1 1
+check "--environment and --light add to a scene that has lights" [ "$rc" -eq 0 ]
+for bad in "--light spot 0 0 0 1 1 1" "--light point 0 0 0 1 1" "--light point 0 0 0 1 -1 1" \
+    "--environment 1 1" "--environment 1 x 1" "--environment -1 0 0"; do
+    # shellcheck disable=SC2086 # the options are word lists on purpose
+    run "$APPM" render "$BUNNY" --size 8x8 --passes 1 -q -o "$T/never.png" $bad
+    check "'$bad' is a usage error (exit $rc)" [ "$rc" -eq 1 ]
+done
+check "no image from the refused renders" absent "$T/never.png"
+
 if [ -n "$EMBED" ]; then
     run "$EMBED" "$SCENE" "$T/embed.png"
     check "embed exits 0" [ "$rc" -eq 0 ]
     check "embed wrote a PNG" [ "$(magic "$T/embed.png" 4)" = '211PNG' ]
 fi
+
+# ---- a first pass that fails ---------------------------------------------------
+# The photon store must grow in the first pass (many photons per path in a
+# closed box) beyond what ulimit -v leaves: the render reports it, exits 3 and
+# writes no image of zero passes.  APPM_PATTERN (the CLI built with
+# -ftrivial-auto-var-init=pattern) makes a read of never-filled stats visible.
+for bin in "$APPM" ${APPM_PATTERN:+"$(abspath "$APPM_PATTERN")"}; do
+    rm -f "$T/oom.pfm"
+    (ulimit -v 100000 2>/dev/null && exec "$bin" render scenes/cornell-empty-white.scene --size 8x8 \
+        --photons 1000000 --passes 1 --threads 1 -q -o "$T/oom.pfm") >"$T/out" 2>"$T/err"
+    rc=$?
+    check "first pass out of memory: exit 3 (got $rc)" [ "$rc" -eq 3 ]
+    check "first pass out of memory: the message" grep -q 'pass failed: out of memory' "$T/err"
+    check "first pass out of memory: no image" absent "$T/oom.pfm"
+done
 
 # ---- SIGINT: stop after the pass in flight, write, report ----------------------------
 

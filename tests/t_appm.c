@@ -1,6 +1,6 @@
 /* tests/t_appm.c - the adaptive bandwidth selector on synthetic photons, no scene.
  *
- * The toy of the design notes (algorithm.md 4.9): photons uniform on the square
+ * The toy of docs/algorithm.md 4.9: photons uniform on the square
  * [-1,1]^2 of the plane z = 0 (density rho = 1/4 per emitted path) carrying
  * Psi = (1 + 50 |y|^2) U, U uniform on (0, 2).  At x = 0 the gathered quantity
  * is L(x) = rho E[Psi | x] = (1 + 50 |x|^2) / 4, so
@@ -8,7 +8,7 @@
  * Every test drives the renderer's own functions: appm__gather_photon (the
  * per-photon kernel and finite-difference sums), appm__gather_finish (the
  * normalisation), appm__r_opt / appm__appm_radius (the selector) and
- * appm__pixel_update (the recursive means).
+ * appm__appm_update (the recursive means).
  */
 #include "../appm.c"
 #include "check.h"
@@ -258,7 +258,7 @@ static void test_selector_guards(void)
     for (j = 1; j <= 1000; j *= 10)
         for (a = 0; a < sizeof vals / sizeof vals[0]; ++a)
             for (b = 0; b < sizeof vals / sizeof vals[0]; ++b) {
-                appm__pixel p;
+                appm__appm_state p;
                 double n_values[3] = {0.0, 1.0, 1e9}, rk = r1 * pow((double)j, -1.0 / 6.0);
                 int k;
                 for (k = 0; k < 3; ++k) {
@@ -266,8 +266,8 @@ static void test_selector_guards(void)
                     memset(&p, 0, sizeof p);
                     p.S = vals[a];
                     p.dI = vals[b];
-                    p.n = n_values[k];
-                    p.r = k == 2 ? 0.02 : 0.0;
+                    p.N = (uint64_t)n_values[k];
+                    p.R = k == 2 ? 0.02 : 0.0;
                     r = appm__appm_radius(r1, r1, 1000, j + 5, &p);
                     rk = r1 * pow((double)(j + 5), -1.0 / 6.0);
                     if (!(r > 0.0) || !(r < HUGE_VAL) || r < APPM__RLO * rk * (1 - 1e-12) ||
@@ -277,11 +277,11 @@ static void test_selector_guards(void)
             }
     CHECK_MSG(bad == 0, "%d degenerate inputs gave a radius outside the clamps", bad);
     {
-        appm__pixel p;
+        appm__appm_state p;
         memset(&p, 0, sizeof p);
         p.S = 1.0;
         p.dI = (double)NAN;
-        p.n = 100;
+        p.N = 100;
         CHECK(appm__appm_radius(r1, r1, 1000, 10, &p) == r1 * pow(10.0, -1.0 / 6.0));
         CHECK(appm__r_opt(0.0, 50.0, 1e4, 2.0) == 0.0);
         CHECK(appm__r_opt(1.0, 0.0, 1e4, 2.0) == 0.0);
@@ -290,11 +290,11 @@ static void test_selector_guards(void)
     /* flat lighting (dI -> 0) must give the largest radius, a strong curvature
      * a small one: the direction of the adaptation */
     {
-        appm__pixel p;
+        appm__appm_state p;
         double rk = r1 * pow(10.0, -1.0 / 6.0);
         memset(&p, 0, sizeof p);
         p.S = 1.0;
-        p.n = 100;
+        p.N = 100;
         p.dI = 1e-12;
         CHECK_NEAR(appm__appm_radius(r1, r1, 1000, 10, &p), APPM__RHI * rk, 1e-15);
         p.dI = 1e12;
@@ -305,7 +305,7 @@ static void test_selector_guards(void)
 /* The full progressive loop on the toy (M = 1000 photons a pass): APPM must be
  * insensitive to its initial radius (final RMSEs for r1 = 0.03, 0.1, 0.3 within
  * a factor 1.5 of each other) and better than Knaus-Zwicker PPM with a badly
- * chosen radius (0.03 or 0.3), as the design notes' simulation found. */
+ * chosen radius (0.03 or 0.3), as the simulation of docs/algorithm.md 4.9 found. */
 #define TOY_RB 0.1 /* the scene's own scale (in a render: the automatic radius) */
 
 static double toy_progressive(double r1, int adaptive, int passes, int runs, uint64_t seed)
@@ -313,24 +313,29 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
     double se = 0.0;
     int run;
     for (run = 0; run < runs; ++run) {
-        appm__pixel p;
+        appm__appm_state p;
+        appm__ppm_state kz;
         appm__rng rng;
         int j;
         memset(&p, 0, sizeof p);
+        memset(&kz, 0, sizeof kz);
         appm__rng_seed(&rng, seed, (uint64_t)run, APPM__DOMAIN_TEST, 7);
         for (j = 1; j <= passes; ++j) {
             double e[3], s, dl, ev;
             uint64_t count;
             float h;
-            p.r = adaptive ? appm__appm_radius(r1, TOY_RB, 1000, (uint64_t)j, &p)
+            p.R = adaptive ? appm__appm_radius(r1, TOY_RB, 1000, (uint64_t)j, &p)
                            : r1 * pow((double)j, -1.0 / 6.0); /* KZ with alpha = 2/3 */
             h = adaptive && appm__lap_pass((uint64_t)j) ? (float)appm__lap_h(TOY_RB, (uint64_t)j) : 0.0f;
-            toy_pass(&rng, 1000, (float)p.r, h, adaptive, 0, &ev, &s, &dl, &count);
+            toy_pass(&rng, 1000, (float)p.R, h, adaptive, 0, &ev, &s, &dl, &count);
             e[0] = e[1] = e[2] = ev;
-            appm__pixel_update(&p, (uint64_t)j, adaptive, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0,
-                               count, 0.0);
+            if (adaptive)
+                appm__appm_update(&p, (uint64_t)j, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0, count);
+            else
+                appm__mean_update(kz.I, (uint64_t)j, e);
         }
-        se += (p.acc[1] - TOY_L0) * (p.acc[1] - TOY_L0);
+        if (!adaptive) p.I[1] = kz.I[1];
+        se += (p.I[1] - TOY_L0) * (p.I[1] - TOY_L0);
     }
     return sqrt(se / runs);
 }

@@ -1,4 +1,4 @@
-/* tests/t_extremes.c - numerical extremes (design notes, testing.md section 2).
+/* tests/t_extremes.c - numerical extremes (docs/testing.md section 2).
  *
  * Each group pushes one quantity to its limit and states, in its comment, what
  * good behaviour is there; the checks assert exactly that:
@@ -541,7 +541,7 @@ static void test_photon_counts(void)
  * photons is kept where adding one more still changes it, and a running mean
  * of a constant stays that constant.
  *
- * (1) appm__pixel_update, 1e7 passes of the same per-pass values: the
+ * (1) appm__appm_update and appm__welford, 1e7 passes of the same per-pass values: the
  *     recursive mean I += (x - I) / j reproduces x exactly after the first
  *     pass (x - I is then exactly 0), so acc, S, dI and the Welford mean are
  *     bitwise x, and the Welford M2 and the Laplacian's spread stay 0; the
@@ -562,32 +562,37 @@ static void test_accumulators(void)
     const double e[3] = {0.1, 0.3, 0.7}, e2[3] = {0.2, 0.6, 1.4};
     const double s_in = 0.0123, dl_in = -2.5, ld_lum = 0.2;
     const uint64_t passes = 10000000u;
-    appm__pixel px;
+    appm__appm_state px;
+    appm__pixel pw;
     uint64_t j;
     int c, exact = 1;
     double v;
     memset(&px, 0, sizeof px);
-    px.r = 0.5;
-    for (j = 1; j <= passes; ++j) appm__pixel_update(&px, j, 1, e, s_in, dl_in, 1.0, 1000, ld_lum);
-    for (c = 0; c < 3; ++c) exact &= px.acc[c] == e[c];
+    memset(&pw, 0, sizeof pw);
+    px.R = 0.5;
+    for (j = 1; j <= passes; ++j) {
+        appm__appm_update(&px, j, e, s_in, dl_in, 1.0, 1000);
+        appm__welford(&pw, j, ld_lum + appm__lumd(e));
+    }
+    for (c = 0; c < 3; ++c) exact &= px.I[c] == e[c];
     v = ld_lum + appm__lumd(e);
-    CHECK_MSG(exact, "the running mean of a constant drifted: %.17g %.17g %.17g", px.acc[0], px.acc[1],
-              px.acc[2]);
+    CHECK_MSG(exact, "the running mean of a constant drifted: %.17g %.17g %.17g", px.I[0], px.I[1],
+              px.I[2]);
     CHECK(px.S == s_in);
     CHECK(px.dI == dl_in && px.dI_m2 == 0.0 && px.dI_w == (double)passes);
-    CHECK(px.wmean == v && px.wm2 == 0.0);
-    CHECK_MSG(px.n == 1e10, "photon count %.17g, expected 1e10", px.n);
-    CHECK(px.r2sum == 0.25 * (double)passes);
-    appm__pixel_update(&px, passes + 1, 1, e2, s_in, dl_in, 1.0, 1, ld_lum);
+    CHECK(pw.wmean == v && pw.wm2 == 0.0);
+    CHECK_MSG(px.N == 10000000000u, "photon count %.17g, expected 1e10", (double)px.N);
+    CHECK(px.R2sum == 0.25 * (double)passes);
+    appm__appm_update(&px, passes + 1, e2, s_in, dl_in, 1.0, 1);
     for (c = 0; c < 3; ++c)
-        CHECK_NEAR(px.acc[c], e[c] + (e2[c] - e[c]) / (double)(passes + 1), 1e-15 * e[c]);
-    CHECK(px.acc[0] != e[0] && px.n == 1e10 + 1.0);
+        CHECK_NEAR(px.I[c], e[c] + (e2[c] - e[c]) / (double)(passes + 1), 1e-15 * e[c]);
+    CHECK(px.I[0] != e[0] && px.N == 10000000001u);
 
     /* (2) */
     memset(&px, 0, sizeof px);
-    px.n = 1099511627776.0; /* 2^40 */
-    appm__pixel_update(&px, 2, 1, e, s_in, dl_in, 0.0, 1, ld_lum);
-    CHECK(px.n == 1099511627777.0);
+    px.N = (uint64_t)1 << 40;
+    appm__appm_update(&px, 2, e, s_in, dl_in, 0.0, 1);
+    CHECK(px.N == ((uint64_t)1 << 40) + 1);
 
     /* (3) sppm at N = 2^40 */
     {
@@ -605,20 +610,21 @@ static void test_accumulators(void)
             double r_before[64];
             int i, moved = 0, consistent = 1;
             for (i = 0; i < 64; ++i) {
-                r->pix[i].n = N0;
-                r_before[i] = r->pix[i].r;
+                appm__sppm_state *k = (appm__sppm_state *)appm__state(r, (size_t)i);
+                k->N = N0;
+                r_before[i] = k->R;
             }
             if (check_passes(r, 1)) {
                 for (i = 0; i < 64; ++i) {
-                    const appm__pixel *p = &r->pix[i];
-                    double m = (p->n - N0) / r->alpha, expect_r;
-                    if (p->n == N0) continue; /* no photon found: nothing to change */
+                    const appm__sppm_state *p = (const appm__sppm_state *)appm__state(r, (size_t)i);
+                    double m = (p->N - N0) / r->alpha, expect_r;
+                    if (p->N == N0) continue; /* no photon found: nothing to change */
                     moved++;
                     /* m is a whole number of photons; N has 2^-12 resolution at 2^40 */
                     consistent &= m >= 0.5 && fabs(m - floor(m + 0.5)) < 1e-2;
                     m = floor(m + 0.5);
-                    expect_r = r_before[i] * sqrt(p->n / (N0 + m));
-                    consistent &= p->r < r_before[i] && fabs(p->r - expect_r) <= 1e-12 * expect_r;
+                    expect_r = r_before[i] * sqrt(p->N / (N0 + m));
+                    consistent &= p->R < r_before[i] && fabs(p->R - expect_r) <= 1e-12 * expect_r;
                 }
                 CHECK_MSG(moved >= 32, "sppm at N = 2^40: only %d of 64 pixels changed N", moved);
                 CHECK_MSG(consistent, "sppm at N = 2^40: N, R not updated as N' = N + alpha m, "

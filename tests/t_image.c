@@ -1,4 +1,4 @@
-/* tests/t_image.c - image files: PFM, PPM and PNG writers, the PFM reader, the
+/* tests/t_image.c - image files: PFM, PPM, PNG and EXR writers, the PFM reader, the
  * error metrics, and what a failed write leaves behind.
  *
  * The files are checked byte by byte against the formats' own definitions,
@@ -7,8 +7,9 @@
  *   PPM  "P6\n<w> <h>\n255\n", rows top to bottom, RGB bytes
  *   PNG  signature, chunks each with a CRC-32 over type + data, a zlib stream
  *        (header, deflate blocks, Adler-32) of rows each led by a filter byte.
- * The PNG writer promises stored (uncompressed) deflate blocks, so the small
- * inflater below only knows those.
+ * The PNG's zlib stream is inflated and its row filters undone by
+ * tests/inflate.h, written from the RFCs independently of the library; the
+ * pixels must be exactly the PPM writer's bytes.
  *
  * sRGB bytes used below, from the sRGB curve 1.055 v^(1/2.4) - 0.055 (12.92 v
  * under 0.0031308), times 255, rounded; every value is at least 0.016 away from
@@ -17,6 +18,7 @@
  *   0.25 -> 137, 0.001 -> 3, 0.1 -> 89, 0.75 -> 225, 1e30 and +inf -> 255. */
 #include "../appm.c"
 #include "check.h"
+#include "inflate.h"
 
 #if defined(__unix__) || defined(__APPLE__)
 #include <sys/stat.h>
@@ -313,19 +315,23 @@ static void test_pfm_malformed(void)
 typedef struct png_info {
     int ok;
     uint32_t w, h;
-    int blocks;                /* stored deflate blocks */
-    unsigned char *raw;        /* the inflated rows (filter byte + RGB) */
+    int idat;                  /* IDAT chunks */
+    int blocks[3];             /* deflate blocks: stored, fixed, dynamic */
+    int filters[5];            /* rows per filter type */
+    unsigned char *raw;        /* the pixels, RGB, row 0 first (filters undone) */
     size_t raw_len;
+    size_t zlen;               /* bytes of the zlib stream */
 } png_info;
 
-/* Walks the chunks, checks every CRC, joins the IDAT data, checks the zlib
- * header, inflates stored blocks and checks the Adler-32. */
+/* Walks the chunks, checks every CRC, joins the IDAT data, inflates it
+ * (header, blocks and Adler-32 checked by tests/inflate.h) and undoes the row
+ * filters. */
 static png_info png_decode(const unsigned char *p, size_t len)
 {
     static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
     png_info r;
-    unsigned char *z = NULL;
-    size_t zlen = 0, pos = 8, zp;
+    unsigned char *z = NULL, *rows;
+    size_t zlen = 0, pos = 8, got, want;
     int seen_ihdr = 0, seen_iend = 0, first = 1;
     memset(&r, 0, sizeof r);
     CHECK(len >= 8 && memcmp(p, sig, 8) == 0);
@@ -347,6 +353,7 @@ static png_info png_decode(const unsigned char *p, size_t len)
         } else if (memcmp(type, "IDAT", 4) == 0) {
             memcpy(z + zlen, data, n);
             zlen += n;
+            r.idat++;
         } else if (memcmp(type, "IEND", 4) == 0) {
             seen_iend = 1;
             CHECK(n == 0);
@@ -355,45 +362,18 @@ static png_info png_decode(const unsigned char *p, size_t len)
         pos += 12 + (size_t)n;
     }
     CHECK(seen_ihdr && seen_iend);
-    /* zlib: CM = 8 (deflate), window <= 32K, no preset dictionary, check bits */
-    CHECK(zlen >= 6);
-    if (zlen < 6) {
-        free(z);
-        return r;
+    r.zlen = zlen;
+    want = (size_t)r.h * (1 + 3 * (size_t)r.w);
+    rows = (unsigned char *)malloc(want + 1);
+    got = seen_ihdr ? tinf_zlib(z, zlen, rows, want + 1, r.blocks) : (size_t)-1;
+    CHECK_MSG(got == want, "the zlib stream inflates to %.0f bytes, not %.0f", (double)got, (double)want);
+    if (got == want) {
+        r.raw_len = (size_t)r.h * 3 * r.w;
+        r.raw = (unsigned char *)malloc(r.raw_len + 1);
+        r.ok = png_unfilter(rows, 3 * (size_t)r.w, r.h, 3, r.raw, r.filters);
+        CHECK(r.ok);
     }
-    CHECK((z[0] & 15) == 8 && (z[0] >> 4) <= 7);
-    CHECK((z[1] & 0x20) == 0);
-    CHECK(((unsigned)z[0] * 256u + z[1]) % 31u == 0);
-    r.raw = (unsigned char *)malloc(zlen);
-    zp = 2;
-    for (;;) {
-        unsigned hdr, ln, nln;
-        if (zp + 5 > zlen) {
-            CHECK_MSG(0, "deflate stream runs past the IDAT data");
-            break;
-        }
-        hdr = z[zp];
-        CHECK_MSG(((hdr >> 1) & 3) == 0, "block type %u is not 'stored'", (hdr >> 1) & 3);
-        if (((hdr >> 1) & 3) != 0) break;
-        ln = z[zp + 1] | (unsigned)z[zp + 2] << 8;
-        nln = z[zp + 3] | (unsigned)z[zp + 4] << 8;
-        CHECK(nln == (~ln & 0xFFFFu));
-        zp += 5;
-        if (zp + ln > zlen) {
-            CHECK_MSG(0, "stored block runs past the IDAT data");
-            break;
-        }
-        memcpy(r.raw + r.raw_len, z + zp, ln);
-        r.raw_len += ln;
-        zp += ln;
-        r.blocks++;
-        if (hdr & 1) break; /* BFINAL */
-    }
-    CHECK(zp + 4 == zlen); /* the Adler-32 closes the stream */
-    if (zp + 4 == zlen) {
-        CHECK_MSG(be32(z + zp) == adler32_of(r.raw, r.raw_len), "Adler-32 is wrong");
-        r.ok = 1;
-    }
+    free(rows);
     free(z);
     return r;
 }
@@ -408,8 +388,8 @@ static void test_png(void)
     const char *path = check_path("image", "small.png");
     float px[2 * 2 * 3] = {0.0f, 0.5f, 1.0f, 2.0f, 0.0f, -1.0f, /* row 0 */
                            0.25f, 0.001f, 1e30f, 0.1f, 0.75f, 0.0f};
-    static const unsigned char want[2 * 7] = {0, 0, 188, 255, 255, 0, 0, /* filter 0, row 0 */
-                                              0, 137, 3, 255, 89, 225, 0};
+    static const unsigned char want[2 * 6] = {0, 188, 255, 255, 0, 0, /* row 0 */
+                                              137, 3, 255, 89, 225, 0};
     appm_image img;
     appm_diag d;
     unsigned char *raw;
@@ -426,30 +406,29 @@ static void test_png(void)
         png_info r = png_decode(raw, len);
         unsigned char want2[sizeof want];
         memcpy(want2, want, sizeof want);
-        want2[13] = 255; /* +inf */
+        want2[11] = 255; /* +inf */
         CHECK(r.ok && r.w == 2 && r.h == 2);
         CHECK(r.raw_len == sizeof want);
         CHECK(r.raw_len == sizeof want && memcmp(r.raw, want2, sizeof want) == 0);
         free(r.raw);
         free(raw);
     }
-    /* Wide enough that the rows span several 65535-byte stored blocks:
-     * 300 rows of 1 + 3 * 200 bytes = 180300 bytes = 3 blocks. */
+    /* 300 rows of 1 + 3 * 200 bytes = 180300 bytes: more than the 64 KiB
+     * window of the compressor, so it slides. */
     {
         enum { W = 200, H = 300 };
         float *big = (float *)malloc(sizeof(float) * W * H * 3);
-        unsigned char *expect = (unsigned char *)malloc((size_t)H * (1 + 3 * W));
+        unsigned char *expect = (unsigned char *)malloc((size_t)H * 3 * W);
         float vals[10];
         int x, y, c;
         memcpy(vals, VALS, sizeof vals);
         vals[4] = (float)NAN;
         for (y = 0; y < H; ++y) {
-            expect[(size_t)y * (1 + 3 * W)] = 0;
             for (x = 0; x < W; ++x)
                 for (c = 0; c < 3; ++c) {
                     int k = (3 * x + c + 7 * y) % 10;
                     big[3 * ((size_t)y * W + x) + c] = vals[k];
-                    expect[(size_t)y * (1 + 3 * W) + 1 + 3 * x + c] = BYTES[k];
+                    expect[(size_t)y * 3 * W + 3 * x + c] = BYTES[k];
                 }
         }
         img.width = W;
@@ -462,9 +441,10 @@ static void test_png(void)
         if (raw) {
             png_info r = png_decode(raw, len);
             CHECK(r.ok && r.w == W && r.h == H);
-            CHECK_MSG(r.blocks == 3, "%d stored blocks", r.blocks);
-            CHECK(r.raw_len == (size_t)H * (1 + 3 * W));
-            CHECK(r.raw_len == (size_t)H * (1 + 3 * W) && memcmp(r.raw, expect, r.raw_len) == 0);
+            CHECK(r.raw_len == (size_t)H * 3 * W);
+            CHECK(r.raw_len == (size_t)H * 3 * W && memcmp(r.raw, expect, r.raw_len) == 0);
+            /* a pattern repeating every 10 bytes and 7 rows compresses to a few percent */
+            CHECK_MSG(r.zlen < (size_t)H * (1 + 3 * W) / 20, "zlib stream %.0f bytes", (double)r.zlen);
             free(r.raw);
             free(raw);
         }
@@ -675,6 +655,360 @@ static void test_compare(void)
     CHECK(appm_image_compare(&A, &A, NULL) != APPM_OK);
 }
 
+/* ---- PNG against PPM, compression, deflate parts --------------------------------- */
+
+/* Writes img as .png and .ppm and checks that the PNG's pixels are exactly the
+ * PPM's bytes; returns the size of the PNG's zlib stream. */
+static size_t png_matches_ppm(const appm_image *img, const char *name)
+{
+    char png[512], ppm[512];
+    unsigned char *a, *b;
+    size_t la, lb, zlen = 0;
+    appm_diag d;
+    snprintf(png, sizeof png, "%s.png", check_path("image", name));
+    snprintf(ppm, sizeof ppm, "%s.ppm", check_path("image", name));
+    CHECK_MSG(appm_image_write(png, img, 1.0, &d) == APPM_OK, "%s: %s", png, d.message);
+    CHECK(appm_image_write(ppm, img, 1.0, &d) == APPM_OK);
+    a = read_all(png, &la);
+    b = read_all(ppm, &lb);
+    CHECK(a && b);
+    if (a && b) {
+        png_info r = png_decode(a, la);
+        char head[64];
+        size_t hl = (size_t)sprintf(head, "P6\n%lu %lu\n255\n", (unsigned long)img->width,
+                                    (unsigned long)img->height);
+        CHECK(r.ok && r.w == img->width && r.h == img->height);
+        CHECK_MSG(r.ok && lb == hl + r.raw_len && memcmp(b + hl, r.raw, r.raw_len) == 0,
+                  "%s: the PNG's pixels differ from the PPM's", name);
+        zlen = r.zlen;
+        free(r.raw);
+    }
+    free(a);
+    free(b);
+    return zlen;
+}
+
+static float *image_alloc(appm_image *img, uint32_t w, uint32_t h)
+{
+    img->width = w;
+    img->height = h;
+    img->rgb = (float *)malloc(sizeof(float) * 3 * (size_t)w * h);
+    return img->rgb;
+}
+
+static void test_png_matches_ppm(void)
+{
+    appm_image img;
+    size_t i, n, z;
+    uint32_t x, y, state = 12345u;
+    /* all black and all white compress to almost nothing: 512 rows of 1537 bytes */
+    n = (size_t)512 * 512 * 3;
+    if (!image_alloc(&img, 512, 512)) return;
+    for (i = 0; i < n; ++i) img.rgb[i] = 0.0f;
+    z = png_matches_ppm(&img, "black");
+    CHECK_MSG(z > 0 && z < 2000, "all-black 512x512: %.0f bytes", (double)z);
+    for (i = 0; i < n; ++i) img.rgb[i] = 3.0f; /* clamps to 255 */
+    z = png_matches_ppm(&img, "white");
+    CHECK_MSG(z > 0 && z < 2000, "all-white 512x512: %.0f bytes", (double)z);
+    /* noise: incompressible bytes may not grow much beyond the raw size */
+    for (i = 0; i < n; ++i) {
+        state = state * 1664525u + 1013904223u;
+        img.rgb[i] = (float)(state >> 8) / 16777216.0f;
+    }
+    z = png_matches_ppm(&img, "noise");
+    CHECK_MSG(z > 0 && z < (size_t)512 * 1537 * 102 / 100, "noise 512x512: %.0f bytes", (double)z);
+    /* a smooth gradient: the filters should make it small */
+    for (y = 0; y < 512; ++y)
+        for (x = 0; x < 512; ++x) {
+            float *p = img.rgb + 3 * ((size_t)y * 512 + x);
+            p[0] = (float)x / 511.0f;
+            p[1] = (float)y / 511.0f;
+            p[2] = 0.25f;
+        }
+    z = png_matches_ppm(&img, "gradient");
+    CHECK_MSG(z > 0 && z < (size_t)512 * 1537 / 10, "gradient 512x512: %.0f bytes", (double)z);
+    free(img.rgb);
+    /* 1x1 */
+    if (!image_alloc(&img, 1, 1)) return;
+    img.rgb[0] = 0.5f;
+    img.rgb[1] = 0.25f;
+    img.rgb[2] = 0.1f;
+    CHECK(png_matches_ppm(&img, "one") > 0);
+    free(img.rgb);
+    /* 32768 wide, 3 rows: a row of 98305 bytes is larger than the window */
+    if (!image_alloc(&img, 32768, 3)) return;
+    for (i = 0; i < (size_t)32768 * 3 * 3; ++i) {
+        state = state * 1664525u + 1013904223u;
+        img.rgb[i] = (i / 3) % 97 < 50 ? (float)(i % 256) / 255.0f : (float)(state >> 8) / 16777216.0f;
+    }
+    CHECK(png_matches_ppm(&img, "wide32768") > 0);
+    free(img.rgb);
+}
+
+static void test_checksums_and_codes(void)
+{
+    appm__zlib z;
+    uint32_t freq[30];
+    unsigned char len[30];
+    unsigned i, maxlen = 0;
+    double kraft = 0.0;
+    /* Adler-32 of "Wikipedia" is 0x11E60398 (RFC 1950's definition, the
+     * textbook example); also over more than 5552 bytes, where the sums are
+     * reduced in pieces. */
+    memset(&z, 0, sizeof z);
+    z.s1 = 1;
+    appm__zlib_adler(&z, (const unsigned char *)"Wikipedia", 9);
+    CHECK((z.s2 << 16 | z.s1) == 0x11E60398u);
+    {
+        unsigned char *big = (unsigned char *)malloc(100000);
+        for (i = 0; i < 100000; ++i) big[i] = (unsigned char)(255 - i % 7);
+        z.s1 = 1;
+        z.s2 = 0;
+        appm__zlib_adler(&z, big, 100000);
+        CHECK((z.s2 << 16 | z.s1) == adler32_of(big, 100000));
+        free(big);
+    }
+    CHECK(appm__crc32_update(0xFFFFFFFFu, (const unsigned char *)"123456789", 9) == (0xCBF43926u ^ 0xFFFFFFFFu));
+    /* Fibonacci counts make the optimal code 29 levels deep: the limit to 15
+     * must hold and leave a complete code (Kraft sum exactly 1). */
+    freq[0] = freq[1] = 1;
+    for (i = 2; i < 30; ++i) freq[i] = freq[i - 1] + freq[i - 2];
+    appm__huff_lengths(freq, 30, 15, len);
+    for (i = 0; i < 30; ++i) {
+        maxlen = len[i] > maxlen ? len[i] : maxlen;
+        kraft += ldexp(1.0, -(int)len[i]);
+        CHECK(len[i] >= 1);
+    }
+    CHECK(maxlen == 15);
+    CHECK(kraft == 1.0);
+    for (i = 1; i < 30; ++i) CHECK(len[i] <= len[i - 1]); /* rarer symbols never get shorter codes */
+    /* deflate's length and distance codes at their boundaries (RFC 1951, 3.2.5) */
+    CHECK(appm__len_code(3) == 0 && appm__len_code(10) == 7 && appm__len_code(11) == 8);
+    CHECK(appm__len_code(12) == 8 && appm__len_code(13) == 9 && appm__len_code(257) == 27);
+    CHECK(appm__len_code(227) == 27 && appm__len_code(226) == 26 && appm__len_code(258) == 28);
+    CHECK(appm__dist_code(1) == 0 && appm__dist_code(4) == 3 && appm__dist_code(5) == 4);
+    CHECK(appm__dist_code(7) == 5 && appm__dist_code(24577) == 29 && appm__dist_code(32768) == 29);
+    CHECK(appm__dist_code(24576) == 28);
+    for (i = 3; i <= 258; ++i) { /* every length lies inside its code's range */
+        unsigned c = appm__len_code(i);
+        CHECK(i >= appm__len_base[c] && i - appm__len_base[c] < (1u << appm__len_extra[c]) && (c < 28 || i == 258));
+    }
+}
+
+/* ---- OpenEXR, read back by a reader written here from the file layout ------------ */
+
+static uint32_t le32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static float half_to_float(unsigned h)
+{
+    unsigned e = (h >> 10) & 31, m = h & 1023;
+    float v = e == 0 ? ldexpf((float)m, -24) : e == 31 ? (m ? (float)NAN : (float)HUGE_VAL)
+                                                         : ldexpf((float)(m | 1024), (int)e - 25);
+    return (h & 0x8000) ? -v : v;
+}
+
+/* Reads a file written by appm (attributes in its order are not assumed: each
+ * is looked up by name) into rgb (w*h*3).  Returns 0 on any inconsistency. */
+static int exr_read(const unsigned char *p, size_t len, uint32_t w, uint32_t h, float *rgb, int *half, int *zip)
+{
+    size_t pos = 8, k, nblock, lines;
+    int type[3] = {-1, -1, -1}, have_dw = 0;
+    if (len < 8 || le32(p) != 20000630u || le32(p + 4) != 2) return 0;
+    *zip = -1;
+    while (pos < len && p[pos]) { /* name, type, size, value */
+        const char *name = (const char *)p + pos, *ty;
+        uint32_t sz;
+        pos += strlen(name) + 1;
+        ty = (const char *)p + pos;
+        pos += strlen(ty) + 1;
+        sz = le32(p + pos);
+        pos += 4;
+        if (pos + sz > len) return 0;
+        if (!strcmp(name, "channels") && !strcmp(ty, "chlist")) {
+            size_t q = pos;
+            int c;
+            for (c = 0; c < 3; ++c) { /* sorted: B, G, R */
+                if (p[q] != "BGR"[c] || p[q + 1] != 0) return 0;
+                type[c] = (int)le32(p + q + 2);
+                if (le32(p + q + 10) != 1 || le32(p + q + 14) != 1) return 0;
+                q += 18;
+            }
+            if (p[q] != 0 || q + 1 != pos + sz) return 0;
+        } else if (!strcmp(name, "compression")) {
+            *zip = p[pos] == 3 ? 1 : p[pos] == 0 ? 0 : -1;
+        } else if (!strcmp(name, "dataWindow")) {
+            have_dw = le32(p + pos) == 0 && le32(p + pos + 4) == 0 && le32(p + pos + 8) == w - 1 &&
+                      le32(p + pos + 12) == h - 1;
+        }
+        pos += sz;
+    }
+    if (pos >= len || *zip < 0 || !have_dw || type[0] != type[1] || type[1] != type[2]) return 0;
+    if (type[0] != 1 && type[0] != 2) return 0;
+    *half = type[0] == 1;
+    pos++;
+    lines = *zip ? 16 : 1;
+    nblock = (h + lines - 1) / lines;
+    for (k = 0; k < nblock; ++k) {
+        size_t off = le32(p + pos + 8 * k), bs = (size_t)(*half ? 2 : 4), y0, ny, raw_n, sz, i, y, c, x;
+        unsigned char *raw, *tmp;
+        if (le32(p + pos + 8 * k + 4) != 0 || off + 8 > len) return 0;
+        y0 = le32(p + off);
+        sz = le32(p + off + 4);
+        if (y0 != k * lines || off + 8 + sz > len) return 0;
+        ny = y0 + lines <= h ? lines : h - y0;
+        raw_n = ny * w * 3 * bs;
+        raw = (unsigned char *)malloc(raw_n + 1);
+        tmp = (unsigned char *)malloc(raw_n + 1);
+        if (sz == raw_n) {
+            memcpy(raw, p + off + 8, raw_n);
+        } else { /* inflate, undo the delta, then the even/odd split */
+            size_t got = tinf_zlib(p + off + 8, sz, tmp, raw_n + 1, NULL), hn = (raw_n + 1) / 2;
+            if (got != raw_n) {
+                free(raw);
+                free(tmp);
+                return 0;
+            }
+            for (i = 1; i < raw_n; ++i) tmp[i] = (unsigned char)(tmp[i - 1] + tmp[i] - 128);
+            for (i = 0; i < raw_n; ++i) raw[i] = tmp[(i & 1) ? hn + i / 2 : i / 2];
+        }
+        for (y = 0, i = 0; y < ny; ++y)
+            for (c = 0; c < 3; ++c)
+                for (x = 0; x < w; ++x, i += bs) {
+                    float v;
+                    if (*half) v = half_to_float((unsigned)raw[i] | (unsigned)raw[i + 1] << 8);
+                    else v = bits_to_float(le32(raw + i));
+                    rgb[3 * ((y0 + y) * w + x) + 2 - c] = v;
+                }
+        free(raw);
+        free(tmp);
+    }
+    return 1;
+}
+
+static void test_half(void)
+{
+    CHECK(appm__half(1.0f) == 0x3C00 && appm__half(-2.0f) == 0xC000 && appm__half(0.0f) == 0);
+    CHECK(appm__half(-0.0f) == 0x8000 && appm__half(0.5f) == 0x3800);
+    CHECK(appm__half(0.1f) == 0x2E66);                   /* 0.0999755859375, the nearest half */
+    CHECK(appm__half(65504.0f) == 0x7BFF && appm__half(65519.0f) == 0x7BFF);
+    CHECK(appm__half(65520.0f) == 0x7BFF && appm__half(1e30f) == 0x7BFF); /* clamped, not inf */
+    CHECK(appm__half(-1e30f) == 0xFBFF);
+    CHECK(appm__half((float)HUGE_VAL) == 0x7C00 && (appm__half((float)NAN) & 0x7FFF) > 0x7C00);
+    CHECK(appm__half(ldexpf(1.0f, -24)) == 0x0001);          /* the smallest subnormal */
+    CHECK(appm__half(ldexpf(1.0f, -25)) == 0x0000);          /* halfway: to even, 0 */
+    CHECK(appm__half(ldexpf(3.0f, -25)) == 0x0002);          /* halfway: to even, 2 */
+    CHECK(appm__half(ldexpf(1.0f, -14)) == 0x0400);          /* the smallest normal */
+    CHECK(appm__half(ldexpf(1023.5f, -24)) == 0x0400);       /* rounds up into the normals */
+    CHECK(appm__half(1.0f + ldexpf(1.0f, -11)) == 0x3C00);   /* halfway: to even */
+    CHECK(appm__half(1.0f + ldexpf(3.0f, -11)) == 0x3C02);
+    CHECK(appm__half(2047.5f) == 0x6800);                    /* 2048 after rounding: exponent carries */
+}
+
+static void test_exr(void)
+{
+    enum { W = 37, H = 41 }; /* 41 lines: two full ZIP blocks and a short one */
+    static const int halfs[2] = {0, 1}, comps[2] = {0, 1};
+    appm_image img;
+    float *back;
+    uint32_t state = 99u;
+    size_t i, n = (size_t)W * H * 3;
+    int a, b;
+    if (!image_alloc(&img, W, H)) return;
+    back = (float *)malloc(sizeof(float) * n);
+    for (i = 0; i < n; ++i) { /* smooth, noisy, tiny, huge and special values */
+        state = state * 1664525u + 1013904223u;
+        img.rgb[i] = i % 5 == 0 ? (float)(i % 97) * 0.01f : (float)(state >> 8) / 65536.0f - 64.0f;
+    }
+    img.rgb[3] = 1e-9f;
+    img.rgb[4] = 7e4f;
+    img.rgb[5] = (float)HUGE_VAL;
+    for (a = 0; a < 2; ++a)
+        for (b = 0; b < 2; ++b) {
+            appm_write_options opt;
+            appm_diag d;
+            const char *path = check_path("image", halfs[a] ? (comps[b] ? "h-none.exr" : "h-zip.exr")
+                                                            : (comps[b] ? "f-none.exr" : "f-zip.exr"));
+            unsigned char *p;
+            size_t len;
+            int half = -1, zip = -1, bad = 0;
+            memset(&opt, 0, sizeof opt);
+            opt.exr_half = halfs[a];
+            opt.exr_uncompressed = comps[b];
+            CHECK(appm_image_write_ex(path, &img, &opt, NULL, &d) == APPM_OK);
+            p = read_all(path, &len);
+            CHECK(p != NULL);
+            if (!p) continue;
+            memset(back, 0, sizeof(float) * n);
+            CHECK_MSG(exr_read(p, len, W, H, back, &half, &zip), "%s does not read back", path);
+            CHECK(half == halfs[a] && zip == !comps[b]);
+            for (i = 0; i < n; ++i) {
+                float want = halfs[a] ? half_to_float(appm__half(img.rgb[i])) : img.rgb[i];
+                if (fbits(back[i]) != fbits(want)) bad++;
+            }
+            CHECK_MSG(bad == 0, "%s: %d values differ", path, bad);
+            /* mostly noise: a ZIP block that would grow is stored raw, so the
+             * file is never larger than header + table + block heads + data */
+            CHECK_MSG(len <= (size_t)W * H * 3 * (halfs[a] ? 2 : 4) + 400 + 16 * H, "%s: %.0f bytes", path,
+                      (double)len);
+            free(p);
+        }
+    /* a smooth image: ZIP must gain, and still read back exactly */
+    for (i = 0; i < n; ++i) img.rgb[i] = (float)(i / 3 % W) * 0.125f + (float)(i % 3);
+    {
+        const char *path = check_path("image", "smooth.exr");
+        appm_diag d;
+        unsigned char *p;
+        size_t len;
+        int half, zip, bad = 0;
+        CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
+        p = read_all(path, &len);
+        CHECK(p && exr_read(p, len, W, H, back, &half, &zip) && !half && zip);
+        for (i = 0; p && i < n; ++i) bad += fbits(back[i]) != fbits(img.rgb[i]);
+        CHECK(bad == 0);
+        CHECK_MSG(len < (size_t)W * H * 12 / 4, "smooth.exr: %.0f bytes", (double)len);
+        free(p);
+    }
+    free(back);
+    free(img.rgb);
+}
+
+static void test_write_allocation_failures(void)
+{
+    enum { W = 64, H = 20 };
+    static const char *const names[3] = {"oom.png", "oom.exr", "oom-h.exr"};
+    appm_image img;
+    size_t i;
+    int k;
+    if (!image_alloc(&img, W, H)) return;
+    for (i = 0; i < (size_t)W * H * 3; ++i) img.rgb[i] = (float)(i % 13) / 13.0f;
+    for (k = 0; k < 3; ++k) {
+        const char *path = check_path("image", names[k]);
+        appm_write_options opt;
+        appm_status st = APPM_ERR_NOMEM;
+        long nfail;
+        int bad = 0;
+        memset(&opt, 0, sizeof opt);
+        opt.exr_half = k == 2;
+        for (nfail = 1; nfail < 40 && st != APPM_OK; ++nfail) {
+            appm_config cfg;
+            check_alloc al;
+            appm_diag d;
+            memset(&cfg, 0, sizeof cfg);
+            check_use_alloc(&cfg, &al, nfail);
+            remove(path);
+            st = appm_image_write_ex(path, &img, &opt, &cfg, &d);
+            if (al.live != 0) bad++;
+            if (st != APPM_OK && (st != APPM_ERR_NOMEM || file_exists(path))) bad++;
+        }
+        CHECK_MSG(bad == 0, "%s: a failed allocation leaked or left a file", names[k]);
+        CHECK_MSG(st == APPM_OK && nfail > 2, "%s: status %d after %ld tries", names[k], (int)st, nfail);
+    }
+    free(img.rgb);
+}
+
 int main(void)
 {
     crc_init();
@@ -682,6 +1016,11 @@ int main(void)
     test_pfm_big_endian_and_grey();
     test_pfm_malformed();
     test_png();
+    test_png_matches_ppm();
+    test_checksums_and_codes();
+    test_half();
+    test_exr();
+    test_write_allocation_failures();
     test_ppm();
     test_write_failures();
     test_compare();

@@ -649,25 +649,23 @@ static int xc_other_plane(const appm__vp *u, const appm__vp *v)
  * NULL) gets the same per block of XC_BLOCK x XC_BLOCK pixels. */
 static double xc_edge_bound(const appm_renderer *r, const double *rsum, int passes, double *blk)
 {
-    const double c = r->method == APPM_METHOD_APPM ? 48.0 / (105.0 * APPM__PI) : 2.0 / (3.0 * APPM__PI);
+    const double c = (r->est->caps & APPM__CAP_BIWEIGHT) ? 48.0 / (105.0 * APPM__PI) : 2.0 / (3.0 * APPM__PI);
     double loss = 0.0;
     uint32_t x, y, w = r->w, h = r->h;
     for (y = 0; y < h; ++y)
         for (x = 0; x < w; ++x) {
             size_t i = (size_t)y * w + x;
             const appm__vp *v = &r->vp[i];
-            const double *acc = r->pix[i].acc;
+            double acc[3] = {0, 0, 0};
             int edge = 0;
             if (v->segs == 0 || !(v->footprint > 0.0f)) continue;
+            appm__photon_term(r, i, (double)passes, acc); /* I: the photon term of ppm and appm */
             edge |= x > 0 && xc_other_plane(&r->vp[i - 1], v);
             edge |= x + 1 < w && xc_other_plane(&r->vp[i + 1], v);
             edge |= y > 0 && xc_other_plane(&r->vp[i - w], v);
             edge |= y + 1 < h && xc_other_plane(&r->vp[i + w], v);
             if (edge) {
-                /* the pixel's photon term: sppm keeps tau, the others the mean itself */
-                double L = (acc[0] + acc[1] + acc[2]) / 3.0, l, rp = r->pix[i].r;
-                if (r->method == APPM_METHOD_SPPM) L = rp > 0.0 ? L / ((double)passes * r->M * APPM__PI * rp * rp) : 0.0;
-                l = c * (rsum[i] / passes) / v->footprint * L;
+                double l = c * (rsum[i] / passes) / v->footprint * (acc[0] + acc[1] + acc[2]) / 3.0;
                 loss += l;
                 if (blk && x < w / XC_BLOCK * XC_BLOCK && y < h / XC_BLOCK * XC_BLOCK)
                     blk[(y / XC_BLOCK) * (w / XC_BLOCK) + x / XC_BLOCK] += l / (XC_BLOCK * XC_BLOCK);

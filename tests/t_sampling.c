@@ -476,7 +476,7 @@ static void test_weights(void)
 
 /* ---- 4. Lights -------------------------------------------------------------- */
 
-/* pbrt-v3 spot falloff as interface.md defines it, integrated over the cone
+/* pbrt-v3 spot falloff as docs/scene-format.md defines it, integrated over the cone
  * numerically (Simpson, 2e5 intervals in cos theta), times 2 pi. */
 static double spot_solid_angle(double cone_deg, double falloff_deg)
 {

@@ -1,0 +1,155 @@
+/* tests/t_estimator.c - the method seam (appm.c section 10.2).
+ *
+ * What is checked, and against what:
+ *   1. Names: appm_method_parse(appm_method_name(m)) == m for every method;
+ *      unknown names, NULL and out-of-range values are refused.
+ *   2. Each table entry describes itself truthfully: its state fields tile
+ *      its state exactly (sizes add up, no overlap, no gap), so a checkpoint
+ *      can write them one by one; a photon method has the hooks a pass calls.
+ *   3. The aux maps a method declares are the ones appm_renderer_aux returns
+ *      after a pass, and only those.
+ *   4. The renderer calls only through its entry: a renderer of method ppm whose
+ *      entry is swapped for a copy (another name, the same hooks) renders the
+ *      same image bit for bit, and one whose radius hook is replaced renders
+ *      with that radius (the RADIUS map shows it).
+ */
+#include "../appm.c"
+#include "check.h"
+
+static void test_names(void)
+{
+    int m;
+    appm_method out;
+    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m) {
+        const char *n = appm_method_name((appm_method)m);
+        CHECK(n != NULL);
+        out = APPM_METHOD_COUNT;
+        CHECK(n && appm_method_parse(n, &out) == APPM_OK && out == (appm_method)m);
+    }
+    CHECK(strcmp(appm_method_name(APPM_METHOD_APPM), "appm") == 0);
+    CHECK(strcmp(appm_method_name(APPM_METHOD_PT), "pt") == 0);
+    CHECK(appm_method_name(APPM_METHOD_COUNT) == NULL);
+    CHECK(appm_method_name((appm_method)-1) == NULL);
+    out = APPM_METHOD_PPM;
+    CHECK(appm_method_parse("APPM", &out) == APPM_ERR_INVALID_ARG && out == APPM_METHOD_PPM);
+    CHECK(appm_method_parse("", &out) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_method_parse("ppm ", &out) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_method_parse(NULL, &out) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_method_parse("sppm", NULL) == APPM_OK);
+}
+
+static void test_entries(void)
+{
+    int m;
+    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m) {
+        const appm__estimator *e = &appm__estimators[m];
+        size_t covered = 0, end = 0;
+        unsigned f;
+        int ordered = 1;
+        for (f = 0; f < e->nfields; ++f) {
+            size_t bytes = (size_t)e->fields[f].count * (e->fields[f].is_u64 ? sizeof(uint64_t) : sizeof(double));
+            ordered &= e->fields[f].offset == end; /* in order, no gap, no overlap */
+            end = e->fields[f].offset + bytes;
+            covered += bytes;
+        }
+        CHECK_MSG(ordered && covered == e->state_size && end == e->state_size,
+                  "%s: fields cover %lu of %lu state bytes", e->name, (unsigned long)covered,
+                  (unsigned long)e->state_size);
+        if (e->caps & APPM__CAP_PHOTONS) CHECK_MSG(e->radius && e->commit, "%s: a photon method without hooks", e->name);
+        if (e->aux & (APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_LAPLACIAN)))
+            CHECK_MSG(e->aux_value != NULL, "%s: declares a RADIUS or LAPLACIAN map without aux_value", e->name);
+        if (e->caps & APPM__CAP_LAPLACIAN)
+            CHECK_MSG(e->caps & APPM__CAP_BIWEIGHT, "%s: a Laplacian needs the smooth kernel", e->name);
+    }
+}
+
+static appm_renderer *render(appm_scene *s, appm_method m, int passes)
+{
+    appm_config cfg;
+    appm_renderer *r;
+    appm_config_init(&cfg);
+    cfg.method = m;
+    cfg.width = 24;
+    cfg.height = 16;
+    cfg.photons = 4000;
+    cfg.threads = 2;
+    cfg.seed = 5;
+    r = check_renderer(s, &cfg);
+    if (r && !check_passes(r, passes)) {
+        appm_renderer_destroy(r);
+        r = NULL;
+    }
+    return r;
+}
+
+static void test_aux(appm_scene *s)
+{
+    int m, k;
+    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m) {
+        appm_renderer *r = render(s, (appm_method)m, 2);
+        if (!r) continue;
+        for (k = 0; k < APPM_AUX_COUNT; ++k) {
+            int declared = (appm__estimators[m].aux & APPM__AUX_BIT(k)) != 0;
+            const float *a = appm_renderer_aux(r, (appm_aux)k);
+            CHECK_MSG((a != NULL) == declared, "%s: aux map %d %s", appm_method_name((appm_method)m), k,
+                      declared ? "declared but not given" : "given but not declared");
+        }
+        appm_renderer_destroy(r);
+    }
+}
+
+static float half_radius(const appm_renderer *r, const void *st)
+{
+    return 0.5f * appm__ppm_radius(r, st);
+}
+
+static void test_seam(appm_scene *s)
+{
+    appm_renderer *a = render(s, APPM_METHOD_PPM, 0), *b = render(s, APPM_METHOD_PPM, 0);
+    appm__estimator copy = appm__estimators[APPM_METHOD_PPM], halved = copy;
+    appm_image ia, ib;
+    size_t i, n;
+    int same = 1, half = 1;
+    if (!a || !b) {
+        appm_renderer_destroy(a);
+        appm_renderer_destroy(b);
+        return;
+    }
+    copy.name = "ppm-copy";
+    b->est = &copy;
+    if (check_passes(a, 3) && check_passes(b, 3)) {
+        appm_renderer_image(a, &ia);
+        appm_renderer_image(b, &ib);
+        n = (size_t)ia.width * ia.height * 3;
+        for (i = 0; i < n; ++i) same &= memcmp(&ia.rgb[i], &ib.rgb[i], sizeof(float)) == 0;
+        CHECK_MSG(same, "a copy of the ppm entry renders another image");
+    }
+    appm_renderer_destroy(b);
+    /* the radius hook decides the gather radius: halve it */
+    b = render(s, APPM_METHOD_PPM, 0);
+    halved.radius = half_radius;
+    if (b) {
+        b->est = &halved;
+        if (check_passes(b, 1)) {
+            n = (size_t)b->w * b->h;
+            for (i = 0; i < n; ++i) half &= b->vp[i].r == 0.5f * (float)sqrt(b->r1 * b->r1);
+            CHECK_MSG(half, "the gather did not use the radius hook's radius");
+        }
+    }
+    appm_renderer_destroy(a);
+    appm_renderer_destroy(b);
+}
+
+int main(void)
+{
+    appm_scene *s;
+    test_names();
+    test_entries();
+    s = check_load_scene("scenes/cornell-original.scene");
+    if (s) {
+        test_aux(s);
+        test_seam(s);
+    }
+    appm_scene_destroy(s);
+    return check_finish();
+}

@@ -1,0 +1,220 @@
+/* tests/t_lights.c - lights for any scene: the white environment a bare OBJ
+ * without light gets, and the lights added to a loaded scene
+ * (appm_scene_add_point_light, appm_scene_set_environment).
+ *
+ * The scene is one two-sided Lambertian square, albedo rho = 0.5, side 2, in
+ * the plane z = 0, framed by the automatic camera (looking along -z).  Analytic
+ * answers, rendered with the unbiased path tracer:
+ *   - constant environment L, nothing else in the way: every point of the
+ *     square sees the whole upper hemisphere, E = pi L, so Lo = rho L = 0.5 L;
+ *     a pixel that misses the square sees L itself;
+ *   - point light of intensity I at distance d on the square's axis: at the
+ *     centre E = I / d^2, Lo = rho / pi * I / d^2 (= 0.5 for I = 4 pi, d = 2),
+ *     and off-centre by s: E = I d / (d^2 + s^2)^(3/2).
+ * Powers (appm_scene_info): point 4 pi I, environment 4 pi^2 R^2 L with R the
+ * bounding-sphere radius (here sqrt 2). */
+#include "../appm.c"
+#include "check.h"
+
+static const char QUAD_OBJ[] = "mtllib q.mtl\nusemtl grey\n"
+                               "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n";
+static const char QUAD_MTL[] = "newmtl grey\nKd 0.5 0.5 0.5\n";
+
+typedef struct warnings {
+    int n;
+    char last[256];
+} warnings;
+
+static void on_log(void *user, const char *file, unsigned line, const char *msg)
+{
+    warnings *w = (warnings *)user;
+    (void)file;
+    (void)line;
+    w->n++;
+    snprintf(w->last, sizeof w->last, "%s", msg);
+}
+
+static appm_scene *load_quad(const appm_config *cfg)
+{
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_status st = appm_scene_load_obj_memory(QUAD_OBJ, strlen(QUAD_OBJ), QUAD_MTL, strlen(QUAD_MTL),
+                                                "quad.obj", cfg, &s, &d);
+    CHECK_MSG(st == APPM_OK, "%s:%u: %s", d.file, d.line, d.message);
+    return s;
+}
+
+/* Mean of channel 1 over the pixels of the square [x0, x1) x [y0, y1). */
+static double box_mean(const appm_image *img, uint32_t x0, uint32_t x1, uint32_t y0, uint32_t y1)
+{
+    double sum = 0.0;
+    uint32_t x, y;
+    for (y = y0; y < y1; ++y)
+        for (x = x0; x < x1; ++x) sum += img->rgb[3 * ((size_t)y * img->width + x) + 1];
+    return sum / ((double)(x1 - x0) * (y1 - y0));
+}
+
+/* Renders `passes` passes of the path tracer at 32x32 into *img (a copy, to free). */
+static int render(const appm_scene *s, int passes, warnings *w, appm_image *img)
+{
+    appm_config cfg;
+    appm_renderer *r = NULL;
+    appm_diag d;
+    appm_image view;
+    int k;
+    appm_config_init(&cfg);
+    cfg.method = APPM_METHOD_PT;
+    cfg.width = cfg.height = 32;
+    cfg.threads = 1; /* a build without threads would warn about 2 */
+    cfg.log = on_log;
+    cfg.log_user = w;
+    img->rgb = NULL;
+    if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) {
+        CHECK_MSG(0, "renderer: %s", d.message);
+        return 0;
+    }
+    for (k = 0; k < passes; ++k) CHECK(appm_renderer_pass(r) == APPM_OK);
+    appm_renderer_image(r, &view);
+    *img = view;
+    img->rgb = (float *)malloc(sizeof(float) * 3 * 32 * 32);
+    if (img->rgb) memcpy(img->rgb, view.rgb, sizeof(float) * 3 * 32 * 32);
+    appm_renderer_destroy(r);
+    return img->rgb != NULL;
+}
+
+static void test_white_environment(void)
+{
+    appm_scene *s = load_quad(NULL);
+    appm_scene_info in;
+    appm_image img;
+    warnings w = {0, ""};
+    const double R = sqrt(2.0), want = 4.0 * APPM__PI * APPM__PI * R * R;
+    if (!s) return;
+    appm_scene_get_info(s, &in);
+    CHECK(in.lights_environment == 1 && in.lights_point == 0 && in.lights_area == 0);
+    CHECK_NEAR(in.power_environment[0], want, want * 1e-6);
+    CHECK_NEAR(in.power_environment[2], want, want * 1e-6);
+    if (render(s, check_quick() ? 16 : 64, &w, &img)) {
+        double centre = box_mean(&img, 12, 20, 12, 20), corner = box_mean(&img, 0, 2, 0, 2);
+        CHECK_NEAR(centre, 0.5, check_quick() ? 0.04 : 0.02); /* rho L */
+        CHECK_NEAR(corner, 1.0, 1e-6);                        /* the environment itself */
+        free(img.rgb);
+    }
+    CHECK_MSG(w.n == 1 && strstr(w.last, "white environment") != NULL, "%d warnings, last '%s'", w.n, w.last);
+    appm_scene_destroy(s);
+}
+
+static void test_point_light(void)
+{
+    appm_scene *s = load_quad(NULL);
+    appm_scene_info in;
+    appm_image img;
+    appm_diag d;
+    warnings w = {0, ""};
+    const double pos[3] = {0, 0, 2}, I[3] = {4 * APPM__PI, 4 * APPM__PI, 4 * APPM__PI};
+    const double bad[3] = {1, -1, 1}, nan3[3] = {0, (double)NAN, 0};
+    if (!s) return;
+    CHECK(appm_scene_add_point_light(s, pos, bad, &d) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_scene_add_point_light(s, nan3, I, &d) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_scene_add_point_light(NULL, pos, I, &d) == APPM_ERR_INVALID_ARG);
+    appm_scene_get_info(s, &in);
+    CHECK(in.lights_environment == 1 && in.lights_point == 0); /* unchanged by the refusals */
+    CHECK(appm_scene_add_point_light(s, pos, I, &d) == APPM_OK);
+    appm_scene_get_info(s, &in);
+    CHECK(in.lights_environment == 0 && in.lights_point == 1); /* the stand-in is gone */
+    CHECK_NEAR(in.power_point[1], 16.0 * APPM__PI * APPM__PI, 1e-3);
+    if (render(s, 4, &w, &img)) {
+        /* the central 2x2 pixels reach s = 0.1 off the axis: E falls by < 0.4 % there */
+        double centre = box_mean(&img, 15, 17, 15, 17), corner = box_mean(&img, 0, 2, 0, 2);
+        CHECK_NEAR(centre, 0.5, 0.006);
+        CHECK(corner == 0.0); /* no environment any more */
+        free(img.rgb);
+    }
+    CHECK_MSG(w.n == 0, "%d warnings, last '%s'", w.n, w.last);
+    /* a second point light behind the square: it lights the back face only, so
+     * the camera's side keeps its mean (each light now picked half the time) */
+    {
+        const double back[3] = {0, 0, -2};
+        CHECK(appm_scene_add_point_light(s, back, I, &d) == APPM_OK);
+        appm_scene_get_info(s, &in);
+        CHECK(in.lights_point == 2);
+        CHECK_NEAR(in.power_point[0], 32.0 * APPM__PI * APPM__PI, 1e-3);
+        if (render(s, 256, &w, &img)) { /* each shadow ray picks one light: 1 or 0, 1024 samples */
+            CHECK_NEAR(box_mean(&img, 15, 17, 15, 17), 0.5, 0.05);
+            free(img.rgb);
+        }
+    }
+    appm_scene_destroy(s);
+}
+
+static void test_set_environment(void)
+{
+    appm_scene *s = load_quad(NULL);
+    appm_scene_info in;
+    appm_image img;
+    appm_diag d;
+    warnings w = {0, ""};
+    const double L[3] = {2, 2, 2}, zero[3] = {0, 0, 0}, inf3[3] = {1, (double)HUGE_VAL, 1};
+    const double want = 4.0 * APPM__PI * APPM__PI * 2.0 * 2.0;
+    if (!s) return;
+    /* the stand-in may not be replaced by nothing */
+    CHECK(appm_scene_set_environment(s, zero, &d) != APPM_OK);
+    CHECK(appm_scene_set_environment(s, inf3, &d) == APPM_ERR_INVALID_ARG);
+    appm_scene_get_info(s, &in);
+    CHECK(in.lights_environment == 1);
+    CHECK_NEAR(in.power_environment[0], want / 2.0, want * 1e-6);
+    CHECK(appm_scene_set_environment(s, L, &d) == APPM_OK);
+    CHECK(appm_scene_set_environment(s, L, &d) == APPM_OK); /* replaces, never adds */
+    appm_scene_get_info(s, &in);
+    CHECK(in.lights_environment == 1);
+    CHECK_NEAR(in.power_environment[0], want, want * 1e-6);
+    if (render(s, check_quick() ? 16 : 64, &w, &img)) {
+        CHECK_NEAR(box_mean(&img, 12, 20, 12, 20), 1.0, check_quick() ? 0.08 : 0.04);
+        CHECK_NEAR(box_mean(&img, 0, 2, 0, 2), 2.0, 1e-6);
+        free(img.rgb);
+    }
+    CHECK(w.n == 0); /* a chosen environment is no stand-in */
+    appm_scene_destroy(s);
+}
+
+/* A failed allocation leaves the scene as it was and leaks nothing. */
+static void test_allocation_failure(void)
+{
+    const double pos[3] = {0, 0, 2}, I[3] = {1, 1, 1};
+    long n;
+    int ok = 0, bad = 0;
+    for (n = 1; n < 20 && !ok; ++n) {
+        appm_config cfg;
+        check_alloc a;
+        appm_scene *s;
+        appm_scene_info in;
+        appm_diag d;
+        long long before;
+        memset(&cfg, 0, sizeof cfg);
+        check_use_alloc(&cfg, &a, 0);
+        s = load_quad(&cfg);
+        if (!s) return;
+        before = a.live;
+        a.fail_at = a.count + n;
+        if (appm_scene_add_point_light(s, pos, I, &d) == APPM_OK) {
+            ok = 1;
+        } else {
+            appm_scene_get_info(s, &in);
+            if (a.live != before || in.lights_point != 0 || in.lights_environment != 1 || d.status != APPM_ERR_NOMEM)
+                bad++;
+        }
+        appm_scene_destroy(s);
+        if (a.live != 0) bad++;
+    }
+    CHECK(ok && n > 2);
+    CHECK(bad == 0);
+}
+
+int main(void)
+{
+    test_white_environment();
+    test_point_light();
+    test_set_environment();
+    test_allocation_failure();
+    return check_finish();
+}
