@@ -5,6 +5,7 @@
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
 #   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
 #                     make bench-glossy: CornellBox-Glossy alone
+#   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 # Without make:  cc -std=c99 -O2 appm.c main.c -lm -pthread -o appm
@@ -19,7 +20,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy fuzz clean
+.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh fuzz clean
 
 all: appm
 
@@ -72,6 +73,9 @@ bench-quick: appm
 
 bench-glossy: appm
 	sh bench/run.sh glossy
+
+bench-bvh:
+	sh bench/bvh.sh
 
 fuzz:
 	sh tests/fuzz/run.sh

@@ -56,6 +56,13 @@
  *     Never build with -ffast-math: the renderer relies on NaN checks and on the
  *     order of floating-point sums (an #error says so).
  *     Unity build: #define APPM_API static, then #include "appm.c".
+ *     SIMD: the BVH (8 children per node) tests a node's child boxes with SSE2
+ *     on every x86-64 build, with AVX2 given -mavx2 or -march=native, and with
+ *     NEON on aarch64, as the compiler's own macros say; tcc, other targets and
+ *     -DAPPM_SIMD=0 use a portable scalar test.  The scalar test computes the
+ *     same floats, so a SIMD build and its -DAPPM_SIMD=0 twin (same compiler,
+ *     same other flags) render the same bytes, and so do gcc's default and
+ *     -mavx2 builds (make portability checks both).
  *
  * CONVENTIONS
  *     Units are scene units; right-handed coordinates; angles in degrees at the

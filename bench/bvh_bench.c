@@ -1,30 +1,57 @@
-/* bench/bvh_bench.c - BVH build time and closest-hit throughput on one thread.
+/* bench/bvh_bench.c - BVH build time, ray throughput and photon-pass speed:
+ * the wide tree (with the box test this build has, and with the scalar one)
+ * against the binary tree it is collapsed from, side by side in one run.
  *
  *   cc -std=c99 -O2 bench/bvh_bench.c -o build/bvh_bench -lm -pthread
- *   ./build/bvh_bench [MESH.obj [RAYS]]      (default scenes/stanford-bunny.obj, 1e6)
+ *   ./build/bvh_bench [MESH.obj [RAYS [PHOTON-SCENE [SIZE]]]]
+ *       defaults: scenes/stanford-bunny.obj, 1e6 rays, scenes/cornell-sphere.scene, 512
+ *   (add -mavx2 or -march=native for the 8-wide AVX2 tree, -DAPPM_SIMD=0 for
+ *   the scalar build)
  *
- * Prints one line of key=value pairs:
- *   bvh_build_ms  median of 5 builds of the loaded triangles (appm__bvh_build on
- *                 a fresh copy each time; the input is in the order the loader
- *                 left it, i.e. the previous build's leaf order)
- *   rays_per_s    closest hits (appm__ray_init + appm__intersect) per second for
- *                 RAYS rays with origins uniform in the bounding box and uniform
- *                 directions; the rays are drawn before the clock starts
- *   triangles, nodes, depth, hit_fraction (of those rays), sah_cost (the tree's
- *   surface-area cost: node visits plus triangle tests expected for a random
- *   line through the root box, a quality figure independent of the machine).
+ * Every figure is the median of 3 rounds; within a round the three traversals
+ * take turns every 10000 rays (photon passes: pass by pass), so a change in
+ * the machine's load hits all of them alike.
+ * One line per traversal (path=binary|scalar|simd):
+ *   closest_per_s   closest hits (appm__ray_init + appm__intersect) per second
+ *                   for RAYS rays, origins uniform in the mesh's bounding box,
+ *                   directions uniform; the rays are drawn before the clock starts
+ *   anyhit_per_s    appm__occluded on the same rays (tmax = FLT_MAX)
+ *   photon_per_s_1t, photon_per_s_2t   photon paths per second of the photon
+ *                   pass alone (appm_stats.seconds_photons) rendering
+ *                   PHOTON-SCENE at SIZE^2 with ppm, 3 passes, 1 and 2 threads
+ *                   (SIZE^2 photon paths a pass)
+ *   checksum        sum of the closest hits' t (equal for all paths up to ties)
+ * Then one summary line:
+ *   bvh_build_ms    median of 5 builds (binary SAH build + collapse) of the
+ *                   loaded triangles, each on a fresh copy in the loader's order
+ *   binary_build_ms the binary build alone (what the build was before the collapse)
+ *   ratios new/old of each figure, triangles, node counts, depth, hit_fraction,
+ *   sah_cost (of the binary tree: node visits plus triangle tests expected for a
+ *   random line through the root box, a machine-independent quality figure).
  * Timing is wall-clock (CLOCK_MONOTONIC); run on an idle machine.
  */
+#define APPM_BVH_BINARY 1 /* keep the binary tree and its traversal for the comparison */
 #include "../appm.c"
 
 #include <stdio.h>
 
 #define BUILDS 5
+#define ROUNDS 3
+#define NPATH 3
+
+static const int path_id[NPATH] = {APPM__BVH_BINARY, APPM__BVH_SCALAR, APPM__BVH_SIMD};
+static const char *path_name[NPATH] = {"binary", "scalar", "simd"};
 
 static int cmp_double(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
+}
+
+static double median(double *v, int n)
+{
+    qsort(v, (size_t)n, sizeof v[0], cmp_double);
+    return v[n / 2];
 }
 
 static double node_area(const appm__node *n)
@@ -48,113 +75,205 @@ static double sah_cost(const appm_scene *s)
     return c;
 }
 
-int main(int argc, char **argv)
+static appm_scene *load_mesh(const char *mesh)
 {
-    const char *mesh = argc > 1 ? argv[1] : "scenes/stanford-bunny.obj";
-    long nrays = argc > 2 ? atol(argv[2]) : 1000000L, i, hits = 0;
     const char *tmp = "appm-bvh-bench.scene.tmp";
     appm_scene *s = NULL;
     appm_diag d;
-    FILE *f;
-    double ms[BUILDS], t0, t1, checksum = 0.0;
-    appm__tri *tri0;
-    appm__tri_info *info0;
-    appm__node *node0;
-    uint32_t n;
-    appm__v3 *orig, *dir;
-    appm__rng rng;
-    int b;
-
+    FILE *f = fopen(tmp, "wb");
     /* A bare OBJ without emitters is not a valid scene (it has no light), so
      * wrap it in a scene file with a point light; mesh paths in a scene file
      * are relative to its folder, here the current one. */
-    f = fopen(tmp, "wb");
     if (!f) {
         fprintf(stderr, "bvh_bench: cannot write %s\n", tmp);
-        return 1;
+        return NULL;
     }
     fprintf(f, "mesh %s\nlight point position 0 1 0 intensity 1 1 1\n", mesh);
     fclose(f);
-    if (appm_scene_load(tmp, NULL, &s, &d) != APPM_OK) {
-        fprintf(stderr, "bvh_bench: %s:%u: %s\n", d.file, d.line, d.message);
-        remove(tmp);
-        return 1;
-    }
+    if (appm_scene_load(tmp, NULL, &s, &d) != APPM_OK) fprintf(stderr, "bvh_bench: %s:%u: %s\n", d.file, d.line, d.message);
     remove(tmp);
-    n = s->ntri;
-    if (n == 0) {
+    if (s && s->ntri == 0) {
         fprintf(stderr, "bvh_bench: no triangles\n");
         appm_scene_destroy(s);
-        return 1;
+        s = NULL;
     }
+    return s;
+}
 
-    /* Builds: the loaded arrays are set aside; each build gets copies, which
-     * appm__bvh_build frees after writing its reordered ones. */
-    tri0 = s->tri;
-    info0 = s->info;
-    node0 = s->node;
-    for (b = 0; b < BUILDS; ++b) {
+/* Median build times (ms) of the full build and of the binary build alone.
+ * The loaded arrays are set aside; each build gets copies, which the build
+ * frees after writing its reordered ones; the last full build is kept. */
+static int time_builds(appm_scene *s, double *full_ms, double *binary_ms)
+{
+    appm__tri *tri0 = s->tri;
+    appm__tri_info *info0 = s->info;
+    double full[BUILDS], bin[BUILDS];
+    uint32_t n = s->ntri;
+    int b, k;
+    appm__free(&s->mem, s->node);
+    appm__free(&s->mem, s->wnode_mem);
+    for (b = 0; b < 2 * BUILDS; ++b) {
         appm__tri *tc = (appm__tri *)appm__alloc(&s->mem, n, sizeof *tc);
         appm__tri_info *ic = (appm__tri_info *)appm__alloc(&s->mem, n, sizeof *ic);
-        if (!tc || !ic) {
-            fprintf(stderr, "bvh_bench: out of memory\n");
-            return 1;
-        }
+        double t0, t1;
+        if (!tc || !ic) return 0;
         memcpy(tc, tri0, n * sizeof *tc);
         memcpy(ic, info0, n * sizeof *ic);
         s->tri = tc;
         s->info = ic;
+        k = b / 2;
         t0 = appm__seconds();
-        if (appm__bvh_build(s, NULL) != APPM_OK) {
-            fprintf(stderr, "bvh_bench: build failed\n");
-            return 1;
-        }
+        if ((b % 2 ? appm__bvh_build(s, NULL) : appm__bvh_build_binary(s, NULL)) != APPM_OK) return 0;
         t1 = appm__seconds();
-        ms[b] = 1e3 * (t1 - t0);
-        if (b + 1 < BUILDS) {
+        (b % 2 ? full : bin)[k] = 1e3 * (t1 - t0);
+        if (b + 1 < 2 * BUILDS) {
             appm__free(&s->mem, s->tri);
             appm__free(&s->mem, s->info);
             appm__free(&s->mem, s->node);
+            if (b % 2) appm__free(&s->mem, s->wnode_mem);
         }
     }
-    /* keep the last build (equal to the first: the build is deterministic) */
     appm__free(&s->mem, tri0);
     appm__free(&s->mem, info0);
-    appm__free(&s->mem, node0);
-    qsort(ms, BUILDS, sizeof ms[0], cmp_double);
+    *full_ms = median(full, BUILDS);
+    *binary_ms = median(bin, BUILDS);
+    return 1;
+}
 
-    /* Rays, drawn up front. */
+#define CHUNK 10000
+
+/* Seconds per path for closest hits (anyhit = 0) or any hits of all rays, the
+ * paths taking turns every CHUNK rays so that a change of load in the middle
+ * of the run is shared by all of them. */
+static void trace(appm_scene *s, const appm__v3 *orig, const appm__v3 *dir, long nrays, int anyhit,
+                  double *sec, long *hits, double *checksum)
+{
+    long c, i;
+    int k;
+    for (k = 0; k < NPATH; ++k) {
+        sec[k] = checksum[k] = 0.0;
+        hits[k] = 0;
+    }
+    for (c = 0; c < nrays; c += CHUNK) {
+        long end = c + CHUNK < nrays ? c + CHUNK : nrays;
+        for (k = 0; k < NPATH; ++k) {
+            double t0 = appm__seconds();
+            s->bvh_path = path_id[k];
+            for (i = c; i < end; ++i) {
+                appm__ray r;
+                appm__hit h;
+                appm__ray_init(&r, orig[i], dir[i], FLT_MAX);
+                if (anyhit) {
+                    hits[k] += appm__occluded(s, &r, UINT32_MAX, UINT32_MAX);
+                } else if (appm__intersect(s, &r, UINT32_MAX, &h)) {
+                    hits[k]++;
+                    checksum[k] += h.t;
+                }
+            }
+            sec[k] += appm__seconds() - t0;
+        }
+    }
+}
+
+/* Photon paths per second of the photon pass alone, per path: one renderer
+ * per path (each on its own copy of the scene), 3 ppm passes each, the
+ * renderers taking turns pass by pass. */
+static void photon_rates(appm_scene **ps, unsigned threads, uint32_t size, double *rate)
+{
+    appm_renderer *r[NPATH];
+    appm_config cfg;
+    int k, p;
+    appm_config_init(&cfg);
+    cfg.method = APPM_METHOD_PPM;
+    cfg.width = cfg.height = size;
+    cfg.threads = threads;
+    for (k = 0; k < NPATH; ++k) {
+        ps[k]->bvh_path = path_id[k];
+        r[k] = NULL;
+        if (appm_renderer_create(ps[k], &cfg, &r[k], NULL) != APPM_OK) r[k] = NULL;
+    }
+    for (p = 0; p < 3; ++p)
+        for (k = 0; k < NPATH; ++k)
+            if (r[k]) appm_renderer_pass(r[k]);
+    for (k = 0; k < NPATH; ++k) {
+        appm_stats st;
+        appm_renderer_stats(r[k], &st);
+        rate[k] = st.seconds_photons > 0.0 ? (double)st.photons_emitted / st.seconds_photons : 0.0;
+        appm_renderer_destroy(r[k]);
+    }
+}
+
+int main(int argc, char **argv)
+{
+    const char *mesh = argc > 1 ? argv[1] : "scenes/stanford-bunny.obj";
+    long nrays = argc > 2 ? atol(argv[2]) : 1000000L, i;
+    const char *pscene = argc > 3 ? argv[3] : "scenes/cornell-sphere.scene";
+    uint32_t size = argc > 4 ? (uint32_t)atol(argv[4]) : 512;
+    double closest[NPATH][ROUNDS], anyhit[NPATH][ROUNDS], ph1[NPATH][ROUNDS], ph2[NPATH][ROUNDS];
+    double med[4][NPATH], checksum[NPATH], cs[NPATH], sec[NPATH], rate[NPATH], full_ms, bin_ms;
+    long hits[NPATH], ahits[NPATH];
+    appm_scene *s = load_mesh(mesh), *ps[NPATH];
+    appm__v3 *orig, *dir;
+    appm_diag d;
+    appm__rng rng;
+    int k, round;
+    if (!s) return 1;
+    if (!time_builds(s, &full_ms, &bin_ms)) {
+        fprintf(stderr, "bvh_bench: build failed\n");
+        return 1;
+    }
+    for (k = 0; k < NPATH; ++k)
+        if (appm_scene_load(pscene, NULL, &ps[k], &d) != APPM_OK) {
+            fprintf(stderr, "bvh_bench: %s:%u: %s\n", d.file, d.line, d.message);
+            return 1;
+        }
+
+    /* Rays, drawn up front, each draw in its own statement so that the ray
+     * set does not depend on the compiler's order of evaluating arguments. */
     orig = (appm__v3 *)malloc((size_t)nrays * sizeof *orig);
     dir = (appm__v3 *)malloc((size_t)nrays * sizeof *dir);
-    if (!orig || !dir) {
+    if (!orig || !dir || nrays < 1) {
         fprintf(stderr, "bvh_bench: out of memory\n");
         return 1;
     }
     appm__rng_seed(&rng, 1, 0, APPM__DOMAIN_TEST, 0);
     for (i = 0; i < nrays; ++i) {
         float u1 = appm__rng_float(&rng), u2 = appm__rng_float(&rng), u3 = appm__rng_float(&rng);
+        float u4 = appm__rng_float(&rng), u5 = appm__rng_float(&rng);
         orig[i] = appm__v(s->bmin.x + u1 * (s->bmax.x - s->bmin.x), s->bmin.y + u2 * (s->bmax.y - s->bmin.y),
                           s->bmin.z + u3 * (s->bmax.z - s->bmin.z));
-        dir[i] = appm__uniform_sphere(appm__rng_float(&rng), appm__rng_float(&rng));
+        dir[i] = appm__uniform_sphere(u4, u5);
     }
-    t0 = appm__seconds();
-    for (i = 0; i < nrays; ++i) {
-        appm__ray r;
-        appm__hit h;
-        appm__ray_init(&r, orig[i], dir[i], FLT_MAX);
-        if (appm__intersect(s, &r, UINT32_MAX, &h)) {
-            hits++;
-            checksum += h.t;
-        }
+    for (round = 0; round < ROUNDS; ++round) {
+        trace(s, orig, dir, nrays, 0, sec, hits, checksum);
+        for (k = 0; k < NPATH; ++k) closest[k][round] = (double)nrays / sec[k];
+        trace(s, orig, dir, nrays, 1, sec, ahits, cs);
+        for (k = 0; k < NPATH; ++k) anyhit[k][round] = (double)nrays / sec[k];
+        photon_rates(ps, 1, size, rate);
+        for (k = 0; k < NPATH; ++k) ph1[k][round] = rate[k];
+        photon_rates(ps, 2, size, rate);
+        for (k = 0; k < NPATH; ++k) ph2[k][round] = rate[k];
     }
-    t1 = appm__seconds();
-
-    printf("bvh_build_ms=%.2f rays_per_s=%.0f triangles=%u nodes=%u depth=%u hit_fraction=%.4f sah_cost=%.2f "
-           "build_ms_min=%.2f build_ms_max=%.2f checksum=%.6g\n",
-           ms[BUILDS / 2], (double)nrays / (t1 - t0), s->ntri, s->nnode, s->depth, (double)hits / (double)nrays,
-           sah_cost(s), ms[0], ms[BUILDS - 1], checksum);
+    for (k = 0; k < NPATH; ++k) {
+        med[0][k] = median(closest[k], ROUNDS);
+        med[1][k] = median(anyhit[k], ROUNDS);
+        med[2][k] = median(ph1[k], ROUNDS);
+        med[3][k] = median(ph2[k], ROUNDS);
+        printf("path=%s closest_per_s=%.0f anyhit_per_s=%.0f photon_per_s_1t=%.0f photon_per_s_2t=%.0f "
+               "checksum=%.9g\n",
+               path_name[k], med[0][k], med[1][k], med[2][k], med[3][k], checksum[k]);
+    }
+    printf("simd=%s width=%d bvh_build_ms=%.2f binary_build_ms=%.2f build_ratio=%.3f closest_ratio=%.3f "
+           "anyhit_ratio=%.3f photon_ratio_1t=%.3f photon_ratio_2t=%.3f scalar_closest_ratio=%.3f "
+           "scalar_anyhit_ratio=%.3f triangles=%u nodes=%u wide_nodes=%u depth=%u hit_fraction=%.4f "
+           "anyhit_fraction=%.4f sah_cost=%.2f\n",
+           APPM__SIMD_NAME, APPM__BVH_W, full_ms, bin_ms, full_ms / bin_ms, med[0][2] / med[0][0],
+           med[1][2] / med[1][0], med[2][2] / med[2][0], med[3][2] / med[3][0], med[0][1] / med[0][0],
+           med[1][1] / med[1][0], s->ntri, s->nnode, s->nwnode, s->depth, (double)hits[0] / (double)nrays,
+           (double)ahits[0] / (double)nrays, sah_cost(s));
     free(orig);
     free(dir);
+    for (k = 0; k < NPATH; ++k) appm_scene_destroy(ps[k]);
     appm_scene_destroy(s);
     return 0;
 }

@@ -59,11 +59,9 @@ l2=$($APPM render $scene --method appm --threads 1 --passes 2 --size 512x512 -q 
 awk -v a="$(kv "$l1" peak_bytes)" -v b="$(kv "$l2" peak_bytes)" -v n="$(kv "$l2" photons_stored)" 'BEGIN {
     printf "\nMemory (appm, 512x512): %.1f bytes per pixel; %.1f bytes per stored photon (%d stored in the last pass; store, sort scratch and grid table included).\n", a / (512 * 512), (b - a) / n, n }' >> "$out/throughput.md"
 
-if [ -f bench/bvh_bench.c ]; then
-    $CC -std=c99 -O2 bench/bvh_bench.c -o "$out/bvh_bench" -lm -pthread && {
-        echo
-        echo "BVH (stanford-bunny, 1 thread): $("$out/bvh_bench" | tail -n 1)"
-    } >> "$out/throughput.md"
+if [ -f bench/bvh.sh ]; then
+    echo >> "$out/throughput.md"
+    sh bench/bvh.sh "$out" > /dev/null && cat "$out/bvh.md" >> "$out/throughput.md"
 fi
 rm -f "$out/tp.pfm"
 cat "$out/throughput.md"

@@ -11,7 +11,11 @@
 #   -ffast-math     must fail, with the library's #error
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
-#   QEMU=1          t_portable built for aarch64 and big-endian s390x runs under qemu-user
+#   QEMU=1          t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
+#                   with -DAPPM_SIMD=0) and big-endian s390x (scalar) run under qemu-user
+# The BVH's box test: t_bvh built with SSE2, -DAPPM_SIMD=0, -mavx2 (where the CPU
+# has AVX2; clang with -mfma too), and renders of each SIMD build and its scalar
+# twin compared byte for byte.
 # A compiler or tool that is not installed is skipped with a message, unless
 # PORTABILITY_STRICT=1, where it counts as a failure.  Each step prints ok, FAIL or
 # skip; the last line is "N passed, N failed"; the exit status is non-zero on failure.
@@ -161,6 +165,75 @@ if have gcc "-DAPPM_THREADS=0"; then
     fi
 fi
 
+# ---- SIMD and scalar box tests of the BVH ---------------------------------------------
+# t_bvh on each path a compiler can build here (it also runs the scalar test of
+# the same build, ray by ray), and the CLI's renders of a SIMD build and of its
+# -DAPPM_SIMD=0 twin, which must be the same bytes.  AVX2 (8-wide tree) and
+# FMA (no contraction under clang) only where this CPU has them.
+
+cpu_has() { grep -qw "$1" /proc/cpuinfo 2>/dev/null; }
+
+# same_render NAME FLAGS...: appm built with FLAGS and with FLAGS -DAPPM_SIMD=0
+# renders the sphere box (ppm, appm and pt) to the same bytes.
+same_render() {
+    name=$1
+    shift
+    tag=$(printf '%s' "$name" | tr -c 'A-Za-z0-9_\n' '_')
+    if ! gcc $C99 -O2 "$@" appm.c main.c -o "$OUT/appm-simd-$tag" -lm -pthread >"$log" 2>&1 ||
+        ! gcc $C99 -O2 "$@" -DAPPM_SIMD=0 appm.c main.c -o "$OUT/appm-scalar-$tag" -lm -pthread >"$log" 2>&1; then
+        bad "$name: SIMD and scalar renders (build)"
+        return
+    fi
+    : >"$log"
+    for m in ppm appm pt; do
+        for v in simd scalar; do
+            "./$OUT/appm-$v-$tag" render scenes/cornell-sphere.scene --method $m --size 48x48 --passes 2 \
+                --threads 2 -q -o "$OUT/render-$v-$tag-$m.pfm" >>"$log" 2>&1 || echo "$v $m failed" >>"$log"
+        done
+        cmp "$OUT/render-simd-$tag-$m.pfm" "$OUT/render-scalar-$tag-$m.pfm" >>"$log" 2>&1 ||
+            echo "$m: the images differ" >>"$log"
+    done
+    if grep -q 'differ\|failed' "$log"; then bad "$name: SIMD and scalar renders"; else ok "$name: SIMD and scalar renders are the same bytes"; fi
+}
+
+# same_as_default NAME TAG: the SIMD renders of same_render NAME equal the default build's.
+same_as_default() {
+    : >"$log"
+    for m in ppm appm pt; do
+        cmp "$OUT/render-simd-gcc_SSE2-$m.pfm" "$OUT/render-simd-$2-$m.pfm" >>"$log" 2>&1 || echo "$m differs" >>"$log"
+    done
+    if grep -q 'differ' "$log"; then bad "$1: renders differ from the default build's"; else ok "$1: renders are the default build's bytes"; fi
+}
+
+# bvh_test NAME COMPILER FLAGS...: t_bvh built and run in quick mode
+bvh_test() {
+    name=$1 cc=$2
+    shift 2
+    tag=$(printf '%s' "$name" | tr -c 'A-Za-z0-9_\n' '_')
+    if $cc $C99 -O2 "$@" tests/t_bvh.c -o "$OUT/t_bvh-$tag" -lm -pthread >"$log" 2>&1; then
+        run_test "$name: t_bvh" env APPM_TEST_QUICK=1 "./$OUT/t_bvh-$tag"
+    else
+        bad "$name: t_bvh (build)"
+    fi
+}
+
+if have gcc "SIMD paths"; then
+    bvh_test "gcc SSE2" gcc
+    bvh_test "gcc -DAPPM_SIMD=0" gcc -DAPPM_SIMD=0
+    same_render "gcc SSE2"
+    if cpu_has avx2; then
+        bvh_test "gcc -mavx2" gcc -mavx2
+        bvh_test "gcc -mavx2 -DAPPM_SIMD=0" gcc -mavx2 -DAPPM_SIMD=0
+        same_render "gcc -mavx2" -mavx2
+        same_as_default "gcc -mavx2" gcc__mavx2
+    else
+        echo "skip -mavx2: this CPU has no AVX2"
+    fi
+fi
+if have clang "clang SIMD paths" && cpu_has avx2 && cpu_has fma; then
+    bvh_test "clang -mavx2 -mfma" clang -mavx2 -mfma
+fi
+
 # ---- mingw-w64 ----------------------------------------------------------------------
 
 MINGW=x86_64-w64-mingw32-gcc
@@ -233,6 +306,18 @@ if [ "${QEMU:-0}" = 1 ]; then
             else
                 bad "$triple-gcc: tests/t_portable.c"
             fi
+            # t_bvh: NEON on aarch64, and its -DAPPM_SIMD=0 twin; s390x has no SIMD
+            # path, so its default build is the scalar one already
+            for simd in "" -DAPPM_SIMD=0; do
+                [ "$arch" = s390x ] && [ -n "$simd" ] && continue
+                if $triple-gcc $C99 -O2 $simd tests/t_bvh.c -o "$OUT/t_bvh-$arch$simd" -lm -pthread \
+                    >"$log" 2>&1; then
+                    run_test "qemu-$arch: t_bvh $simd" env APPM_TEST_QUICK=1 \
+                        qemu-$arch -L /usr/$triple "$OUT/t_bvh-$arch$simd"
+                else
+                    bad "$triple-gcc $simd: tests/t_bvh.c"
+                fi
+            done
         fi
     done
 else

@@ -15,6 +15,9 @@
  *   4. Degenerate builds (G7, G8): duplicates, one triangle, a geometric chain
  *      that drives the SAH deep; NaN/inf/zero rays miss without crashing.
  *   5. pbrt's Triangle.BadCases (G4): a zero-area triangle is never hit.
+ *   6. The wide tree's SIMD and scalar box tests agree exactly, ties included
+ *      (every ray of part 1 goes through both), and the whole suite runs once
+ *      on each path.
  *
  * The brute-force reference for the 69k-triangle bunny would cost 1e10 triangle
  * tests for 1e5 rays, so the big ray sets use the same loop with a culling step
@@ -58,13 +61,23 @@ static appm__v3 lerp3(appm__v3 a, appm__v3 b, float t) { return appm__add(a, app
 
 /* ---- Scenes ---------------------------------------------------------------- */
 
+/* The traversal every scene of the current round uses (main runs the suite
+ * once per path: the vector box test, where the build has one, and the scalar). */
+static int g_path = APPM__BVH_SIMD;
+
+static appm_scene *on_path(appm_scene *s)
+{
+    if (s) s->bvh_path = g_path;
+    return s;
+}
+
 static appm_scene *load_text(const char *obj, const char *mtl, const char *name)
 {
     appm_scene *s = NULL;
     appm_diag d;
     appm_status st = appm_scene_load_obj_memory(obj, strlen(obj), mtl, mtl ? strlen(mtl) : 0, name, NULL, &s, &d);
     CHECK_MSG(st == APPM_OK, "%s: %s:%u: %s", name, d.file, d.line, d.message);
-    return st == APPM_OK ? s : NULL;
+    return st == APPM_OK ? on_path(s) : NULL;
 }
 
 /* A growing text buffer for generated OBJ files. */
@@ -170,7 +183,7 @@ static appm_scene *hand_scene(const appm__tri *tris, uint32_t n)
         }
     }
     CHECK(appm__bvh_build(s, NULL) == APPM_OK);
-    return s;
+    return on_path(s);
 }
 
 static void hand_free(appm_scene *s)
@@ -178,6 +191,7 @@ static void hand_free(appm_scene *s)
     appm__free(&s->mem, s->tri);
     appm__free(&s->mem, s->info);
     appm__free(&s->mem, s->node);
+    appm__free(&s->mem, s->wnode_mem);
     CHECK(s->mem.live == 0); /* the build freed all its scratch memory */
     free(s);
 }
@@ -283,7 +297,7 @@ static int brute_cull(const appm_scene *s, const cull *cu, const appm__ray *r, a
 
 typedef struct ray_stats {
     const char *name;
-    long rays, hits, bad_hit, bad_t, bad_tri, ties, bad_any, bad_clip, bad_cull, pure;
+    long rays, hits, bad_hit, bad_t, bad_tri, ties, bad_any, bad_clip, bad_cull, bad_path, pure;
     int printed;
 } ray_stats;
 
@@ -300,6 +314,21 @@ static void report_ray(ray_stats *st, const char *what, appm__v3 o, appm__v3 d)
             o.z, d.x, d.y, d.z);
 }
 
+/* The vector and the scalar box test must give the very same answer, exact
+ * ties included (the same triangle): they compute the same floats and visit
+ * the same nodes in the same order.  Without SIMD both calls are scalar. */
+static void compare_paths(const appm_scene *s, const appm__ray *r, ray_stats *st, appm__v3 o, appm__v3 d)
+{
+    appm__hit a, b;
+    int fa = appm__intersect_wide(s, r, UINT32_MAX, &a, 0), fb = appm__intersect_wide(s, r, UINT32_MAX, &b, 1);
+    if (fa != fb || (fa && (fbits(a.t) != fbits(b.t) || fbits(a.b1) != fbits(b.b1) ||
+                            fbits(a.b2) != fbits(b.b2) || a.tri != b.tri)) ||
+        appm__occluded_wide(s, r, UINT32_MAX, UINT32_MAX, 0) != appm__occluded_wide(s, r, UINT32_MAX, UINT32_MAX, 1)) {
+        st->bad_path++;
+        report_ray(st, "the SIMD and the scalar box test disagree", o, d);
+    }
+}
+
 /* One ray through the BVH and through the reference.  `pure` also runs the
  * plain loop and requires the culled loop to agree with it bitwise. */
 static void compare_ray(const appm_scene *s, const cull *cu, appm__v3 o, appm__v3 d, ray_stats *st, int pure)
@@ -313,6 +342,7 @@ static void compare_ray(const appm_scene *s, const cull *cu, appm__v3 o, appm__v
     st->rays++;
     fb = appm__intersect(s, &r, UINT32_MAX, &hb);
     ff = cu ? brute_cull(s, cu, &r, &hf) : brute(s, &r, &hf);
+    compare_paths(s, &r, st, o, d);
     if (pure && cu) {
         int fp = brute(s, &r, &hp);
         st->pure++;
@@ -369,6 +399,7 @@ static void compare_ray(const appm_scene *s, const cull *cu, appm__v3 o, appm__v
         st->bad_clip++;
         report_ray(st, "intersect() with a finite tmax disagrees", o, d);
     }
+    compare_paths(s, &r, st, o, d);
 }
 
 static void stats_check(const ray_stats *st, long min_rays)
@@ -382,6 +413,7 @@ static void stats_check(const ray_stats *st, long min_rays)
     CHECK_MSG(st->bad_any == 0, "%s: %ld any-hit disagreements", st->name, st->bad_any);
     CHECK_MSG(st->bad_clip == 0, "%s: %ld clipped closest-hit disagreements", st->name, st->bad_clip);
     CHECK_MSG(st->bad_cull == 0, "%s: %ld culled-reference disagreements (test bug)", st->name, st->bad_cull);
+    CHECK_MSG(st->bad_path == 0, "%s: %ld SIMD/scalar disagreements", st->name, st->bad_path);
 }
 
 static appm__v3 tri_vertex(const appm__tri *t, int k)
@@ -517,7 +549,7 @@ static void test_bvh_vs_brute(void)
     CHECK(check_write_file(path, "mesh ../../scenes/stanford-bunny.obj\n"
                                  "light point position 0 1 0 intensity 1 1 1\n"));
     CHECK_MSG(appm_scene_load(path, NULL, &s, &d) == APPM_OK, "%s:%u: %s", d.file, d.line, d.message);
-    if (s) {
+    if (on_path(s)) {
         CHECK(s->ntri > 60000);
         bvh_vs_brute(s, "bunny", quick ? 10000 : 100000, quick ? 100 : 1000, 1);
         appm_scene_destroy(s);
@@ -527,7 +559,7 @@ static void test_bvh_vs_brute(void)
     s = NULL;
     CHECK_MSG(appm_scene_load("scenes/CornellBox-Original.obj", NULL, &s, &d) == APPM_OK, "%s:%u: %s", d.file,
               d.line, d.message);
-    if (s) {
+    if (on_path(s)) {
         bvh_vs_brute(s, "cornell", quick ? 5000 : 50000, 0, 0);
         appm_scene_destroy(s);
     }
@@ -627,7 +659,7 @@ static appm_scene *one_tri_scene(const appm__v3 *p)
         appm_scene_destroy(s);
         return NULL;
     }
-    return s;
+    return on_path(s);
 }
 
 /* pbrt's Triangle.Reintersect: triangles whose coordinates are +-10^U(-6,6)
@@ -993,13 +1025,19 @@ static void test_bad_cases(void)
 
 int main(void)
 {
-    appm__rng_seed(&g_rng, 1, 0, APPM__DOMAIN_TEST, 1);
-    test_bad_cases();
-    test_bad_rays();
-    test_degenerate();
-    test_reintersect();
-    test_reintersect_scenes();
-    test_watertight();
-    test_bvh_vs_brute();
+    int round;
+    printf("box test: %s, %d-wide tree\n", APPM__SIMD_NAME, APPM__BVH_W);
+    for (round = 0; round < 2; ++round) {
+        g_path = round ? APPM__BVH_SCALAR : APPM__BVH_SIMD;
+        printf("-- %s box test --\n", round ? "scalar" : "SIMD");
+        appm__rng_seed(&g_rng, 1, 0, APPM__DOMAIN_TEST, 1);
+        test_bad_cases();
+        test_bad_rays();
+        test_degenerate();
+        test_reintersect();
+        test_reintersect_scenes();
+        test_watertight();
+        test_bvh_vs_brute();
+    }
     return check_finish();
 }

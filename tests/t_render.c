@@ -8,7 +8,8 @@
  *                  the kernel-blurred irradiance, alpha = 2/3 to the true one
  *   3. cross-check ppm and appm against the unbiased path tracer on the
  *                  Cornell boxes: image means agree, RMSE falls with passes
- *   4. determinism the same bytes for 1, 2 and 3 threads
+ *   4. determinism the same bytes for 1, 2 and 3 threads, and for the SIMD and
+ *                  the scalar box test of the BVH
  *   5. memory      no allocation from pass to pass once the photon store fits
  *
  * Every tolerance below is a multiple of a standard error that the test
@@ -953,6 +954,13 @@ static void test_determinism(void)
                   method_name(methods[mi]));
         CHECK_MSG(memcmp(img[0], img[3], n * sizeof(float)) != 0, "%s: seeds 5 and 6 give the same image",
                   method_name(methods[mi]));
+        /* the scalar box test of the wide BVH finds the same hits as the SIMD one */
+        s->bvh_path = APPM__BVH_SCALAR;
+        ok = det_render(s, methods[mi], 2, 5, img[3], NULL);
+        s->bvh_path = APPM__BVH_SIMD;
+        CHECK_MSG(ok && memcmp(img[0], img[3], n * sizeof(float)) == 0,
+                  "%s: the SIMD (%s) and the scalar box test give different images", method_name(methods[mi]),
+                  APPM__SIMD_NAME);
         for (t = 0; t < 3; ++t) file[t] = slurp(name[t], &len[t]);
         CHECK_MSG(file[0] && len[0] > n * sizeof(float), "%s: %s missing or short", method_name(methods[mi]),
                   name[0]);
