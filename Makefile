@@ -5,6 +5,7 @@
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), wasm32-wasi,
 #                     C89/C++ header
 #   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
+#                     make bench-glossy: CornellBox-Glossy alone
 #                     make bench-sampler: --sampler qmc against random on every scene
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
@@ -23,7 +24,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-bvh bench-sampler fuzz web \
+.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler fuzz web \
         test-web clean
 
 all: appm
@@ -74,6 +75,9 @@ bench: appm
 
 bench-quick: appm
 	sh bench/run.sh quick
+
+bench-glossy: appm
+	sh bench/run.sh glossy
 
 bench-bvh:
 	sh bench/bvh.sh

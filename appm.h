@@ -313,6 +313,7 @@ typedef struct appm_scene_info {
     uint32_t width, height;         /* the scene's image size                            */
     uint64_t memory_bytes;          /* bytes the scene holds                            */
     uint64_t peak_bytes;            /* the most that loading held at once               */
+    uint32_t materials_glossy;      /* Lambert + Phong lobe (Ks > 0 on illum 2)          */
 } appm_scene_info;
 
 APPM_API void appm_scene_get_info(const appm_scene *scene, appm_scene_info *info);

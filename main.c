@@ -753,8 +753,9 @@ static int cmd_info(int argc, char **argv)
     printf("scene       %s\n", argv[2]);
     printf("triangles   %llu (%llu degenerate dropped)\n", (unsigned long long)in.triangles,
            (unsigned long long)in.dropped_triangles);
-    printf("materials   %u diffuse, %u mirror, %u dielectric (%u emissive)\n", in.materials_diffuse,
-           in.materials_mirror, in.materials_dielectric, in.materials_emissive);
+    printf("materials   %u diffuse, %u mirror, %u dielectric, %u glossy (%u emissive)\n",
+           in.materials_diffuse, in.materials_mirror, in.materials_dielectric, in.materials_glossy,
+           in.materials_emissive);
     printf("lights      %u area, %u point, %u spot, %u environment\n", in.lights_area, in.lights_point,
            in.lights_spot, in.lights_environment);
     if (in.lights_area)

@@ -3,9 +3,12 @@
 #
 #   sh bench/run.sh quick     one scene, small image, 6 runs of 8 s (plus the reference
 #                             the first time)
-#   sh bench/run.sh full      four scenes, the full ppm grid, throughput and scaling,
+#   sh bench/run.sh full      five scenes, the full ppm grid, throughput and scaling,
 #                             and the sampler suite (bench/sampler.sh)
 #   sh bench/run.sh refs      only the references of the full suite (the slow part)
+#   sh bench/run.sh glossy    only CornellBox-Glossy of the full suite (its reference,
+#                             the first time, is 2 x 67 M path-traced paths: 10 minutes
+#                             on 2 loaded cores, then 6 runs of 10 s)
 #
 # For every scene: a reference (rendered once by a long path-tracing run and
 # cached in bench/ref/ with the exact command in NAME.cmd; never committed),
@@ -111,14 +114,18 @@ if [ "$mode" = refs ]; then # only render (or check) the references of the full 
     reference cornell-original-128 scenes/cornell-original.scene 128x128 4096
     reference cornell-sphere-dof-128 scenes/cornell-sphere-dof.scene 128x128 4096
     reference cornell-mm-128 scenes/cornell-mm.scene 128x128 4096
+    reference cornell-glossy-128 scenes/cornell-glossy.scene 128x128 4096
     exit 0
 elif [ "$mode" = quick ]; then
     scene cornell-sphere-64 scenes/cornell-sphere.scene 64x64 8 8192 small
+elif [ "$mode" = glossy ]; then
+    scene cornell-glossy-128 scenes/cornell-glossy.scene 128x128 10 4096 small
 else
     scene cornell-sphere-256 scenes/cornell-sphere.scene 256x256 30 8192 full
     scene cornell-original-128 scenes/cornell-original.scene 128x128 10 4096 small
     scene cornell-sphere-dof-128 scenes/cornell-sphere-dof.scene 128x128 10 4096 small
     scene cornell-mm-128 scenes/cornell-mm.scene 128x128 10 4096 small
+    scene cornell-glossy-128 scenes/cornell-glossy.scene 128x128 10 4096 small
 fi
 bench/report "$out" > /dev/null || exit 1
 

@@ -176,9 +176,31 @@ typedef struct cornell_case {
     uint64_t tris;            /* quads count 2, triangles 1 (awk over the `f` lines) */
     uint32_t diffuse, mirror, dielectric;
     double ke[3];             /* Ke of the `light` material */
-    int glossy;               /* materials with Ks > 0 on illum 2 (one warning whatever the count) */
+    uint32_t glossy;          /* materials with Ks > 0 on illum 2 (glossy since interface.md 2) */
     int scene_camera;         /* loaded through a .scene with a camera statement */
 } cornell_case;
+
+/* CornellBox-Glossy's two glossy materials after the Kd + Ks <= 1 scaling. */
+static void check_glossy_box(const appm_scene *s)
+{
+    uint32_t m, nsph = 0, nfloor = 0;
+    for (m = 1; m < s->nmat; ++m) {
+        const appm__material *mt = &s->mat[m];
+        if (mt->kind != APPM__MAT_GLOSSY) continue;
+        if (mt->ns == 32.0f) { /* sphere: Kd 0.486 0.631 0.663, Ks 0.7 */
+            nsph++;
+            CHECK_NEAR(mt->color.x, 0.486 / 1.186, 1e-6);
+            CHECK_NEAR(mt->ks.x, 0.7 / 1.186, 1e-6);
+            CHECK_NEAR(mt->color.z + mt->ks.z, 1.0, 1e-6);
+        } else if (mt->ns == 80.0f) { /* floor: Kd 0.725 0.71 0.68, Ks 0.3 (sums <= 1.025) */
+            nfloor++;
+            CHECK_NEAR(mt->color.x, 0.725 / 1.025, 1e-6);
+            CHECK_NEAR(mt->color.z, 0.68, 1e-6); /* 0.98: not scaled */
+            CHECK_NEAR(mt->ks.z, 0.3, 1e-6);
+        }
+    }
+    CHECK_MSG(nsph == 1 && nfloor == 1, "%u sphere, %u floor materials", nsph, nfloor);
+}
 
 static void test_cornell(void)
 {
@@ -190,13 +212,13 @@ static void test_cornell(void)
         {"scenes/CornellBox-Mirror.obj", 36, 7, 1, 0, {17, 12, 4}, 0, 0},
         {"scenes/CornellBox-Empty-RG.obj", 12, 6, 0, 0, {17, 12, 4}, 0, 0},
         {"scenes/CornellBox-Empty-White.obj", 12, 6, 0, 0, {10, 10, 10}, 0, 0},
-        {"scenes/CornellBox-Glossy.obj", 1112, 8, 0, 0, {10, 10, 10}, 2, 0},
+        {"scenes/CornellBox-Glossy.obj", 1112, 6, 0, 0, {10, 10, 10}, 2, 0},
         {"scenes/CornellBox-Sphere.obj", 2188, 6, 1, 1, {10, 10, 10}, 0, 0},
         {"scenes/cornell-original.scene", 36, 8, 0, 0, {17, 12, 4}, 0, 1},
         {"scenes/cornell-mirror.scene", 36, 7, 1, 0, {17, 12, 4}, 0, 1},
         {"scenes/cornell-empty-rg.scene", 12, 6, 0, 0, {17, 12, 4}, 0, 1},
         {"scenes/cornell-empty-white.scene", 12, 6, 0, 0, {10, 10, 10}, 0, 1},
-        {"scenes/cornell-glossy.scene", 1112, 8, 0, 0, {10, 10, 10}, 2, 1},
+        {"scenes/cornell-glossy.scene", 1112, 6, 0, 0, {10, 10, 10}, 2, 1},
         {"scenes/cornell-sphere.scene", 2188, 6, 1, 1, {10, 10, 10}, 0, 1},
         {"scenes/cornell-sphere-dof.scene", 2188, 6, 1, 1, {10, 10, 10}, 0, 1},
     };
@@ -216,9 +238,9 @@ static void test_cornell(void)
         CHECK_MSG(in.dropped_triangles == 0, "%s: dropped %llu", c->path,
                   (unsigned long long)in.dropped_triangles);
         CHECK_MSG(in.materials_diffuse == c->diffuse && in.materials_mirror == c->mirror &&
-                      in.materials_dielectric == c->dielectric,
-                  "%s: %u diffuse, %u mirror, %u dielectric", c->path, in.materials_diffuse,
-                  in.materials_mirror, in.materials_dielectric);
+                      in.materials_dielectric == c->dielectric && in.materials_glossy == c->glossy,
+                  "%s: %u diffuse, %u mirror, %u dielectric, %u glossy", c->path, in.materials_diffuse,
+                  in.materials_mirror, in.materials_dielectric, in.materials_glossy);
         CHECK_MSG(in.materials_emissive == 1, "%s: %u emissive", c->path, in.materials_emissive);
         CHECK_MSG(in.lights_area == 2 && in.lights_point == 0 && in.lights_spot == 0 &&
                       in.lights_environment == 0,
@@ -228,10 +250,12 @@ static void test_cornell(void)
         CHECK_NEAR(emissive_area(s), light_area, 1e-5);
         CHECK(in.width == 512 && in.height == 512);
         /* Warnings: every MTL of the archive has Ka lines (ignored), each file
-         * must say so exactly once; glossy Ks only in the glossy box, once. */
+         * must say so exactly once.  Only the glossy box's sphere has Kd + Ks > 1
+         * (0.486 + 0.7 in red): one warning, and the two scaled to sum to 1. */
         CHECK_MSG(log_count(&lb, "'Ka'") == 1, "%s: %d Ka warnings", c->path, log_count(&lb, "'Ka'"));
-        CHECK_MSG(log_count(&lb, "glossy") == (c->glossy ? 1 : 0), "%s: %d glossy warnings", c->path,
-                  log_count(&lb, "glossy"));
+        CHECK_MSG(log_count(&lb, "Kd + Ks") == (c->glossy ? 1 : 0), "%s: %d Kd + Ks warnings", c->path,
+                  log_count(&lb, "Kd + Ks"));
+        if (c->glossy) check_glossy_box(s);
         CHECK_MSG(!log_has_repeats(&lb), "%s: a warning kind was sent twice", c->path);
         if (log_find(&lb, "'Ka'") >= 0)
             CHECK(strstr(lb.file[log_find(&lb, "'Ka'")], ".mtl") != NULL);
@@ -843,9 +867,11 @@ static void test_mtl_mapping(void)
             } else if (k == 3 || k == 5) {
                 CHECK_MSG(m->kind == APPM__MAT_MIRROR, "illum %d: kind %d", k, m->kind);
                 CHECK(same_v3(m->color, appm__v(0.4f, 0.5f, 0.6f))); /* Ks */
-            } else {
-                CHECK_MSG(m->kind == APPM__MAT_DIFFUSE, "illum %d: kind %d", k, m->kind);
+            } else { /* Ks 0.4 0.5 0.6 > 0 on the others: glossy, Ns 1 by default */
+                CHECK_MSG(m->kind == APPM__MAT_GLOSSY, "illum %d: kind %d", k, m->kind);
                 CHECK(same_v3(m->color, appm__v(0.1f, 0.2f, 0.3f))); /* Kd */
+                CHECK(same_v3(m->ks, appm__v(0.4f, 0.5f, 0.6f)));
+                CHECK(m->ns == 1.0f);
             }
             CHECK(!m->emissive);
         }
@@ -865,12 +891,56 @@ static void test_mtl_mapping(void)
         appm_scene_info in;
         appm_scene_get_info(s, &in);
         /* dielectric: illum 4 6 7 9, glass_default, emissive_glass; mirror: illum
-         * 3 5, mirror_default, emissive_mirror; the other 8 are diffuse */
-        CHECK(in.materials_dielectric == 6 && in.materials_mirror == 4 && in.materials_diffuse == 8);
+         * 3 5, mirror_default, emissive_mirror; glossy: illum 0 1 2 8 10; the
+         * other 3 are diffuse */
+        CHECK(in.materials_dielectric == 6 && in.materials_mirror == 4 && in.materials_diffuse == 3);
+        CHECK(in.materials_glossy == 5);
         CHECK(in.materials_emissive == 3);
         CHECK(in.lights_area == 1); /* only used emissive materials make lights */
     }
-    CHECK(log_count(&lb, "glossy") == 1); /* Ks 0.4.. on the diffuse illum values */
+    CHECK(log_count(&lb, "Kd + Ks") == 0); /* 0.1 + 0.4 .. 0.3 + 0.6: all below 1 */
+    CHECK(!log_has_repeats(&lb));
+    appm_scene_destroy(s);
+}
+
+/* Glossy materials: Ns at its limits, Kd + Ks scaling, defaults, warnings. */
+static void test_mtl_glossy(void)
+{
+    appm_scene *s;
+    appm_diag d;
+    logbuf lb;
+    /* Glossy: Ns at the limits, Kd + Ks > 1 scaled per channel keeping the
+     * ratio (one warning for the file), Ns reset to 1 at each newmtl, and Ns
+     * without Ks > 0 a warning (the material stays diffuse). */
+    CHECK(load_mem(TRI_LIGHT,
+                   "newmtl light\nKe 1 1 1\nKd 0.5 0.5 0.5\nKs 0.25 0.75 1.5\nNs 100000\n"
+                   "newmtl g2\nKd 0.9 0.1 0\nKs 0.3 0.3 0.3\nNs 0.001\n"
+                   "newmtl g3\nKs 0.1 0 0\n"
+                   "newmtl d\nKs 0 0 0\nNs 50\n",
+                   &s, &d, &lb) == APPM_OK);
+    if (s) {
+        const appm__material *m = &s->mat[1];
+        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 1e5f);
+        CHECK_NEAR(m->color.x, 0.5, 1e-7);          /* 0.75: unchanged */
+        CHECK_NEAR(m->ks.x, 0.25, 1e-7);
+        CHECK_NEAR(m->color.y, 0.5 / 1.25, 1e-7);   /* 1.25: scaled */
+        CHECK_NEAR(m->ks.y, 0.75 / 1.25, 1e-7);
+        CHECK_NEAR(m->color.z, 0.5 / 1.5, 1e-7);    /* Ks 1.5 clamped to 1 first */
+        CHECK_NEAR(m->ks.z, 1.0 / 1.5, 1e-7);
+        m = &s->mat[2];
+        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 0.001f);
+        CHECK_NEAR(m->color.x, 0.9 / 1.2, 1e-7);
+        CHECK_NEAR(m->ks.x, 0.3 / 1.2, 1e-7);
+        CHECK_NEAR(m->color.y, 0.1, 1e-7);
+        m = &s->mat[3];
+        CHECK(m->kind == APPM__MAT_GLOSSY && m->ns == 1.0f);
+        CHECK(same_v3(m->color, appm__v(0.8f, 0.8f, 0.8f)) && same_v3(m->ks, appm__v(0.1f, 0, 0)));
+        CHECK(s->mat[4].kind == APPM__MAT_DIFFUSE);
+    }
+    CHECK(log_count(&lb, "Kd + Ks") == 1);
+    CHECK(log_count(&lb, "'Ns'") == 1);
+    if (log_find(&lb, "'Ns'") >= 0) CHECK(strstr(lb.msg[log_find(&lb, "'Ns'")], "Ks > 0") != NULL);
+    CHECK(log_count(&lb, "clamped") == 1);
     CHECK(!log_has_repeats(&lb));
     appm_scene_destroy(s);
 }
@@ -907,6 +977,13 @@ static void test_mtl_values(void)
             {"newmtl light\nKe 1 1 1e39\n", 2},
             {"newmtl light\nKe -1 1 1\n", 2},
             {"newmtl light\nillum 4.5\n", 2},
+            /* the Phong exponent: (0, 1e5] (interface.md section 2) */
+            {"newmtl light\nKe 1 1 1\nKs 0.5 0.5 0.5\nNs 0\n", 4},
+            {"newmtl light\nKe 1 1 1\nNs -3\n", 3},
+            {"newmtl light\nKe 1 1 1\nNs nan\n", 3},
+            {"newmtl light\nKe 1 1 1\nNs 100001\n", 3},
+            {"newmtl light\nKe 1 1 1\nNs 1e6\nKs 0.2 0.2 0.2\n", 3},
+            {"newmtl light\nKe 1 1 1\nNs\n", 3},
             {"newmtl light\nillum -1\n", 2},
             {"newmtl\n", 1},
         };
@@ -1290,6 +1367,7 @@ int main(void)
     test_mtl_before_newmtl();
     test_mtl_mapping();
     test_mtl_values();
+    test_mtl_glossy();
     test_obj_ignored_warnings();
     test_scene_statements();
     test_scene_malformed();

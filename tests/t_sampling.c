@@ -16,6 +16,11 @@
  *      albedo, glass exactly 1 for photons (S5).
  *   4. Photon emission (A8, S8, S9): the light pick frequencies, the CDF's ends,
  *      zero-variance emission weights, and power conservation.
+ *   5. Glossy (Lambert + normalised modified Phong): chi-square of the lobe
+ *      sampler at several Ns and of the whole BSDF sampler at several angles,
+ *      the albedo against numerical integration, reciprocity, energy <= 1 for
+ *      every wo, the lobe's pdf and f against closed forms, and large Ns
+ *      approaching the mirror.
  *   The chi-square tests of section 1 run twice: with the PCG stream, and with
  *   the numbers of the low-discrepancy sampler (appm.c section 2.3; its own
  *   tests are in t_sampler.c), which must map to the same distributions.  A
@@ -26,7 +31,7 @@
 #include "check.h"
 
 #define GROUP "sampling"
-#define NTESTS_CHI2 9 /* chi-square tests in this file, for the Sidak correction */
+#define NTESTS_CHI2 19 /* chi-square tests in this file, for the Sidak correction */
 #define DEG (APPM__PI / 180.0)
 
 static appm__rng g_rng;
@@ -716,6 +721,261 @@ static void test_pick_boundaries(void)
     appm_scene_destroy(s);
 }
 
+/* ---- 5. Glossy --------------------------------------------------------------
+ *
+ * The test's own double-precision model of interface.md section 2, written
+ * from the formula and not from the library:
+ *   f = Kd / pi + Ks (Ns + 2) / (2 pi) max(0, wi . r)^Ns,  r = 2 (wo.n) n - wo,
+ *   pdf = P_d cos / pi + (1 - P_d) (Ns + 1) / (2 pi) max(0, wi . r)^Ns (wi above),
+ *   P_d = sum Kd / (sum Kd + sum Ks). */
+
+static appm__material glossy_mat(double kd, double ks, double ns)
+{
+    appm__material m;
+    memset(&m, 0, sizeof m);
+    m.kind = APPM__MAT_GLOSSY;
+    m.color = appm__v((float)kd, (float)kd, (float)kd);
+    m.ks = appm__v((float)ks, (float)ks, (float)ks);
+    m.ns = (float)ns;
+    return m;
+}
+
+/* wo at polar angle theta (degrees) from +z, azimuth 0. */
+static appm__v3 wo_at(double theta) { return appm__v((float)sin(theta * DEG), 0.0f, (float)cos(theta * DEG)); }
+
+static double ref_pdf(double kd, double ks, double ns, const double wo[3], const double wi[3])
+{
+    double r[3] = {-wo[0], -wo[1], wo[2]}, c = wi[0] * r[0] + wi[1] * r[1] + wi[2] * r[2], pd = kd / (kd + ks);
+    if (wi[2] <= 0.0) return 0.0;
+    return pd * wi[2] / APPM__PI + (c > 0 ? (1.0 - pd) * (ns + 1.0) / (2.0 * APPM__PI) * pow(c, ns) : 0.0);
+}
+
+/* The lobe's albedo int (Ns+2)/(2 pi) cos^Ns(a) max(0, n.wi) dw at incidence
+ * theta, integrated in the lobe's own frame: with t = cos^(Ns+1) a the lobe
+ * measure is uniform, (Ns+1)/(2 pi) cos^Ns a dw = dt dphi / (2 pi), so the
+ * albedo is (Ns+2)/(Ns+1) times the mean of max(0, n.wi) over (t, phi).  At
+ * fixed t, n.wi = A - B cos phi (A = cos a cos theta, B = sin a sin theta), whose
+ * positive part has the mean (A (pi - p0) + B sin p0) / pi, p0 = acos(A / B),
+ * with p0 / pi of the circle below the horizon; the t integral is a midpoint
+ * rule of n points on each side of t* = sin^(Ns+1) theta, where the horizon
+ * starts to cut.  *below: the share of lobe samples below the horizon. */
+static double lobe_quad(double ns, double theta, int n, double *below)
+{
+    double st = sin(theta * DEG), ct = cos(theta * DEG), ts = pow(st, ns + 1.0), sum = 0.0, out = 0.0;
+    int i, part;
+    for (part = 0; part < 2; ++part) {
+        double lo = part ? ts : 0.0, hi = part ? 1.0 : ts, h = (hi - lo) / n;
+        for (i = 0; i < n && h > 0.0; ++i) {
+            double t = lo + (i + 0.5) * h, ca = pow(t, 1.0 / (ns + 1.0)), sa = sqrt(fmax(0.0, 1.0 - ca * ca));
+            double A = ca * ct, B = sa * st, p0;
+            if (B <= fabs(A)) {
+                sum += (A > 0.0 ? A : 0.0) * h;
+                out += (A > 0.0 ? 0.0 : 1.0) * h;
+                continue;
+            }
+            p0 = acos(A / B);
+            sum += (A * (APPM__PI - p0) + B * sin(p0)) / APPM__PI * h;
+            out += p0 / APPM__PI * h;
+        }
+    }
+    if (below) *below = out;
+    return (ns + 2.0) / (ns + 1.0) * sum;
+}
+
+static double lobe_albedo(double ns, double theta, int n) { return lobe_quad(ns, theta, n, NULL); }
+
+/* The lobe alone: cos(a) to the axis must follow (Ns+1) cos^Ns a on [0, 1], so
+ * v = cos^(Ns+1) a is uniform; binned in v and in the azimuth about the axis. */
+static void test_lobe_chi2(double ns, long N)
+{
+    double obs[NT * NP], ex[NT * NP], axis[3] = {0.48, -0.6, 0.64}, t[3], b[3];
+    appm__v3 ax = appm__v(0.48f, -0.6f, 0.64f);
+    long i, badlen = 0;
+    int c;
+    char name[64];
+    frame(axis, t, b);
+    memset(obs, 0, sizeof obs);
+    for (i = 0; i < N; ++i) {
+        appm__v3 w = appm__phong_dir(ax, (float)ns, uf(), uf());
+        double x = w.x * t[0] + w.y * t[1] + w.z * t[2], y = w.x * b[0] + w.y * b[1] + w.z * b[2];
+        double z = w.x * axis[0] + w.y * axis[1] + w.z * axis[2];
+        double a = atan2(sqrt(x * x + y * y), z), v = exp((ns + 1.0) * log(cos(a)));
+        if (fabs(x * x + y * y + z * z - 1.0) > 1e-5) badlen++;
+        obs[bin_of(z > 0 ? v : 0.0, 0, 1, NT) * NP + bin_of(atan2(y, x), -APPM__PI, APPM__PI, NP)] += 1;
+    }
+    for (c = 0; c < NT * NP; ++c) ex[c] = (double)N / (NT * NP);
+    snprintf(name, sizeof name, "Phong lobe, Ns = %g", ns);
+    CHECK_MSG(badlen == 0, "%s: %ld samples not of unit length", name, badlen);
+    chi2_check(name, obs, ex, NT * NP);
+}
+
+/* The whole glossy sampler at incidence theta: cells in (cos theta_i, phi_i)
+ * about the normal, expected counts from the reference pdf integrated over
+ * each cell (midpoint, S x S points), plus one cell for the rejected samples
+ * (the lobe below the horizon), whose probability (1 - P_d) P_below comes from
+ * the lobe-frame quadrature above; the cells are scaled to hold the rest
+ * (this removes the midpoint rule's global error, of order 1e-4, which at
+ * normal incidence would otherwise expect rejections where none can occur). */
+static void test_glossy_chi2(double kd, double ks, double ns, double theta, long N)
+{
+    enum { S = 24 };
+    static double obs[NT * NP + 1], ex[NT * NP + 1];
+    appm__material m = glossy_mat(kd, ks, ns);
+    appm__surf sf = flat_surf();
+    appm__v3 wo = wo_at(theta);
+    double wod[3] = {wo.x, wo.y, wo.z}, up = 0.0, below, pd = kd / (kd + ks);
+    long i;
+    int c, a, k, l;
+    char name[64];
+    memset(obs, 0, sizeof obs);
+    for (i = 0; i < N; ++i) {
+        appm__bsdf_sample bs;
+        if (!appm__bsdf_sample_dir(&m, &sf, wo, uf(), uf(), uf(), APPM__RADIANCE, &bs)) {
+            obs[NT * NP] += 1;
+            continue;
+        }
+        obs[bin_of(bs.wi.z, 0, 1, NT) * NP + bin_of(atan2(bs.wi.y, bs.wi.x), -APPM__PI, APPM__PI, NP)] += 1;
+    }
+    for (c = 0; c < NT; ++c)
+        for (a = 0; a < NP; ++a) {
+            double sum = 0.0, dz = 1.0 / NT / S, dp = 2.0 * APPM__PI / NP / S;
+            for (k = 0; k < S; ++k)
+                for (l = 0; l < S; ++l) {
+                    double z = (c + (k + 0.5) / S) / NT, phi = -APPM__PI + 2.0 * APPM__PI * (a + (l + 0.5) / S) / NP;
+                    double sz = sqrt(1.0 - z * z), wi[3];
+                    wi[0] = sz * cos(phi), wi[1] = sz * sin(phi), wi[2] = z;
+                    sum += ref_pdf(kd, ks, ns, wod, wi) * dz * dp; /* dw = dz dphi */
+                }
+            ex[c * NP + a] = (double)N * sum;
+            up += sum;
+        }
+    lobe_quad(ns, theta, 20000, &below);
+    ex[NT * NP] = (double)N * (1.0 - pd) * below;
+    for (c = 0; c < NT * NP; ++c) ex[c] *= (1.0 - (1.0 - pd) * below) / up;
+    snprintf(name, sizeof name, "glossy Ns %g at %g deg", ns, theta);
+    chi2_check(name, obs, ex, NT * NP + 1);
+}
+
+/* E[f cos / pdf] of the sampler against Kd + Ks A(theta) from the quadrature. */
+static void test_glossy_albedo(void)
+{
+    static const double nss[4] = {1, 10, 100, 1000}, thetas[4] = {0, 30, 60, 85};
+    long N = check_quick() ? 100000 : 400000, i;
+    int a, b;
+    CHECK_NEAR(lobe_albedo(1, 0, 20000), 1.0, 1e-6); /* the normalisation: A(0) = 1 */
+    CHECK_NEAR(lobe_albedo(100, 0, 20000), 1.0, 1e-6);
+    for (a = 0; a < 4; ++a)
+        for (b = 0; b < 4; ++b) {
+            appm__material m = glossy_mat(0.3, 0.6, nss[a]);
+            appm__surf sf = flat_surf();
+            appm__v3 wo = wo_at(thetas[b]);
+            double sum = 0.0, sum2 = 0.0, mean, se, expect = 0.3 + 0.6 * lobe_albedo(nss[a], thetas[b], 20000);
+            long bad = 0;
+            for (i = 0; i < N; ++i) {
+                appm__bsdf_sample bs;
+                double w;
+                if (!appm__bsdf_sample_dir(&m, &sf, wo, uf(), uf(), uf(), (int)(i & 1), &bs)) continue;
+                w = bs.weight.y;
+                sum += w, sum2 += w * w;
+                /* the sample's pdf and weight agree with the library's pdf and f */
+                if (fabs(bs.pdf - appm__bsdf_pdf(&m, sf.ns, bs.wi, wo)) > 1e-5 * bs.pdf ||
+                    bs.specular || !(w >= 0.0))
+                    bad++;
+            }
+            mean = sum / N;
+            se = sqrt((sum2 / N - mean * mean) / N);
+            CHECK_MSG(fabs(mean - expect) <= 4.0 * se + 1e-4, "glossy Ns %g at %g deg: albedo %.5f, quadrature %.5f (SE %.2g)",
+                      nss[a], thetas[b], mean, expect, se);
+            CHECK_MSG(bad == 0, "glossy Ns %g at %g deg: %ld samples with a bad pdf or weight", nss[a], thetas[b], bad);
+            if (getenv("APPM_TEST_VERBOSE"))
+                printf("  glossy albedo Ns %6g theta %2g: MC %.5f quadrature %.5f SE %.2g\n", nss[a], thetas[b],
+                       mean, expect, se);
+        }
+}
+
+/* Energy: with Kd + Ks = 1 the albedo is at most 1 at every incidence, and 1
+ * exactly at normal incidence; it falls towards grazing as the horizon cuts the
+ * lobe.  f and pdf against the closed forms, and reciprocity f(a,b) = f(b,a). */
+static void test_glossy_energy(void)
+{
+    static const double nss[5] = {0.5, 1, 10, 100, 1000};
+    int a, k;
+    long i, nonrecip = 0, badf = 0, badpdf = 0;
+    for (a = 0; a < 5; ++a) {
+        /* the quadrature's own error, known at normal incidence where A = 1 */
+        double worst = 0.0, prev = 2.0, qerr = fabs(lobe_albedo(nss[a], 0, 5000) - 1.0);
+        int mono = 1;
+        for (k = 0; k <= 89; ++k) {
+            double alb = 0.25 + 0.75 * lobe_albedo(nss[a], k, 5000);
+            worst = alb > worst ? alb : worst;
+            mono &= alb <= prev + 1e-9;
+            prev = alb;
+        }
+        CHECK_MSG(worst <= 1.0 + 0.75 * qerr + 1e-9, "Ns %g: albedo %.7f > 1 (quadrature error %.2g)", nss[a],
+                  worst, qerr);
+        CHECK_MSG(mono, "Ns %g: the albedo does not fall monotonically towards grazing", nss[a]);
+    }
+    for (i = 0; i < 200000; ++i) {
+        appm__material m = glossy_mat(0.2 + 0.3 * uf(), 0.4 * uf() + 0.01, nss[i % 5] * (1.0 + uf()));
+        appm__v3 x = appm__uniform_sphere(uf(), uf()), y = appm__uniform_sphere(uf(), uf()), n = appm__v(0, 0, 1);
+        appm__v3 f1, f2;
+        double xd[3], yd[3], r[3], c, fr, pr;
+        x.z = fabsf(x.z), y.z = fabsf(y.z);
+        f1 = appm__bsdf_f(&m, n, x, y);
+        f2 = appm__bsdf_f(&m, n, y, x);
+        if (fabs(f1.y - f2.y) > 1e-5 * (f1.y + f2.y) + 1e-30) nonrecip++;
+        xd[0] = x.x, xd[1] = x.y, xd[2] = x.z, yd[0] = y.x, yd[1] = y.y, yd[2] = y.z;
+        r[0] = -yd[0], r[1] = -yd[1], r[2] = yd[2];
+        c = xd[0] * r[0] + xd[1] * r[1] + xd[2] * r[2];
+        fr = m.color.y / APPM__PI + (c > 0 ? m.ks.y * (m.ns + 2.0) / (2.0 * APPM__PI) * pow(c, m.ns) : 0.0);
+        pr = ref_pdf(m.color.y, m.ks.y, m.ns, yd, xd);
+        /* float rounding of c (1e-7) grows by Ns in c^Ns */
+        if (fabs(f1.y - fr) > (1e-5 + 1e-6 * m.ns) * fr) badf++;
+        if (fabs(appm__bsdf_pdf(&m, n, x, y) - pr) > (1e-5 + 1e-6 * m.ns) * pr) badpdf++;
+    }
+    CHECK_MSG(nonrecip == 0, "%ld pairs with f(a,b) != f(b,a)", nonrecip);
+    CHECK_MSG(badf == 0, "%ld values of f off the closed form", badf);
+    CHECK_MSG(badpdf == 0, "%ld values of the pdf off the closed form", badpdf);
+    { /* below the surface: nothing */
+        appm__material m = glossy_mat(0.5, 0.5, 10);
+        appm__v3 f = appm__bsdf_f(&m, appm__v(0, 0, 1), appm__v(0.6f, 0, -0.8f), appm__v(0, 0, 1));
+        CHECK(f.x == 0.0f && appm__bsdf_pdf(&m, appm__v(0, 0, 1), appm__v(0.6f, 0, -0.8f), appm__v(0, 0, 1)) == 0.0f);
+    }
+}
+
+/* Large Ns approaches the mirror: at Ns = 1e5 every sample lies within 0.02
+ * rad of the mirror direction (P(a > 0.02) = cos(0.02)^100001 = 2e-9); Kd = 0
+ * so the lobe is always chosen.  The weight tends to Ks cos(theta), not Ks:
+ * the normalisation (Ns + 2) / (2 pi) is exact at normal incidence only, and a
+ * narrow lobe's albedo is Ks times the cosine at its axis (Lafortune and
+ * Willems' model; the quadrature checks this limit too). */
+static void test_glossy_mirror_limit(void)
+{
+    appm__material m = glossy_mat(0.0, 0.9, 1e5);
+    appm__surf sf = flat_surf();
+    appm__v3 wo = wo_at(45.0), r = appm__v(-wo.x, -wo.y, wo.z);
+    long i, N = 100000, far = 0, rejected = 0;
+    double sum = 0.0, amax = 0.0;
+    for (i = 0; i < N; ++i) {
+        appm__bsdf_sample bs;
+        double a;
+        if (!appm__bsdf_sample_dir(&m, &sf, wo, uf(), uf(), uf(), APPM__RADIANCE, &bs)) {
+            rejected++;
+            continue;
+        }
+        a = acos(fmin(1.0, (double)appm__dot(bs.wi, r)));
+        amax = a > amax ? a : amax;
+        far += a > 0.02;
+        sum += bs.weight.x;
+    }
+    CHECK_MSG(far == 0 && rejected == 0, "Ns 1e5: %ld samples beyond 0.02 rad (max %.4f), %ld rejected", far, amax,
+              rejected);
+    /* E[w] = Ks A(45 deg), A -> cos 45 deg (the lobe is 3e-3 wide) */
+    CHECK_NEAR(sum / N, 0.9 * cos(45.0 * DEG), 2e-3);
+    CHECK_NEAR(lobe_albedo(1e5, 45, 2000), cos(45.0 * DEG), 1e-4);
+    CHECK_NEAR(lobe_albedo(1e5, 0, 2000), 1.0, 1e-6);
+}
+
 int main(void)
 {
     int quick = check_quick();
@@ -740,5 +1000,19 @@ int main(void)
     test_weights();
     test_lights();
     test_pick_boundaries();
+    printf("glossy:\n");
+    test_lobe_chi2(1, N);
+    test_lobe_chi2(10, N);
+    test_lobe_chi2(100, N);
+    test_lobe_chi2(1e4, N);
+    test_glossy_chi2(0.4, 0.5, 1, 0, N);
+    test_glossy_chi2(0.4, 0.5, 10, 30, N);
+    test_glossy_chi2(0.4, 0.5, 10, 75, N);
+    test_glossy_chi2(0.2, 0.7, 40, 0, N);
+    test_glossy_chi2(0.2, 0.7, 40, 50, N);
+    test_glossy_chi2(0.2, 0.7, 40, 85, N);
+    test_glossy_albedo();
+    test_glossy_energy();
+    test_glossy_mirror_limit();
     return check_finish();
 }

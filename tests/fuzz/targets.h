@@ -299,7 +299,8 @@ static appm_status fuzz__loader_begin(appm__loader *L, appm__mem *m, fuzz_env *e
 }
 
 /* Materials after appm__mtl_parse: names inside the pool, kinds known, colours
- * clamped to [0,1], Ke finite and >= 0, Ni in (0,100]. */
+ * clamped to [0,1], Ke finite and >= 0, Ni in (0,100]; glossy: Kd + Ks <= 1,
+ * Ns in (0, 1e5]. */
 static int fuzz__check_materials(const char *target, const appm__loader *L)
 {
     size_t i;
@@ -310,8 +311,15 @@ static int fuzz__check_materials(const char *target, const appm__loader *L)
         if (m->name >= L->names.count ||
             !memchr((const char *)L->names.data + m->name, 0, L->names.count - m->name))
             return fuzz__bad(target, "material name outside the name pool");
-        if (m->kind < APPM__MAT_DIFFUSE || m->kind > APPM__MAT_DIELECTRIC)
+        if (m->kind < APPM__MAT_DIFFUSE || m->kind > APPM__MAT_GLOSSY)
             return fuzz__bad(target, "unknown material kind");
+        if (m->kind == APPM__MAT_GLOSSY) { /* Ks in [0,1], Kd + Ks <= 1 per channel, Ns in (0, 1e5] */
+            const float s[3] = {m->ks.x, m->ks.y, m->ks.z};
+            for (k = 0; k < 3; ++k)
+                if (!(s[k] >= 0.0f && s[k] <= 1.0f && c[k] + s[k] <= 1.0f + 1e-6f))
+                    return fuzz__bad(target, "glossy Ks outside [0,1] or Kd + Ks > 1");
+            if (!(m->ns > 0.0f && m->ns <= 1e5f)) return fuzz__bad(target, "Ns out of range");
+        }
         for (k = 0; k < 3; ++k)
             if (!(c[k] >= 0.0f && c[k] <= 1.0f))
                 return fuzz__bad(target, "reflectance outside [0,1]");
