@@ -6155,8 +6155,8 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
     info->bbox_max[0] = s->bmax.x;
     info->bbox_max[1] = s->bmax.y;
     info->bbox_max[2] = s->bmax.z;
-    info->bvh_nodes = s->nnode;
-    info->bvh_depth = s->depth;
+    info->bvh_nodes = s->nwnode; /* the wide tree the renderer traverses */
+    info->bvh_depth = s->wdepth;
     info->width = s->width;
     info->height = s->height;
     info->memory_bytes = s->mem.live;

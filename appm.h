@@ -280,8 +280,8 @@ typedef struct appm_scene_info {
     double power_area[3];           /* emitted power (W) per kind, RGB                   */
     double power_point[3], power_spot[3], power_environment[3];
     double bbox_min[3], bbox_max[3];
-    uint64_t bvh_nodes;
-    uint32_t bvh_depth;
+    uint64_t bvh_nodes;             /* nodes of the wide BVH the renderer traverses      */
+    uint32_t bvh_depth;             /* and its depth (root = 1)                          */
     uint32_t width, height;         /* the scene's image size                            */
     uint64_t memory_bytes;          /* bytes the scene holds                            */
     uint64_t peak_bytes;            /* the most that loading held at once               */
