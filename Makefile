@@ -3,7 +3,8 @@
 #   make test         every test, normal build and ASan+UBSan build, plus the CLI
 #   make test-long    the slow statistical tests (more samples)
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
-#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset
+#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
+#                     make bench-sampler: --sampler qmc against random on every scene
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
@@ -19,7 +20,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-bvh fuzz clean
+.PHONY: all test test-long portability dynamic bench bench-quick bench-bvh bench-sampler fuzz clean
 
 all: appm
 
@@ -72,6 +73,9 @@ bench-quick: appm
 
 bench-bvh:
 	sh bench/bvh.sh
+
+bench-sampler: appm
+	sh bench/sampler.sh
 
 fuzz:
 	sh tests/fuzz/run.sh

@@ -620,6 +620,280 @@ static void appm__rng_float3(appm__rng *r, float *u)
     u[2] = appm__rng_float(r);
 }
 
+/* ---- 2.3 Low-discrepancy sampler ------------------------------------------
+ *
+ * The numbers of a path, in --sampler qmc, are the coordinates of one point of
+ * a randomized low-discrepancy sequence: Sobol' (Joe & Kuo 2008), Owen-scrambled
+ * and index-shuffled by hashing (Laine & Karras 2011; Burley 2020), padded.
+ * The dimensions come in groups of four.  Each group is the 4-D Sobol' point
+ * (dims 1-4 of Joe-Kuo's table: van der Corput and three polynomials) of a
+ * shuffled index, each coordinate Owen-scrambled with its own seed; each group
+ * shuffles with its own seed, so groups are mutually independent (padding), while
+ * inside a group, and above all in its first two coordinates (a (0,2)-sequence),
+ * the points are stratified.  Owen scrambling keeps that structure: every aligned
+ * block of 2^k points of coordinates (0, 1) has exactly one point in each
+ * elementary interval of area 2^-k, whatever the seed.
+ *
+ * The shuffle is an Owen scramble of the index itself (its most significant bit
+ * first), so an aligned block of 2^k indices maps onto another aligned block:
+ * a pixel's passes 0 .. 2^k - 1 always form a whole (0,k,2)-net.
+ *
+ * The sampler is stateless: a coordinate is a pure function of (key, index,
+ * group, dimension), where key = (seed, chain, pixel) for eye paths and (seed,
+ * chain) for photon paths.  Nothing carries from pass to pass but the pass
+ * counter, which is all a checkpoint would need.  The layout of the dimensions
+ * is in appm__smp_* below; past APPM__LD_VERTICES vertices a path draws from its
+ * PCG stream (section 2.2), as does every path in --sampler random.          */
+
+/* Direction numbers v_k = m_k 2^(32-k) of Sobol' dimensions 1-4.  Dimension 1 is
+ * the identity (the radical inverse in base 2); 2-4 follow from Joe and Kuo's
+ * primitive polynomials and initial m_k (new-joe-kuo-6.21201, d = 2, 3, 4):
+ *   d = 2: s = 1, a = 0, m = 1        d = 3: s = 2, a = 1, m = 1 3
+ *   d = 4: s = 3, a = 1, m = 1 3 1
+ * by m_k = 2 a_1 m_(k-1) ^ ... ^ 2^(s-1) a_(s-1) m_(k-s+1) ^ 2^s m_(k-s) ^ m_(k-s)
+ * (Bratley & Fox 1988).  t_sampler recomputes them from these parameters. */
+static const uint32_t appm__sobol_v[4][32] = {
+    {0x80000000u, 0x40000000u, 0x20000000u, 0x10000000u, 0x08000000u, 0x04000000u, 0x02000000u,
+     0x01000000u, 0x00800000u, 0x00400000u, 0x00200000u, 0x00100000u, 0x00080000u, 0x00040000u,
+     0x00020000u, 0x00010000u, 0x00008000u, 0x00004000u, 0x00002000u, 0x00001000u, 0x00000800u,
+     0x00000400u, 0x00000200u, 0x00000100u, 0x00000080u, 0x00000040u, 0x00000020u, 0x00000010u,
+     0x00000008u, 0x00000004u, 0x00000002u, 0x00000001u},
+    {0x80000000u, 0xc0000000u, 0xa0000000u, 0xf0000000u, 0x88000000u, 0xcc000000u, 0xaa000000u,
+     0xff000000u, 0x80800000u, 0xc0c00000u, 0xa0a00000u, 0xf0f00000u, 0x88880000u, 0xcccc0000u,
+     0xaaaa0000u, 0xffff0000u, 0x80008000u, 0xc000c000u, 0xa000a000u, 0xf000f000u, 0x88008800u,
+     0xcc00cc00u, 0xaa00aa00u, 0xff00ff00u, 0x80808080u, 0xc0c0c0c0u, 0xa0a0a0a0u, 0xf0f0f0f0u,
+     0x88888888u, 0xccccccccu, 0xaaaaaaaau, 0xffffffffu},
+    {0x80000000u, 0xc0000000u, 0x60000000u, 0x90000000u, 0xe8000000u, 0x5c000000u, 0x8e000000u,
+     0xc5000000u, 0x68800000u, 0x9cc00000u, 0xee600000u, 0x55900000u, 0x80680000u, 0xc09c0000u,
+     0x60ee0000u, 0x90550000u, 0xe8808000u, 0x5cc0c000u, 0x8e606000u, 0xc5909000u, 0x6868e800u,
+     0x9c9c5c00u, 0xeeee8e00u, 0x5555c500u, 0x8000e880u, 0xc0005cc0u, 0x60008e60u, 0x9000c590u,
+     0xe8006868u, 0x5c009c9cu, 0x8e00eeeeu, 0xc5005555u},
+    {0x80000000u, 0xc0000000u, 0x20000000u, 0x50000000u, 0xf8000000u, 0x74000000u, 0xa2000000u,
+     0x93000000u, 0xd8800000u, 0x25400000u, 0x59e00000u, 0xe6d00000u, 0x78080000u, 0xb40c0000u,
+     0x82020000u, 0xc3050000u, 0x208f8000u, 0x51474000u, 0xfbea2000u, 0x75d93000u, 0xa0858800u,
+     0x914e5400u, 0xdbe79e00u, 0x25db6d00u, 0x58800080u, 0xe54000c0u, 0x79e00020u, 0xb6d00050u,
+     0x800800f8u, 0xc00c0074u, 0x200200a2u, 0x50050093u}
+};
+
+/* Point i of Sobol' dimension d (0..3), 32 bits: x = XOR of v_k over the set
+ * bits k of i (natural order, not Gray code: the point set of the first 2^k is
+ * the same, and the order does not matter after the index shuffle). */
+static uint32_t appm__sobol(uint32_t i, unsigned d)
+{
+    const uint32_t *v = appm__sobol_v[d];
+    uint32_t x = 0;
+    for (; i; i >>= 1, ++v) x ^= *v & (0u - (i & 1u)); /* no branch on a random bit */
+    return x;
+}
+
+/* Bit reversal, rev.  The Owen scramble of a 32-bit fraction x / 2^32 (most
+ * significant digit first) is owen(x, seed) = rev(appm__lk_permute(rev(x), seed)). */
+static inline uint32_t appm__reverse32(uint32_t x)
+{
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
+    x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
+    return (x >> 16) | (x << 16);
+}
+
+/* A seeded permutation of 32-bit words in which output bit k depends only on
+ * input bits 0..k: adding, multiplying by an odd number and x ^= x * even all
+ * move information towards the high bits only, and each is a bijection of the
+ * low k bits for every k (the Laine-Karras construction; these operations and
+ * constants are this file's own).  Read with the bits reversed, that is a nested
+ * (Owen) scramble: digit k of the result is digit k of x flipped by a function
+ * of digits 1..k-1.  A hash, not Owen's fully random tree, so its randomness is
+ * tested, not assumed (t_sampling). */
+static inline uint32_t appm__lk_permute(uint32_t x, uint32_t seed)
+{
+    x += seed;
+    x ^= x * 0x6A09E668u;
+    x *= (seed >> 15) | 1u;
+    x ^= x * 0xBB67AE86u;
+    x += seed >> 7;
+    x ^= x * 0x3C6EF372u;
+    return x;
+}
+
+/* The fast form of owen(sobol(owen(index, s0), d), s_d), the coordinate below.
+ * Sobol' is linear over the bits of its index, so a point is the XOR of the
+ * points of the index's four bytes, and the reversals inside both scrambles can
+ * be folded into a table: with ir = lk(rev(index), s0) (so the shuffled index is
+ * rev(ir)) and y = rev(sobol(rev(ir), d)) = XOR over the bytes v_b of ir of
+ *   tab[(d * 4 + b) * 256 + v_b] = rev(sobol(rev(v_b << 8b), d)),
+ * the coordinate is rev(lk(y, s_d)).  4 lookups and 2 reversals instead of a
+ * loop over 32 bits (the shuffled index has all 32 set) and 4 reversals.  The
+ * table: 4 dims x 4 byte positions x 256 (16 KiB), filled once per renderer,
+ * and the sampler keeps rev(index) of its path. */
+#define APPM__SOBOL_REV8 (4u * 4u * 256u)          /* then 256 reversed bytes */
+#define APPM__SOBOL_TAB_SIZE (APPM__SOBOL_REV8 + 256u)
+
+static void appm__sobol_table(uint32_t *tab)
+{
+    unsigned d, b, v;
+    for (v = 0; v < 256; ++v) tab[APPM__SOBOL_REV8 + v] = appm__reverse32(v) >> 24;
+    for (d = 0; d < 4; ++d)
+        for (b = 0; b < 4; ++b)
+            for (v = 0; v < 256; ++v)
+                tab[(d * 4 + b) * 256 + v] =
+                    appm__reverse32(appm__sobol(appm__reverse32((uint32_t)v << (8 * b)), d));
+}
+
+/* The coordinates in `mask` (bit d: dimension d, 0..3) of group `group` of
+ * point `index` of the sequence `key`, in [0, 1) with 24 bits (as
+ * appm__rng_float); the others are left as they are.  One shuffle of the index
+ * per group, one scramble seed per coordinate.  Equal to owen(sobol(owen(index,
+ * s0), d), s_d) (t_sampling checks); only the coordinates a path will read are
+ * computed (a mirror reads none, a point light no point on it). */
+static void appm__ld(const uint32_t *tab, uint64_t key, uint32_t rindex, unsigned group,
+                     unsigned mask, float *u)
+{
+    const uint32_t *rev8 = tab + APPM__SOBOL_REV8;
+    uint64_t g = appm__mix64(key ^ ((uint64_t)(group + 1) * 0xD1B54A32D192ED03ull));
+    uint32_t ir = appm__lk_permute(rindex, (uint32_t)g);
+    unsigned d;
+    for (d = 0; d < 4; ++d) {
+        const uint32_t *t = tab + d * 1024;
+        uint32_t y, z;
+        if (!(mask >> d & 1u)) continue;
+        y = t[ir & 255] ^ t[256 + ((ir >> 8) & 255)] ^ t[512 + ((ir >> 16) & 255)] ^
+            t[768 + (ir >> 24)];
+        z = appm__lk_permute(y, (uint32_t)(g >> 32) + d * 0x9E3779B9u);
+        /* the top 24 bits of rev(z) are the low 24 of z, reversed */
+        z = rev8[z & 255] << 16 | rev8[(z >> 8) & 255] << 8 | rev8[(z >> 16) & 255];
+        u[d] = (float)z * (1.0f / 16777216.0f);
+    }
+}
+
+/* Independently scrambled chains of passes (cfg.chains = K): pass j (1-based)
+ * belongs to chain (j - 1) mod K and is point (j - 1) / K of that chain's
+ * sequences.  The chains are independent randomizations of one integral, so the
+ * spread of their means is an honest error estimate (section 10), which the
+ * spread of correlated successive passes is not.  The price: each chain is K
+ * times shorter, its nets K times coarser, and a scrambled net's advantage
+ * grows with its size: measured at 256 passes, 4 chains lost half or more of
+ * what the sequence gains on the diffuse boxes (bench/sampler.sh).  So the
+ * default is one chain (the best image), and K >= 2 is asked for when an
+ * honest estimate matters. */
+#define APPM__MAX_CHAINS 64
+#define APPM__LD_VERTICES 8 /* path vertices with low-discrepancy numbers */
+
+enum { APPM__DOMAIN_LD_EYE = 5, APPM__DOMAIN_LD_PHOTON = 6 };
+
+/* The numbers of one path: a sequence key and index (qmc), and the path's PCG
+ * stream (random mode, and beyond the layout). */
+typedef struct appm__sampler {
+    appm__rng rng;
+    const uint32_t *tab; /* appm__sobol_table */
+    uint64_t key;
+    uint32_t rindex; /* the point of the sequence, bit-reversed (appm__ld) */
+    int qmc;
+} appm__sampler;
+
+/* Eye path of pixel `pixel` in pass `pass` (or the path tracer's path); qmc
+ * when tab (appm__sobol_table) is given, with `chains` chains (>= 1).  The PCG
+ * stream is the one every earlier version used, so --sampler random renders the
+ * same bytes as before. */
+static void appm__sampler_eye(appm__sampler *s, const uint32_t *tab, unsigned chains, uint64_t seed,
+                              uint64_t pass, uint64_t pixel)
+{
+    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = p0 % chains;
+    appm__rng_seed(&s->rng, seed, pass, APPM__DOMAIN_EYE, pixel);
+    s->tab = tab;
+    s->qmc = tab != NULL;
+    s->key = appm__mix64(seed ^ appm__mix64(chain * 8 + APPM__DOMAIN_LD_EYE) ^ appm__mix64(~pixel));
+    s->rindex = appm__reverse32((uint32_t)(p0 / chains));
+}
+
+/* Photon path i of pass `pass`, M paths a pass: point q M + i of its chain's
+ * sequence, q the pass's place in the chain, so the photons of all passes
+ * together fill the light's sample space as one low-discrepancy set (Keller et
+ * al. 2011).  Past 2^32 points the sequence continues with a fresh key. */
+static void appm__sampler_photon(appm__sampler *s, const uint32_t *tab, unsigned chains,
+                                 uint64_t seed, uint64_t pass, uint64_t M, uint64_t i)
+{
+    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = p0 % chains;
+    uint64_t n = (p0 / chains) * M + i;
+    appm__rng_seed(&s->rng, seed, pass, APPM__DOMAIN_PHOTON, i);
+    s->tab = tab;
+    s->qmc = tab != NULL;
+    s->key = appm__mix64(seed ^ appm__mix64(chain * 8 + APPM__DOMAIN_LD_PHOTON) ^
+                         appm__mix64(n >> 32));
+    s->rindex = appm__reverse32((uint32_t)n);
+}
+
+/* The dimension layout (groups of four; b = the path's vertex, 0 at its first
+ * hit; vertices from APPM__LD_VERTICES on draw from the PCG stream):
+ *   eye path     group 0: pixel (dims 0, 1), lens (2, 3)
+ *   photon path  group 0: emission position and direction (dims 0-3, see
+ *                appm__emit), group 1: the light (dim 0)
+ *   vertex b     group 2 + 2b: point on the light (dims 0, 1), light choice (2)
+ *                group 3 + 2b: BSDF direction (0, 1), component or Fresnel
+ *                choice (2), Russian roulette (3)
+ * The masks say which coordinates the caller will read (the others are 0).  In
+ * random mode each call draws all its numbers from the stream, in the order of
+ * the output array (the order of every earlier version), whatever the mask. */
+#define APPM__G_LIGHT(b) (2u + 2u * (b))
+#define APPM__G_BSDF(b) (3u + 2u * (b))
+
+/* Next-event estimation at vertex b: u[0] picks the light, u[1], u[2] the
+ * point on it.  mask: bit 0 for u[0], bit 1 for u[1] and u[2]. */
+static void appm__smp_light(appm__sampler *s, unsigned b, unsigned mask, float *u)
+{
+    float v[4] = {0, 0, 0, 0};
+    if (!s->qmc || b >= APPM__LD_VERTICES) {
+        appm__rng_float3(&s->rng, u);
+        return;
+    }
+    appm__ld(s->tab, s->key, s->rindex, APPM__G_LIGHT(b), (mask & 1u ? 4u : 0u) | (mask & 2u ? 3u : 0u),
+             v);
+    u[0] = v[2];
+    u[1] = v[0];
+    u[2] = v[1];
+}
+
+/* BSDF sampling at vertex b: u[0], u[1] the direction, u[2] the component;
+ * mask from appm__bsdf_dims (bit k: u[k]), plus bit 3 when the Russian
+ * roulette of this vertex will most likely be asked for (computed with the
+ * rest: one index shuffle).  u holds 4 floats. */
+static void appm__smp_bsdf(appm__sampler *s, unsigned b, unsigned mask, float *u)
+{
+    if (!s->qmc || b >= APPM__LD_VERTICES) {
+        appm__rng_float3(&s->rng, u);
+        return;
+    }
+    u[0] = u[1] = u[2] = u[3] = 0.0f;
+    appm__ld(s->tab, s->key, s->rindex, APPM__G_BSDF(b), mask, u);
+}
+
+/* Russian roulette after vertex b; u and mask: as given to appm__smp_bsdf. */
+static float appm__smp_rr(appm__sampler *s, unsigned b, unsigned mask, const float *u)
+{
+    float v[4];
+    if (!s->qmc || b >= APPM__LD_VERTICES) return appm__rng_float(&s->rng);
+    if (mask & 8u) return u[3];
+    appm__ld(s->tab, s->key, s->rindex, APPM__G_BSDF(b), 8u, v);
+    return v[3];
+}
+
+/* Photon emission: u[0] picks the light, u[1..4] position and direction.
+ * mask: bit 0 for u[0], bit 1 for u[1], u[2], bit 2 for u[3], u[4]. */
+static void appm__smp_emit(appm__sampler *s, unsigned mask, float *u)
+{
+    int k;
+    for (k = 0; k < 5; ++k) u[k] = s->qmc ? 0.0f : appm__rng_float(&s->rng);
+    if (!s->qmc) return;
+    if (mask & 1u) appm__ld(s->tab, s->key, s->rindex, 1, 1u, u);
+    appm__ld(s->tab, s->key, s->rindex, 0, (mask & 2u ? 3u : 0u) | (mask & 4u ? 12u : 0u), u + 1);
+}
+
+/* Camera (qmc only; random mode keeps its rotated R2 sequence, section 7.2). */
+static void appm__smp_camera(const appm__sampler *s, int lens, float *u)
+{
+    appm__ld(s->tab, s->key, s->rindex, 0, lens ? 15u : 3u, u);
+}
+
 /* ==== 3. IMAGE I/O =======================================================
  *
  * PFM (linear float): header "PF\n<w> <h>\n<scale>\n", then rows from the
@@ -4235,6 +4509,13 @@ static int appm__bsdf_sample_dir(const appm__material *m, const appm__surf *sf, 
     return appm__finite3(bs->weight) && appm__finite3(bs->wi);
 }
 
+/* Which of u1, u2, u3 appm__bsdf_sample_dir reads for material m (bit k-1:
+ * u_k), so that the sampler computes no others. */
+static unsigned appm__bsdf_dims(const appm__material *m)
+{
+    return m->kind == APPM__MAT_DIFFUSE ? 3u : (m->kind == APPM__MAT_MIRROR ? 0u : 4u);
+}
+
 /* ---- 6.1 Lights -------------------------------------------------------------- */
 
 /* Index of the light whose CDF interval holds u (binary search; u < 1 always,
@@ -4316,13 +4597,15 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
     power[2] = f * l->value.z;
 }
 
-/* Samples the start of a photon path: light by power, then position and direction. */
-static int appm__emit(const appm_scene *s, appm__rng *rng, appm__photon_start *ps)
+/* Samples the start of a photon path from u[0..4] (appm__smp_emit): light by
+ * power (u[0]), then position and direction (u[1], u[2] the first 2-D sample of
+ * each light kind, the one a stratified sampler serves best; u[3], u[4] the
+ * second). */
+static int appm__emit(const appm_scene *s, const float *u, appm__photon_start *ps)
 {
-    uint32_t li = appm__pick_light(s, appm__rng_float(rng));
+    uint32_t li = appm__pick_light(s, u[0]);
     const appm__light *l = &s->light[li];
-    float u1 = appm__rng_float(rng), u2 = appm__rng_float(rng);
-    float u3 = appm__rng_float(rng), u4 = appm__rng_float(rng);
+    float u1 = u[1], u2 = u[2], u3 = u[3], u4 = u[4];
     appm__v3 o, d;
     float w;
     ps->skip = UINT32_MAX;
@@ -4433,6 +4716,20 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
     return appm__finite3(ls->li);
 }
 
+/* Which numbers the lights of scene s make the samplers read (appm__smp_light,
+ * appm__smp_emit): bit 0 the light choice (more than one light); for next-event
+ * estimation bit 1 a point on the light (an area or environment light); for
+ * emission bit 1 u1, u2 (every kind) and bit 2 u3, u4 (area and environment). */
+static unsigned appm__light_dims(const appm_scene *s, int emission)
+{
+    unsigned mask = s->nlight > 1 ? 1u : 0u, k;
+    if (emission) mask |= 2u;
+    for (k = 0; k < s->nlight; ++k)
+        if (s->light[k].kind == APPM__LIGHT_AREA || s->light[k].kind == APPM__LIGHT_ENV)
+            mask |= emission ? 4u : 2u;
+    return mask;
+}
+
 /* Solid-angle pdf with which appm__sample_light would have produced direction
  * wi reaching area light `tri` at distance t (for MIS in the path tracer). */
 static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi, float t)
@@ -4445,8 +4742,10 @@ static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi
 
 /* ==== 7. EYE PASS =========================================================
  *
- * Every pass traces one eye path per pixel: a uniformly jittered point in the
- * pixel (box filter) and on the lens, then through mirrors and glass until the
+ * Every pass traces one eye path per pixel: a point in the pixel (box filter)
+ * and on the lens - of the pixel's own low-discrepancy sequence, so that its
+ * passes stratify the pixel (section 2.3), or uniformly jittered with
+ * --sampler random - then through mirrors and glass until the
  * first diffuse vertex x.  There the path stops and becomes the pixel's visible
  * point for this pass (stochastic PPM: a new x every pass, so anti-aliasing,
  * depth of field and glossy-free caustic paths all converge).  What the path
@@ -4537,6 +4836,10 @@ struct appm_renderer {
     double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
     unsigned threads, max_depth;
     uint64_t seed, pass;
+    uint32_t *sobol;     /* --sampler qmc: appm__sobol_table (section 2.3); NULL: random */
+    unsigned nee_dims, emit_dims; /* appm__light_dims of the scene */
+    unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
+    double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
     appm__pixel *pix;
@@ -4621,7 +4924,7 @@ APPM__UNUSED static appm__v3 appm__photon_normal(const appm__photon *p)
 
 /* ---- 7.2 Camera rays ---------------------------------------------------------- */
 
-/* Where in the pixel (and on the lens) pass j samples: the R2 sequence of
+/* --sampler random: where in the pixel (and on the lens) pass j samples: the R2 sequence of
  * Roberts (2018), x_j = frac(s + j g) with g = (1/phi2, 1/phi2^2), phi2 the
  * plastic number - or R4 with the lens, so that the lens and pixel coordinates
  * are not correlated.  Each pixel rotates the sequence by its own random offset
@@ -4642,15 +4945,20 @@ static void appm__pixel_sample(uint64_t pass, appm__rng *rng, int lens, float *u
     }
 }
 
-static void appm__camera_ray(const appm_renderer *r, uint32_t px, uint32_t py, appm__ray *ray)
+static void appm__camera_ray(const appm_renderer *r, const appm__sampler *smp, uint32_t px,
+                             uint32_t py, appm__ray *ray)
 {
     const appm__camera *c = &r->scene->cam;
-    appm__rng prng;
     float su[4], u, v, l1 = 0.0f, l2 = 0.0f;
     float aspect = (float)r->w / (float)r->h;
-    /* the rotation of pixel (px, py) is the same in every pass: a stream of its own */
-    appm__rng_seed(&prng, r->seed, 0, APPM__DOMAIN_PIXEL, (uint64_t)py * r->w + px);
-    appm__pixel_sample(r->pass, &prng, c->aperture > 0.0f, su);
+    if (smp->qmc) {
+        appm__smp_camera(smp, c->aperture > 0.0f, su);
+    } else {
+        /* the rotation of pixel (px, py) is the same in every pass: a stream of its own */
+        appm__rng prng;
+        appm__rng_seed(&prng, r->seed, 0, APPM__DOMAIN_PIXEL, (uint64_t)py * r->w + px);
+        appm__pixel_sample(r->pass, &prng, c->aperture > 0.0f, su);
+    }
     u = su[0];
     v = su[1];
     if (c->aperture > 0.0f) {
@@ -4682,14 +4990,16 @@ static void appm__add3(double *acc, appm__v3 v)
 }
 
 /* Direct light at diffuse point sf seen from wo, by one shadow ray. */
-static appm__v3 appm__direct(const appm_scene *s, const appm__surf *sf, const appm__material *m,
-                             appm__v3 wo, appm__rng *rng)
+static appm__v3 appm__direct(const appm_renderer *r, const appm__surf *sf, const appm__material *m,
+                             appm__v3 wo, appm__sampler *smp, unsigned vertex)
 {
     float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f, c;
     appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side);
-    float u0 = appm__rng_float(rng), u1 = appm__rng_float(rng), u2 = appm__rng_float(rng);
+    float u[3];
     appm__light_sample ls;
-    if (!appm__sample_light(s, sf, ns, u0, u1, u2, &ls)) return appm__v(0, 0, 0);
+    const appm_scene *s = r->scene;
+    appm__smp_light(smp, vertex, r->nee_dims, u);
+    if (!appm__sample_light(s, sf, ns, u[0], u[1], u[2], &ls)) return appm__v(0, 0, 0);
     c = appm__dot(ls.wi, ns);
     if (!(c > 0.0f) || !(appm__dot(ls.wi, ng) > 0.0f)) return appm__v(0, 0, 0);
     if (appm__occluded(s, &ls.shadow, sf->tri, ls.skip)) return appm__v(0, 0, 0);
@@ -4701,14 +5011,14 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
     const appm_scene *s = r->scene;
     const size_t pi = (size_t)py * r->w + px;
     appm__vp *vp = &r->vp[pi];
-    appm__rng rng;
+    appm__sampler smp;
     appm__ray ray;
     appm__v3 W = appm__v(1, 1, 1), ld = appm__v(0, 0, 0);
     uint32_t skip = UINT32_MAX;
     unsigned segs = 0;
     float travelled = 0.0f;
-    appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_EYE, pi);
-    appm__camera_ray(r, px, py, &ray);
+    appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
+    appm__camera_ray(r, &smp, px, py, &ray);
     vp->segs = 0;
     for (;;) {
         appm__hit h;
@@ -4716,7 +5026,8 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         const appm__material *m;
         appm__v3 wo;
         appm__bsdf_sample bs;
-        float u3[3];
+        float u3[4];
+        unsigned dims;
         if (++segs > r->max_depth) break;
         if (!appm__intersect(s, &ray, skip, &h)) {
             if (s->env >= 0) ld = appm__add(ld, appm__mul(W, s->light[s->env].value));
@@ -4734,21 +5045,22 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
             vp->segs = (uint8_t)(segs > 255 ? 255 : segs);
             vp->footprint = travelled * r->pixel_angle;
             if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth)
-                ld = appm__add(ld, appm__mul(W, appm__direct(s, &sf, m, wo, &rng)));
+                ld = appm__add(ld, appm__mul(W, appm__direct(r, &sf, m, wo, &smp, segs - 1)));
             if (!appm__finite3(vp->wf)) {
                 vp->segs = 0;
                 r->dropped[worker]++;
             }
             break;
         }
-        appm__rng_float3(&rng, u3);
+        dims = appm__bsdf_dims(m) | (segs > 4 ? 8u : 0u);
+        appm__smp_bsdf(&smp, segs - 1, dims, u3);
         if (!appm__bsdf_sample_dir(m, &sf, wo, u3[0], u3[1], u3[2], APPM__RADIANCE, &bs))
             break;
         W = appm__mul(W, bs.weight);
         if (segs > 4) { /* Russian roulette on long specular chains (glass) */
             float q = appm__maxc(W);
             if (q < 1.0f) {
-                if (appm__rng_float(&rng) >= q) break;
+                if (appm__smp_rr(&smp, segs - 1, dims, u3) >= q) break;
                 W = appm__scale(W, 1.0f / q);
             }
         }
@@ -4773,8 +5085,9 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
 /* ==== 8. PHOTON PASS ======================================================
  *
  * M photon paths per pass, in chunks of APPM__CHUNK paths.  Path i of pass j
- * draws from its own random stream (seed, j, i), so its photons are the same
- * whatever thread traces it.  Chunk c is traced by task c % T into region
+ * draws its numbers from point i of the pass's block of a low-discrepancy
+ * sequence (section 2.3) or from its own random stream (seed, j, i), so its
+ * photons are the same whatever thread traces it.  Chunk c is traced by task c % T into region
  * c % T of the store; the grid build then reads the chunks in order c = 0, 1,
  * ..., which makes the photon order, and every sum over photons, independent
  * of the thread count.
@@ -4816,15 +5129,17 @@ static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf 
 static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker)
 {
     const appm_scene *s = r->scene;
-    appm__rng rng;
+    appm__sampler smp;
     appm__photon_start ps;
     appm__ray ray;
     appm__v3 gamma;
     uint32_t skip;
     unsigned segs = 0;
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
-    appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_PHOTON, index);
-    if (!appm__emit(s, &rng, &ps)) {
+    float ue[5];
+    appm__sampler_photon(&smp, r->sobol, r->chains, r->seed, r->pass, r->M, index);
+    appm__smp_emit(&smp, r->emit_dims, ue);
+    if (!appm__emit(s, ue, &ps)) {
         if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
         return 1;
     }
@@ -4837,7 +5152,8 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         const appm__material *m;
         appm__v3 wi, g2;
         appm__bsdf_sample bs;
-        float u3[3];
+        float u3[4];
+        unsigned dims;
         float q;
         if (!appm__intersect(s, &ray, skip, &h)) break;
         appm__surface(s, &h, &sf);
@@ -4851,13 +5167,16 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
             if (!appm__store_photon(r, task, &sf, wi, gamma, segs)) return 0;
         }
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
-        appm__rng_float3(&rng, u3);
+        /* the roulette: nearly always after a diffuse or mirror bounce (albedo < 1),
+         * rarely after glass (weight 1) */
+        dims = appm__bsdf_dims(m) | (m->kind != APPM__MAT_DIELECTRIC ? 8u : 0u);
+        appm__smp_bsdf(&smp, segs - 1, dims, u3);
         if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs))
             break;
         g2 = appm__mul(gamma, bs.weight);
         q = appm__maxc(gamma) > 0.0f ? appm__maxc(g2) / appm__maxc(gamma) : 0.0f;
         if (q < 1.0f) {
-            if (!(appm__rng_float(&rng) < q)) break;
+            if (!(appm__smp_rr(&smp, segs - 1, dims, u3) < q)) break;
             g2 = appm__scale(g2, 1.0f / q);
         }
         gamma = g2;
@@ -5417,6 +5736,53 @@ static void appm__welford(appm__pixel *p, uint64_t j, double v)
     p->wm2 += d * (v - p->wmean);
 }
 
+/* With K >= 2 chains (section 2.3): the sum of a pixel's per-pass luminances in
+ * each chain, sums[0 .. K-1]. */
+static void appm__chain_add(double *sums, unsigned K, uint64_t j, double v)
+{
+    if (sums) sums[(j - 1) % K] += v;
+}
+
+/* Pixel i's chain sums, or NULL with one chain. */
+static double *appm__chain_sums(const appm_renderer *r, size_t i)
+{
+    return r->chain_sum ? r->chain_sum + i * r->chains : NULL;
+}
+
+/* The per-pass estimate v of pixel px in this pass, for the noise estimate:
+ * its Welford statistics and its chain's sum. */
+static void appm__pass_value(appm_renderer *r, appm__pixel *px, double v)
+{
+    appm__welford(px, r->pass, v);
+    appm__chain_add(appm__chain_sums(r, (size_t)(px - r->pix)), r->chains, r->pass, v);
+}
+
+/* The variance of a pixel's mean over j passes (luminance).
+ *   independent passes (random): Var = s^2 / j with s^2 = M2 / (j - 1).
+ *   one sequence (qmc, 1 chain): the same formula.  Successive passes are then
+ *           negatively correlated (that is the point of the sequence), so it
+ *           overstates the error where the sequence helps: an upper bound.
+ *   K >= 2 chains (sums, section 2.3): independent randomizations.  With n_c
+ *           passes and mean m_c in chain c and the overall mean m,
+ *           sum_c n_c (m_c - m)^2 has expectation (K - 1) sigma^2, sigma^2 / n_c
+ *           the variance of a chain mean (one-way analysis of variance), so
+ *           Var(m) = sum_c n_c (m_c - m)^2 / ((K - 1) j).  K - 1 degrees of
+ *           freedom per pixel, many over an image. */
+static double appm__mean_var(const appm__pixel *p, const double *sums, unsigned chains, uint64_t j)
+{
+    double m = 0.0, ss = 0.0;
+    uint64_t k, K = j < chains ? j : chains;
+    if (j < 2) return 0.0;
+    if (!sums || chains < 2) return p->wm2 / ((double)(j - 1) * (double)j);
+    for (k = 0; k < K; ++k) m += sums[k];
+    m /= (double)j;
+    for (k = 0; k < K; ++k) {
+        double n = (double)(j / chains + (k < j % chains)), d = sums[k] / n - m;
+        ss += n * d * d;
+    }
+    return ss / ((double)(K - 1) * (double)j);
+}
+
 /* The recursive (Yamato) mean of ppm and appm after pass j:
  *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j. */
 static void appm__mean_update(double *I, uint64_t pass, const double *e)
@@ -5533,7 +5899,7 @@ static void appm__ppm_commit(appm_renderer *r, appm__pixel *px, void *st, const 
     double e[3], s, dl;
     appm__gather_estimates(r, g, worker, e, &s, &dl);
     appm__mean_update(k->I, r->pass, e);
-    appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e));
+    appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e));
 }
 
 static void appm__ppm_pass_end(appm_renderer *r)
@@ -5640,7 +6006,7 @@ static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const
     a->R = vp->r;
     appm__gather_estimates(r, g, worker, e, &s, &dl);
     appm__appm_update(a, r->pass, e, s, dl, g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0, g->count);
-    appm__welford(px, r->pass, (double)appm__lum(vp->ld) + appm__lumd(e));
+    appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e));
 }
 
 static double appm__appm_bias(const void *st, double j)
@@ -5725,22 +6091,23 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
 {
     const appm_scene *s = r->scene;
     const size_t pi = (size_t)py * r->w + px;
-    appm__rng rng;
+    appm__sampler smp;
     appm__ray ray;
     appm__v3 W = appm__v(1, 1, 1), L = appm__v(0, 0, 0), prev_ns = appm__v(0, 0, 1);
     float prev_pdf = 0.0f;
     int prev_specular = 1;
     uint32_t skip = UINT32_MAX;
     unsigned segs = 0;
-    appm__rng_seed(&rng, r->seed, r->pass, APPM__DOMAIN_EYE, pi);
-    appm__camera_ray(r, px, py, &ray);
+    appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
+    appm__camera_ray(r, &smp, px, py, &ray);
     for (;;) {
         appm__hit h;
         appm__surf sf;
         const appm__material *m;
         appm__v3 wo;
         appm__bsdf_sample bs;
-        float u3[3];
+        float u3[4];
+        unsigned dims;
         if (++segs > r->max_depth) break;
         if (!appm__intersect(s, &ray, skip, &h)) {
             if (s->env >= 0) {
@@ -5763,9 +6130,9 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         if (m->kind == APPM__MAT_DIFFUSE && segs + 1 <= r->max_depth) {
             float side = appm__dot(wo, sf.ng) >= 0.0f ? 1.0f : -1.0f, c;
             appm__v3 ns = appm__scale(sf.ns, side), ng = appm__scale(sf.ng, side);
-            float u0 = appm__rng_float(&rng), u1 = appm__rng_float(&rng), u2 = appm__rng_float(&rng);
             appm__light_sample ls;
-            if (appm__sample_light(s, &sf, ns, u0, u1, u2, &ls)) {
+            appm__smp_light(&smp, segs - 1, r->nee_dims, u3);
+            if (appm__sample_light(s, &sf, ns, u3[0], u3[1], u3[2], &ls)) {
                 c = appm__dot(ls.wi, ns);
                 if (c > 0.0f && appm__dot(ls.wi, ng) > 0.0f &&
                     !appm__occluded(s, &ls.shadow, sf.tri, ls.skip)) {
@@ -5776,7 +6143,8 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
             }
             prev_ns = ns;
         }
-        appm__rng_float3(&rng, u3);
+        dims = appm__bsdf_dims(m) | (segs >= 3 ? 8u : 0u);
+        appm__smp_bsdf(&smp, segs - 1, dims, u3);
         if (!appm__bsdf_sample_dir(m, &sf, wo, u3[0], u3[1], u3[2], APPM__RADIANCE, &bs))
             break;
         W = appm__mul(W, bs.weight);
@@ -5785,19 +6153,18 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         if (segs >= 3) {
             float q = appm__maxc(W);
             q = q > 0.95f ? 0.95f : q;
-            if (!(appm__rng_float(&rng) < q)) break;
+            if (!(appm__smp_rr(&smp, segs - 1, dims, u3) < q)) break;
             W = appm__scale(W, 1.0f / q);
         }
         appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
         skip = sf.tri;
     }
-    if (appm__finite3(L)) {
-        appm__add3(r->pix[pi].ld, L);
-        appm__welford(&r->pix[pi], r->pass, (double)appm__lum(L));
-    } else {
+    if (!appm__finite3(L)) {
         r->dropped[worker]++;
-        appm__welford(&r->pix[pi], r->pass, 0.0);
+        L = appm__v(0, 0, 0);
     }
+    appm__add3(r->pix[pi].ld, L);
+    appm__pass_value(r, &r->pix[pi], (double)appm__lum(L));
 }
 
 static void appm__pt_task(void *arg, uint32_t row, unsigned worker)
@@ -5823,6 +6190,8 @@ APPM_API void appm_config_init(appm_config *cfg)
     cfg->direct = APPM_DIRECT_NEE;
     cfg->alpha = 2.0 / 3.0;
     cfg->max_depth = 32;
+    cfg->sampler = APPM_SAMPLER_QMC;
+    cfg->chains = 1;
 }
 
 static void appm__loader_free(appm__loader *L)
@@ -6285,6 +6654,8 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->dest);
     appm__free(&r->mem, r->state);
     appm__pmap_free(&r->pmap, &r->mem);
+    appm__free(&r->mem, r->sobol);
+    appm__free(&r->mem, r->chain_sum);
 }
 
 /* The options of a renderer of `scene`: cfg (NULL: all defaults) with every 0
@@ -6304,6 +6675,13 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown method %d", (int)c.method);
     if ((int)c.direct < 0 || c.direct > APPM_DIRECT_PHOTONS)
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown direct-light mode");
+    if ((int)c.sampler < 0 || c.sampler > APPM_SAMPLER_RANDOM)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown sampler %d",
+                          (int)c.sampler);
+    if (c.chains > APPM__MAX_CHAINS)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "%u chains is above %d", c.chains,
+                          APPM__MAX_CHAINS);
+    if (c.chains == 0 || c.sampler == APPM_SAMPLER_RANDOM) c.chains = 1;
     if (c.alpha == 0.0) c.alpha = 2.0 / 3.0;
     if (!(c.alpha > 0.0 && c.alpha <= 1.0))
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "alpha %g is not in (0, 1]", c.alpha);
@@ -6328,6 +6706,26 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
               "radiance 1 (add lights to choose others)");
     *out = c;
     return APPM_OK;
+}
+
+/* The sampler's part of a renderer (section 2.3): which numbers the scene's
+ * lights read, the Sobol' table (qmc) and the chains' sums (chains >= 2).
+ * Returns 0 when out of memory. */
+static int appm__sampler_alloc(appm_renderer *r, const appm_config *c)
+{
+    r->nee_dims = appm__light_dims(r->scene, 0);
+    r->emit_dims = appm__light_dims(r->scene, 1);
+    r->chains = c->chains;
+    if (c->sampler == APPM_SAMPLER_QMC) {
+        r->sobol = (uint32_t *)appm__alloc(&r->mem, APPM__SOBOL_TAB_SIZE, sizeof *r->sobol);
+        if (!r->sobol) return 0;
+        appm__sobol_table(r->sobol);
+    }
+    if (c->chains >= 2) {
+        r->chain_sum = (double *)appm__alloc(&r->mem, (size_t)r->w * r->h * c->chains, sizeof(double));
+        if (!r->chain_sum) return 0;
+    }
+    return 1;
 }
 
 APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
@@ -6381,7 +6779,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }
-    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) ||
+    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) || !appm__sampler_alloc(r, &c) ||
         ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
@@ -6466,7 +6864,8 @@ static int appm__photon_term(const appm_renderer *r, size_t i, double j, double 
 
 /* The estimated relative error of the image (appm_stats.est_relerr):
  *   sqrt( mean over pixels of (bias^2 + Var) / (I^2 + 0.01) ),
- * Var from the Welford spread of the per-pass estimates, divided by j. */
+ * Var from the Welford spread of the per-pass estimates divided by j, or from
+ * the spread between the chains (appm__mean_var). */
 static void appm__estimate_error(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
@@ -6477,7 +6876,7 @@ static void appm__estimate_error(appm_renderer *r)
     }
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = p->wm2 / ((j - 1.0) * j), bias = 0.0, I, t[3];
+        double var = appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass), bias = 0.0, I, t[3];
         if (r->est->bias) bias = r->est->bias(appm__state(r, i), j);
         I = appm__lumd(p->ld) / j;
         if (appm__photon_term(r, i, j, t)) I += appm__lumd(t);
@@ -6604,7 +7003,7 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
     a = r->aux[which];
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = r->pass > 1 ? p->wm2 / ((j - 1.0) * j) : 0.0, v;
+        double var = appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass), v;
         switch (which) {
         case APPM_AUX_RADIUS:
         case APPM_AUX_LAPLACIAN: v = r->est->aux_value(r, appm__state(r, i), which); break;

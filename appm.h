@@ -208,6 +208,23 @@ typedef enum appm_direct {
     APPM_DIRECT_PHOTONS   /* first-bounce photons are stored and gathered instead   */
 } appm_direct;
 
+/* Where the numbers of every path come from (appm.c, section 2.3).
+ *   QMC: a randomized low-discrepancy sequence (Owen-scrambled Sobol', padded)
+ *     in every dimension: pixel, lens, light choice, point on the light, BSDF
+ *     direction, Fresnel choice, Russian roulette, photon emission and every
+ *     photon bounce (the first 8 vertices of a path; PCG beyond).  The photons
+ *     of all passes form one low-discrepancy set.  Stateless: a sample is a
+ *     function of (seed, pass, pixel or photon index, dimension) only, so the
+ *     state of a render is its pixel statistics and the pass counter - nothing
+ *     else would need saving.  See `chains` for the error estimate.
+ *   RANDOM: independent PCG streams (and the rotated R2 sequence for the pixel
+ *     and lens), the sampler of earlier versions, bit for bit; kept to compare
+ *     and to teach what the sequence buys. */
+typedef enum appm_sampler {
+    APPM_SAMPLER_QMC = 0,  /* default */
+    APPM_SAMPLER_RANDOM
+} appm_sampler;
+
 /* Every field: 0 (or NULL) means "default".  `appm_config cfg = {0};` works. */
 typedef struct appm_config {
     appm_allocator allocator;
@@ -224,6 +241,15 @@ typedef struct appm_config {
     unsigned threads;         /* worker threads: all cores                           */
     uint64_t seed;            /* 0 is a valid seed and the default                   */
     unsigned max_depth;       /* longest counted path, in segments: 32               */
+    appm_sampler sampler;     /* APPM_SAMPLER_QMC                                    */
+    /* qmc: passes dealt to this many independently scrambled, interleaved chains
+     * (at most 64).  1 (default): one sequence, the best image; est_relerr is
+     * then the spread of the per-pass estimates, which successive points of one
+     * sequence make an overestimate (2-2.5x measured where the sequence helps
+     * most).  K >= 2: est_relerr from the spread between the chains, honest, at
+     * a price in accuracy (each chain's nets are K times coarser; 4 chains lost
+     * half or more of the gain on diffuse boxes at 256 passes), 8 K bytes a pixel. */
+    unsigned chains;
 } appm_config;
 
 /* The defaults spelled out (every field set to the value 0 stands for, where that
@@ -360,7 +386,10 @@ typedef struct appm_stats {
     uint64_t memory_bytes;          /* held by the renderer now                         */
     uint64_t peak_bytes;            /* the most the renderer held at once               */
     uint64_t dropped_samples;       /* NaN/inf contributions discarded (never in image)  */
-    double est_relerr;              /* appm: estimated image relative error (< 0: none)  */
+    double est_relerr;              /* appm, pt: estimated image relative error, the     */
+                                    /* root mean over pixels of (bias^2 + var) /         */
+                                    /* (I^2 + 0.01); var from the spread between the     */
+                                    /* chains (chains >= 2) or the passes; < 0: none      */
     unsigned threads;
 } appm_stats;
 

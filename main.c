@@ -122,6 +122,10 @@ static const char *const RENDER_HELP =
     "  --size WxH            override the scene's image size\n"
     "  --max-depth N         longest light path counted, in segments from light to camera [32]\n"
     "  --direct MODE         nee (shadow rays, default) | photons (first-bounce photons)\n"
+    "  --sampler S           qmc (scrambled Sobol' in every path dimension, default) |\n"
+    "                        random (independent PCG streams, the earlier sampler)\n"
+    "  --chains K            qmc: K independently scrambled chains of passes, so that\n"
+    "                        est_relerr is honest (K >= 2) at a price in accuracy [1]\n"
     "  --exposure X          multiply before the sRGB conversion of .png/.ppm [1]\n"
     "  --reference REF.pfm   compare with this image after every pass\n"
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
@@ -361,6 +365,10 @@ static int parse_render(int argc, char **argv, render_opts *o)
                 char names[256];
                 return usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
             }
+        } else if (strcmp(a, "--sampler") == 0) {
+            if (strcmp(v, "qmc") == 0) o->cfg.sampler = APPM_SAMPLER_QMC;
+            else if (strcmp(v, "random") == 0) o->cfg.sampler = APPM_SAMPLER_RANDOM;
+            else return usage_error("--sampler must be qmc or random, not '%s'", v);
         } else if (strcmp(a, "--direct") == 0) {
             if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
             else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
@@ -397,6 +405,9 @@ static int parse_render(int argc, char **argv, render_opts *o)
         } else if (strcmp(a, "--seed") == 0) {
             if (!parse_u64(v, &u)) return usage_error("--seed needs a non-negative integer, not '%s'", v);
             o->cfg.seed = u;
+        } else if (strcmp(a, "--chains") == 0) {
+            if (!parse_u64(v, &u) || u == 0 || u > 64) return usage_error("--chains needs 1..64, not '%s'", v);
+            o->cfg.chains = (unsigned)u;
         } else if (strcmp(a, "--max-depth") == 0) {
             if (!parse_u64(v, &u) || u == 0 || u > 254) return usage_error("--max-depth needs 1..254, not '%s'", v);
             o->cfg.max_depth = (unsigned)u;
@@ -461,6 +472,7 @@ static int cmd_render(int argc, char **argv)
     char outbuf[1024];
     FILE *logf = NULL;
     double t0;
+    clock_t c0; /* processor time of the render loop: the cost on a shared machine */
     int rc = parse_render(argc, argv, &o), progress, have_cmp = 0;
     appm_status s;
     if (rc >= 0) return rc;
@@ -510,6 +522,7 @@ static int cmd_render(int argc, char **argv)
     progress = !o.quiet && appm_isatty(2);
     signal(SIGINT, on_sigint);
     t0 = now_seconds();
+    c0 = clock();
     for (;;) {
         double el;
         if ((s = appm_renderer_pass(r)) != APPM_OK) {
@@ -583,6 +596,9 @@ static int cmd_render(int argc, char **argv)
                st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
                (unsigned long long)st.photons_stored);
         if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
+        printf(" sampler=%s", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
+        if (o.cfg.sampler == APPM_SAMPLER_QMC) printf(" chains=%u", o.cfg.chains ? o.cfg.chains : 1u);
+        printf(" cpu_s=%.3f", (double)(clock() - c0) / CLOCKS_PER_SEC);
         if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
         if (g_interrupted) printf(" interrupted=1");
         printf("\n");

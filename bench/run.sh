@@ -3,7 +3,8 @@
 #
 #   sh bench/run.sh quick     one scene, small image, 6 runs of 8 s (plus the reference
 #                             the first time)
-#   sh bench/run.sh full      four scenes, the full ppm grid, throughput and scaling
+#   sh bench/run.sh full      four scenes, the full ppm grid, throughput and scaling,
+#                             and the sampler suite (bench/sampler.sh)
 #   sh bench/run.sh refs      only the references of the full suite (the slow part)
 #
 # For every scene: a reference (rendered once by a long path-tracing run and
@@ -123,5 +124,6 @@ bench/report "$out" > /dev/null || exit 1
 
 if [ "$mode" = full ]; then
     sh bench/throughput.sh "$out" || exit 1
+    sh bench/sampler.sh || exit 1
 fi
 echo "wrote $out/report.md"

@@ -139,10 +139,21 @@ check "render without -o exits 0" [ "$rc" -eq 0 ]
 check "render without -o writes cornell-original.png in the current folder" [ -s "$T/cwd/cornell-original.png" ]
 check "render without -o names it in the summary" grep -q 'output=cornell-original.png' "$T/cwd/out"
 
+# the sampler: qmc by default, named in the summary; random is another image
+small "$SCENE" -o "$T/s-qmc.pfm"
+check "render: the summary names the default sampler qmc" grep -q ' sampler=qmc' "$T/out"
+small "$SCENE" --sampler random -o "$T/s-random.pfm"
+check "render --sampler random exits 0" [ "$rc" -eq 0 ]
+check "render --sampler random: the summary says sampler=random" grep -q ' sampler=random' "$T/out"
+differ() { ! cmp -s "$1" "$2"; }
+check "render --sampler random renders another image than qmc" differ "$T/s-qmc.pfm" "$T/s-random.pfm"
+small "$SCENE" --sampler qmc -o "$T/s-qmc2.pfm"
+check "render --sampler qmc is the default" cmp -s "$T/s-qmc.pfm" "$T/s-qmc2.pfm"
+
 # ---- bad options: exit 1 and a message ------------------------------------------
 
 for opts in "--alpha 0" "--alpha 1.5" "--photons 0" "--size 0x0" "--size 10" "--method foo" \
-    "--passes" "--no-such-option" "--threads 0" "--radius -1" "--passes 0" "--seed x"; do
+    "--passes" "--no-such-option" "--threads 0" "--radius -1" "--passes 0" "--seed x" "--sampler sobol"; do
     # shellcheck disable=SC2086 # the options are meant to split
     run "$APPM" render "$SCENE" --size 8x8 -q -o "$T/never.png" $opts
     check "render $opts exits 1 (got $rc)" [ "$rc" -eq 1 ]

@@ -16,17 +16,36 @@
  *      albedo, glass exactly 1 for photons (S5).
  *   4. Photon emission (A8, S8, S9): the light pick frequencies, the CDF's ends,
  *      zero-variance emission weights, and power conservation.
+ *   The chi-square tests of section 1 run twice: with the PCG stream, and with
+ *   the numbers of the low-discrepancy sampler (appm.c section 2.3; its own
+ *   tests are in t_sampler.c), which must map to the same distributions.  A
+ *   stratified sequence fits a distribution better than chance, so its X^2 is
+ *   small and p close to 1: a wrong mapping still shows as p = 0.
  */
 #include "../appm.c"
 #include "check.h"
 
 #define GROUP "sampling"
-#define NTESTS_CHI2 5 /* chi-square tests in this file, for the Sidak correction */
+#define NTESTS_CHI2 9 /* chi-square tests in this file, for the Sidak correction */
 #define DEG (APPM__PI / 180.0)
 
 static appm__rng g_rng;
 
-static float uf(void) { return appm__rng_float(&g_rng); }
+/* The source of uf(): the PCG stream, or (g_qmc) coordinates 0, 1 of successive
+ * points of one sequence of the sampler (group 3: a vertex's BSDF numbers), two
+ * calls a point - every sampler tested with it takes two numbers. */
+static int g_qmc;
+static uint64_t g_qmc_calls;
+static uint32_t g_tab[APPM__SOBOL_TAB_SIZE];
+
+static float uf(void)
+{
+    float u[4];
+    uint64_t c = g_qmc_calls++;
+    if (!g_qmc) return appm__rng_float(&g_rng);
+    appm__ld(g_tab, 0x5EED5EEDull, appm__reverse32((uint32_t)(c / 2)), 3, 3u, u);
+    return u[c % 2];
+}
 
 /* ---- Chi-square machinery --------------------------------------------------- */
 
@@ -610,11 +629,13 @@ static void test_lights(void)
     for (k = 0; k < NL; ++k)
         for (c = 0; c < 3; ++c) gmin[k][c] = HUGE_VAL, gmax[k][c] = -HUGE_VAL;
     for (i = 0; i < N; ++i) {
-        appm__rng peek = g_rng;
         appm__photon_start ps;
-        uint32_t li = appm__pick_light(s, appm__rng_float(&peek)); /* the light appm__emit will choose */
+        float ue[5];
+        uint32_t li;
         double g[3];
-        if (!appm__emit(s, &g_rng, &ps)) {
+        for (c = 0; c < 5; ++c) ue[c] = uf();
+        li = appm__pick_light(s, ue[0]); /* the light appm__emit will choose */
+        if (!appm__emit(s, ue, &ps)) {
             emit_fail++;
             continue;
         }
@@ -706,6 +727,14 @@ int main(void)
     test_cosine(appm__normalize(appm__v(0.3f, -0.8f, -0.52f)), N, "cosine around a tilted n");
     test_sphere(N);
     test_triangle(N);
+    g_qmc = 1;
+    appm__sobol_table(g_tab);
+    printf("the same, fed with the low-discrepancy sampler:\n");
+    test_cosine(appm__v(0, 0, 1), N, "qmc: cosine around +z");
+    test_cosine(appm__normalize(appm__v(0.3f, -0.8f, -0.52f)), N, "qmc: cosine around a tilted n");
+    test_sphere(N);
+    test_triangle(N);
+    g_qmc = 0;
     test_fresnel();
     test_dielectric();
     test_weights();

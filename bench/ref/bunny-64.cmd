@@ -1,0 +1,1 @@
+./appm render scenes/bunny.scene --method pt --size 64x64 --passes 4096 --threads 2 -q --sampler random --seed 1000003 -o bench/ref/bunny-64-a.pfm; ./appm render scenes/bunny.scene --method pt --size 64x64 --passes 4096 --threads 2 -q --sampler random --seed 1000004 -o bench/ref/bunny-64-b.pfm; bench/refmix bench/ref/bunny-64-a.pfm bench/ref/bunny-64-b.pfm bench/ref/bunny-64.pfm
