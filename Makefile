@@ -2,12 +2,15 @@
 #   make              the command line tool ./appm
 #   make test         every test, normal build and ASan+UBSan build, plus the CLI
 #   make test-long    the slow statistical tests (more samples)
-#   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), C89/C++ header
+#   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), wasm32-wasi,
+#                     C89/C++ header
 #   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
 #                     make bench-sampler: --sampler qmc against random on every scene
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
+#   make web          web/appm.wasm and the scenes of the classroom page (clang, lld, wasi-libc)
+#   make test-web     the page in headless Chromium against the native build (web/README.md)
 # Without make:  cc -std=c99 -O2 appm.c main.c -lm -pthread -o appm
 
 CC      ?= cc
@@ -20,7 +23,8 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-bvh bench-sampler fuzz clean
+.PHONY: all test test-long portability dynamic bench bench-quick bench-bvh bench-sampler fuzz web \
+        test-web clean
 
 all: appm
 
@@ -80,5 +84,28 @@ bench-sampler: appm
 fuzz:
 	sh tests/fuzz/run.sh
 
+# WebAssembly: appm.c unchanged, no threads, as a WASI reactor (no main; the page
+# calls the exports of web/shim.c).  Debian's wasi-libc installs under /usr.  The
+# C stack gets 1 MiB instead of wasm-ld's 64 KiB, placed below the data so that an
+# overflow traps instead of overwriting it.
+WASMCC      ?= clang
+WASI_SYSROOT ?= /usr
+WEBSCENES    = $(patsubst scenes/%,web/scenes/%,$(wildcard scenes/CornellBox-*.obj scenes/CornellBox-*.mtl)) \
+               web/scenes/CREDITS-cornell.txt
+
+web: web/appm.wasm $(WEBSCENES)
+
+web/appm.wasm: appm.c appm.h web/shim.c
+	$(WASMCC) --target=wasm32-wasi --sysroot=$(WASI_SYSROOT) -mexec-model=reactor $(WARN) -O2 \
+	    -DAPPM_THREADS=0 appm.c web/shim.c -o $@ -Wl,--strip-debug \
+	    -Wl,-z,stack-size=1048576 -Wl,--stack-first
+
+web/scenes/%: scenes/%
+	@mkdir -p web/scenes
+	cp $< $@
+
+test-web: web appm
+	python3 tests/web.py
+
 clean:
-	rm -rf appm appm.exe build tests/out bench/report
+	rm -rf appm appm.exe build tests/out bench/report web/appm.wasm web/scenes

@@ -2005,7 +2005,7 @@ static appm_status appm__pfm_parse(appm__mem *m, const unsigned char *p, size_t 
     double scale = 0.0;
     int channels, little, k;
     char num[64];
-    size_t need;
+    uint64_t need; /* 64-bit: 32768 x 32768 RGB is 12 GB, beyond a 32-bit size_t */
     out->width = out->height = 0;
     out->rgb = NULL;
     if (len < 2 || p[0] != 'P' || (p[1] != 'F' && p[1] != 'f'))
@@ -2038,8 +2038,8 @@ static appm_status appm__pfm_parse(appm__mem *m, const unsigned char *p, size_t 
     if (pos >= len) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PFM has no pixel data");
     pos++; /* the single whitespace byte after the scale */
     little = scale < 0.0;
-    need = (size_t)dims[0] * dims[1] * (size_t)channels * 4;
-    if (len - pos < need)
+    need = (uint64_t)dims[0] * dims[1] * (uint64_t)channels * 4;
+    if ((uint64_t)(len - pos) < need)
         return appm__fail(diag, APPM_ERR_PARSE, name, 0,
                           "PFM data is short: %.0f bytes for %lux%lu pixels", (double)(len - pos),
                           dims[0], dims[1]);
@@ -6658,6 +6658,17 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->chain_sum);
 }
 
+/* Photons per task region of the first store, 1.5 per path plus slack, in
+ * double and clamped before the conversion: 1.5 x 2^32 paths exceed a 32-bit
+ * size_t (wasm32), and cap * tasks must fit the store's uint32 indices, the
+ * limit appm__photon_pass grows to.  Too large a store fails to allocate. */
+static size_t appm__store_guess(uint64_t paths, unsigned tasks)
+{
+    const double guess = (double)paths * 1.5 / (double)tasks + 4096.0;
+    const size_t limit = (size_t)0xFFFFFFF0u / tasks;
+    return guess < (double)limit ? (size_t)guess : limit;
+}
+
 /* The options of a renderer of `scene`: cfg (NULL: all defaults) with every 0
  * replaced by its default, validated.  APPM_ERR_INVALID_ARG for an absurd one. */
 static appm_status appm__config_resolve(const appm_scene *scene, const appm_config *cfg, appm_config *out,
@@ -6775,7 +6786,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
         r->task_failed = (int *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_failed);
         /* first guess at the store: 1.5 photons per path; it grows if needed */
-        r->cap = (size_t)((double)r->M * 1.5 / r->tasks) + 4096;
+        r->cap = appm__store_guess(r->M, r->tasks);
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
     }

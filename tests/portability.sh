@@ -9,6 +9,10 @@
 #   mingw-w64       Win32 threads (the default) and -DAPPM_THREADS=1 (winpthreads)
 #   the header      C89 and C++98, syntax only
 #   -ffast-math     must fail, with the library's #error
+#   wasm32-wasi     clang -Werror, no threads: the web build (appm.c + web/shim.c), and
+#                   the tests that run in seconds (t_portable, t_alloc, t_image, t_loader,
+#                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator, t_lights,
+#                   t_extremes, t_sampler), 32-bit size_t, under Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
 #   QEMU=1          t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
@@ -265,6 +269,41 @@ if have gcc "-ffast-math is refused"; then
         ok "-ffast-math is refused by the #error"
     else
         bad "-ffast-math is refused by the #error (it failed, but not with the #error)"
+    fi
+fi
+
+# ---- wasm32-wasi: 32-bit size_t, no threads, no pthread (the browser build) ------------------
+
+WASI_SYSROOT=${WASI_SYSROOT:-/usr}
+WASM="clang --target=wasm32-wasi --sysroot=$WASI_SYSROOT $C99 -O2 -DAPPM_THREADS=0"
+if have clang "wasm32-wasi"; then
+    if [ -f "$WASI_SYSROOT/include/wasm32-wasi/stdio.h" ] ||
+        [ -f "$WASI_SYSROOT/include/stdio.h" ]; then
+        step "clang wasm32-wasi -Werror: appm.c web/shim.c (make web)" \
+            $WASM -mexec-model=reactor appm.c web/shim.c -o "$OUT/appm.wasm"
+        if have node "wasm32-wasi: the tests under Node's WASI"; then
+            # wasm-ld gives the C stack 64 KiB and puts it above the data, where an
+            # overflow silently overwrites malloc's state; the tests' big local arrays
+            # (t_bvh's most of all) get 32 MiB, below the data, so an overflow traps.
+            for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress t_pmap \
+                t_estimator t_lights t_extremes t_sampler; do
+                if $WASM "tests/$n.c" -o "$OUT/$n.wasm" -Wl,-z,stack-size=33554432 \
+                    -Wl,--stack-first >"$log" 2>&1; then
+                    run_test "wasm32-wasi: tests/$n.c under node" env APPM_TEST_QUICK=1 \
+                        node --experimental-wasi-unstable-preview1 --no-warnings \
+                        tests/wasi-run.mjs "$OUT/$n.wasm"
+                else
+                    bad "clang wasm32-wasi -Werror: tests/$n.c"
+                fi
+            done
+        fi
+    else
+        : >"$log"
+        if [ "$STRICT" = 1 ]; then
+            bad "wasm32-wasi (no wasi-libc under $WASI_SYSROOT; PORTABILITY_STRICT=1)"
+        else
+            echo "skip wasm32-wasi: no wasi-libc under $WASI_SYSROOT (set WASI_SYSROOT)"
+        fi
     fi
 fi
 

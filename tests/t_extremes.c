@@ -523,7 +523,10 @@ static void test_photon_counts(void)
             CHECK_MSG(st == APPM_ERR_NOMEM && r == NULL && d.status == APPM_ERR_NOMEM && d.message[0],
                       "2^32 photons, %s: create gave %d (%s)", method_name(methods[mi]), (int)st, d.message);
         }
-        CHECK_MSG(b.refused > 0 && b.live == 0, "2^32 photons, %s: %ld refused, %lld bytes leaked",
+        /* with a 32-bit size_t the store's size overflows and is refused before
+         * the allocator is asked */
+        CHECK_MSG((b.refused > 0 || sizeof(size_t) < 8) && b.live == 0,
+                  "2^32 photons, %s: %ld refused, %lld bytes leaked",
                   method_name(methods[mi]), b.refused, b.live);
     }
 

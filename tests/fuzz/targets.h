@@ -65,7 +65,7 @@ static void *fuzz__alloc_fn(void *user, size_t n)
         a->failed = 1;
         return NULL;
     }
-    if (n > (size_t)1 << 40) return NULL; /* absurd: never reached by a sane reader */
+    if ((uint64_t)n > (uint64_t)1 << 40) return NULL; /* absurd: never reached by a sane reader */
     p = (unsigned char *)malloc(n + FUZZ__HEADER);
     if (!p) return NULL;
     memcpy(p, &n, sizeof n);
@@ -580,7 +580,11 @@ static int fuzz__pfm_roundtrip(fuzz_env *e, const appm_image *img)
     unsigned char *bytes;
     int bad = 0;
     size_t count = (size_t)img->width * img->height * 3;
+#if defined(__wasi__)
+    o.f = NULL; /* WASI has no tmpfile() */
+#else
     o.f = tmpfile();
+#endif
     if (!o.f) return 0; /* no temporary files here: nothing to check */
     o.ok = 1;
     o.crc = 0;
