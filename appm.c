@@ -4285,8 +4285,11 @@ static appm_status appm__bvh_collapse(appm_scene *s)
                                                sizeof *stack);
     s->wnode_mem = NULL;
     if (c.cnt && c.fst && stack) {
+        /* in 64 bits: the sum can exceed a 32-bit size_t (wasm32) */
+        uint64_t bytes;
         s->npack = appm__collapse_count(s, &c);
-        s->wnode_mem = appm__alloc(m, ((size_t)cap + 1) * sizeof *s->wnode + (size_t)s->npack * sizeof *s->pack, 1);
+        bytes = ((uint64_t)cap + 1) * sizeof *s->wnode + (uint64_t)s->npack * sizeof *s->pack;
+        if (bytes == (uint64_t)(size_t)bytes) s->wnode_mem = appm__alloc(m, (size_t)bytes, 1);
     }
     if (s->wnode_mem) {
         addr = (uintptr_t)s->wnode_mem;
