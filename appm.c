@@ -3112,6 +3112,25 @@ typedef struct appm__wnode {
     uint32_t count[APPM__BVH_W]; /* leaf: its triangles; APPM__W_INNER; 0: no child */
 } appm__wnode;
 
+/* A leaf's triangles in packs of four, structure of arrays, so that one vector
+ * operation evaluates a step of the watertight test for four triangles.  A
+ * leaf child of a wide node names its first pack (first) and its triangles
+ * (count, up to APPM__LEAF_MAX unless the binary build made a larger leaf);
+ * its packs are consecutive, the last one padded with copies of its first
+ * lane whose index is APPM__NO_TRI, so they are never reported. */
+#ifndef APPM__LEAF_MAX
+#define APPM__LEAF_MAX 4
+#endif
+#define APPM__NO_TRI UINT32_MAX
+#if defined(APPM__SSE) || defined(APPM__NEON)
+#define APPM__PACKS 1 /* a scalar build stores no packs */
+#endif
+
+typedef struct appm__tpack { /* 160 bytes */
+    float v[3][3][4];        /* v[vertex][axis][lane]: p0, p1, p2 of four triangles */
+    uint32_t tri[4];         /* their indices in appm_scene.tri */
+} appm__tpack;
+
 /* How appm__intersect and appm__occluded traverse (appm_scene.bvh_path). */
 #define APPM__BVH_SIMD 0   /* wide tree, the vector box test where there is one */
 #define APPM__BVH_SCALAR 1 /* wide tree, the scalar box test (same answers) */
@@ -3139,7 +3158,9 @@ struct appm_scene {
     appm__node root;       /* its root box (the box-test slack is measured on it) */
     appm__wnode *wnode;    /* the wide tree the renderer traverses, 64-byte aligned */
     void *wnode_mem;       /* the allocation holding it */
-    uint32_t nwnode;
+    uint32_t nwnode, wdepth; /* of the wide tree */
+    appm__tpack *pack;     /* leaf triangles, in the same allocation after the nodes */
+    uint32_t npack;
     int bvh_path;          /* APPM__BVH_SIMD, _SCALAR or _BINARY */
     appm__camera cam;
     uint32_t width, height;
@@ -3607,7 +3628,12 @@ static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
         size_t k;
         for (k = 0; k < sizeof(appm__wnode); k += 64) __builtin_prefetch(p + k);
     } else {
+#if defined(APPM__PACKS)
+        __builtin_prefetch(&s->pack[e->first]);
+        __builtin_prefetch((const char *)&s->pack[e->first] + 64);
+#else
         __builtin_prefetch(&s->tri[e->first]);
+#endif
     }
 }
 #define APPM__PREFETCH_ENTRY(s, e) appm__prefetch_entry(s, e)
@@ -3616,6 +3642,221 @@ static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
 #endif
 
 #define APPM__WSTACK ((APPM__BVH_W - 1) * APPM__BVH_MAX_DEPTH + APPM__BVH_W)
+
+/* ---- Leaf packs ----------------------------------------------------------------
+ *
+ * appm__pack_hit is appm__tri_hit for four triangles at once: the same float
+ * operations on the same operands in the same order (no contraction), lane by
+ * lane, so each lane's t, b1, b2 and verdict are appm__tri_hit's bit for bit.
+ * Two details make that exact.  A lane with an edge function exactly 0 has
+ * U, V, W recomputed in double, in scalar code, as appm__tri_hit does.  And
+ * fmaxf, which ignores a NaN operand, becomes maxps, which does not: they differ
+ * only when a vertex difference is NaN, and then det is NaN too, so the lane is
+ * a miss either way.  A lane is a hit when appm__tri_hit would accept it with
+ * tmax = the leaf's entry tmax; the caller keeps the first nearest lane, which is
+ * what a plain loop with a shrinking tmax keeps.  A scalar build stores no packs:
+ * its leaves name their triangles directly. */
+
+#if defined(APPM__PACKS)
+/* Recomputes U, V, W in double for the lanes of `zero` (appm__tri_hit's edge rule). */
+static void appm__pack_edges_double(unsigned zero, const float *A, float *U, float *V, float *W)
+{
+    /* A: Ax, Ay, Bx, By, Cx, Cy, four lanes each */
+    while (zero) {
+        int j = APPM__CTZ(zero);
+        double Ax = A[j], Ay = A[4 + j], Bx = A[8 + j], By = A[12 + j], Cx = A[16 + j], Cy = A[20 + j];
+        zero &= zero - 1;
+        U[j] = (float)(Cx * By - Cy * Bx);
+        V[j] = (float)(Ax * Cy - Ay * Cx);
+        W[j] = (float)(Bx * Ay - By * Ax);
+    }
+}
+#endif
+
+/* The error-bound constants of appm__tri_hit, computed the same way. */
+#define APPM__TRI_G (FLT_EPSILON * 0.5f)
+#define APPM__TRI_G2 (2 * APPM__TRI_G / (1 - 2 * APPM__TRI_G))
+#define APPM__TRI_G3 (3 * APPM__TRI_G / (1 - 3 * APPM__TRI_G))
+#define APPM__TRI_G5 (5 * APPM__TRI_G / (1 - 5 * APPM__TRI_G))
+
+#if defined(APPM__SSE)
+#define APPM__V4 __m128
+#define APPM__LD(p) _mm_loadu_ps(p)
+#define APPM__SET(x) _mm_set1_ps(x)
+#define APPM__ADD(a, b) _mm_add_ps(a, b)
+#define APPM__SUB(a, b) _mm_sub_ps(a, b)
+#define APPM__MUL(a, b) _mm_mul_ps(a, b)
+#define APPM__DIV(a, b) _mm_div_ps(a, b)
+#define APPM__MAX(a, b) _mm_max_ps(a, b)
+#define APPM__ABS(a) _mm_andnot_ps(_mm_set1_ps(-0.0f), a)
+#define APPM__ST(p, a) _mm_storeu_ps(p, a)
+#define APPM__M4 __m128
+#define APPM__EQ(a, b) _mm_cmpeq_ps(a, b)
+#define APPM__LT(a, b) _mm_cmplt_ps(a, b)
+#define APPM__GT(a, b) _mm_cmpgt_ps(a, b)
+#define APPM__OR(a, b) _mm_or_ps(a, b)
+#define APPM__AND(a, b) _mm_and_ps(a, b)
+#define APPM__ANDNOT(a, b) _mm_andnot_ps(a, b) /* ~a & b */
+#define APPM__MASK(a) ((unsigned)_mm_movemask_ps(a))
+#elif defined(APPM__NEON)
+#define APPM__V4 float32x4_t
+#define APPM__LD(p) vld1q_f32(p)
+#define APPM__SET(x) vdupq_n_f32(x)
+#define APPM__ADD(a, b) vaddq_f32(a, b)
+#define APPM__SUB(a, b) vsubq_f32(a, b)
+#define APPM__MUL(a, b) vmulq_f32(a, b)
+#define APPM__DIV(a, b) vdivq_f32(a, b)
+#define APPM__MAX(a, b) vmaxq_f32(a, b)
+#define APPM__ABS(a) vabsq_f32(a)
+#define APPM__ST(p, a) vst1q_f32(p, a)
+#define APPM__M4 uint32x4_t
+#define APPM__EQ(a, b) vceqq_f32(a, b)
+#define APPM__LT(a, b) vcltq_f32(a, b)
+#define APPM__GT(a, b) vcgtq_f32(a, b)
+#define APPM__OR(a, b) vorrq_u32(a, b)
+#define APPM__AND(a, b) vandq_u32(a, b)
+#define APPM__ANDNOT(a, b) vbicq_u32(b, a)
+static unsigned appm__neon_mask(uint32x4_t m)
+{
+    static const uint32_t bit[4] = {1, 2, 4, 8};
+    return (unsigned)vaddvq_u32(vandq_u32(m, vld1q_u32(bit)));
+}
+#define APPM__MASK(a) appm__neon_mask(a)
+#endif
+
+#if defined(APPM__PACKS)
+/* The lanes of pk hit by r in (tmin, tmax), with their t, b1, b2. */
+static inline unsigned appm__pack_hit(const appm__ray *r, const appm__tpack *pk, float tmax, float *tt,
+                                      float *b1, float *b2)
+{
+    const APPM__V4 z = APPM__SET(0.0f), sx = APPM__SET(r->sx), sy = APPM__SET(r->sy), sz = APPM__SET(r->sz);
+    const APPM__V4 ox = APPM__SET(r->ok[0]), oy = APPM__SET(r->ok[1]), oz = APPM__SET(r->ok[2]);
+    APPM__V4 Az = APPM__SUB(APPM__LD(pk->v[0][r->kz]), oz), Bz = APPM__SUB(APPM__LD(pk->v[1][r->kz]), oz);
+    APPM__V4 Cz = APPM__SUB(APPM__LD(pk->v[2][r->kz]), oz);
+    APPM__V4 Ax = APPM__SUB(APPM__SUB(APPM__LD(pk->v[0][r->kx]), ox), APPM__MUL(sx, Az));
+    APPM__V4 Ay = APPM__SUB(APPM__SUB(APPM__LD(pk->v[0][r->ky]), oy), APPM__MUL(sy, Az));
+    APPM__V4 Bx = APPM__SUB(APPM__SUB(APPM__LD(pk->v[1][r->kx]), ox), APPM__MUL(sx, Bz));
+    APPM__V4 By = APPM__SUB(APPM__SUB(APPM__LD(pk->v[1][r->ky]), oy), APPM__MUL(sy, Bz));
+    APPM__V4 Cx = APPM__SUB(APPM__SUB(APPM__LD(pk->v[2][r->kx]), ox), APPM__MUL(sx, Cz));
+    APPM__V4 Cy = APPM__SUB(APPM__SUB(APPM__LD(pk->v[2][r->ky]), oy), APPM__MUL(sy, Cz));
+    APPM__V4 U = APPM__SUB(APPM__MUL(Cx, By), APPM__MUL(Cy, Bx));
+    APPM__V4 V = APPM__SUB(APPM__MUL(Ax, Cy), APPM__MUL(Ay, Cx));
+    APPM__V4 W = APPM__SUB(APPM__MUL(Bx, Ay), APPM__MUL(By, Ax));
+    APPM__V4 det, t, mzw, mz, mx, my, dx, dy, dz, de, me, dt;
+    APPM__M4 ok;
+    unsigned zero = APPM__MASK(APPM__OR(APPM__OR(APPM__EQ(U, z), APPM__EQ(V, z)), APPM__EQ(W, z)));
+    if (zero) { /* on an edge: decide in double, lane by lane */
+        float A[24], u[4], v[4], w[4];
+        APPM__ST(A, Ax), APPM__ST(A + 4, Ay), APPM__ST(A + 8, Bx), APPM__ST(A + 12, By);
+        APPM__ST(A + 16, Cx), APPM__ST(A + 20, Cy), APPM__ST(u, U), APPM__ST(v, V), APPM__ST(w, W);
+        appm__pack_edges_double(zero, A, u, v, w);
+        U = APPM__LD(u), V = APPM__LD(v), W = APPM__LD(w);
+    }
+    ok = APPM__AND(APPM__OR(APPM__OR(APPM__LT(U, z), APPM__LT(V, z)), APPM__LT(W, z)),
+                   APPM__OR(APPM__OR(APPM__GT(U, z), APPM__GT(V, z)), APPM__GT(W, z))); /* mixed signs */
+    det = APPM__ADD(APPM__ADD(U, V), W);
+    t = APPM__DIV(APPM__ADD(APPM__ADD(APPM__MUL(U, APPM__MUL(sz, Az)), APPM__MUL(V, APPM__MUL(sz, Bz))),
+                            APPM__MUL(W, APPM__MUL(sz, Cz))),
+                  det); /* NaN or +-inf where det is 0 or NaN: no hit below */
+    ok = APPM__ANDNOT(ok, APPM__AND(APPM__GT(t, APPM__SET(r->tmin)), APPM__LT(t, APPM__SET(tmax))));
+    if (!APPM__MASK(ok)) return 0;
+    /* the bound on t's rounding error, as in appm__tri_hit */
+    mzw = APPM__MAX(APPM__ABS(Az), APPM__MAX(APPM__ABS(Bz), APPM__ABS(Cz)));
+    mz = APPM__MUL(APPM__SET(fabsf(r->sz)), mzw);
+    mx = APPM__MAX(APPM__ABS(Ax), APPM__MAX(APPM__ABS(Bx), APPM__ABS(Cx)));
+    my = APPM__MAX(APPM__ABS(Ay), APPM__MAX(APPM__ABS(By), APPM__ABS(Cy)));
+    dz = APPM__MUL(APPM__SET(APPM__TRI_G3), mz);
+    dx = APPM__MUL(APPM__SET(APPM__TRI_G5), APPM__ADD(mx, APPM__MUL(APPM__SET(fabsf(r->sx)), mzw)));
+    dy = APPM__MUL(APPM__SET(APPM__TRI_G5), APPM__ADD(my, APPM__MUL(APPM__SET(fabsf(r->sy)), mzw)));
+    de = APPM__MUL(APPM__SET(2.0f), APPM__ADD(APPM__ADD(APPM__MUL(APPM__MUL(APPM__SET(APPM__TRI_G2), mx), my),
+                                                        APPM__MUL(dy, mx)),
+                                              APPM__MUL(dx, my)));
+    me = APPM__MAX(APPM__ABS(U), APPM__MAX(APPM__ABS(V), APPM__ABS(W)));
+    dt = APPM__DIV(APPM__MUL(APPM__SET(3.0f),
+                             APPM__ADD(APPM__ADD(APPM__MUL(APPM__MUL(APPM__SET(APPM__TRI_G3), me), mz),
+                                                 APPM__MUL(de, mz)),
+                                       APPM__MUL(dz, me))),
+                   APPM__ABS(det));
+    ok = APPM__AND(ok, APPM__GT(t, dt));
+    APPM__ST(tt, t);
+    APPM__ST(b1, APPM__DIV(V, det));
+    APPM__ST(b2, APPM__DIV(W, det));
+    return APPM__MASK(ok);
+}
+#endif
+
+/* Closest hit among a leaf's triangles (first, count as in appm__wnode),
+ * ignoring `skip`; q->tmax is set to the shrinking *tmax before each test, as in
+ * a plain loop over the triangles in order (lanes keep the triangles' order). */
+static int appm__leaf_hit(const appm_scene *s, appm__ray *q, uint32_t first, uint32_t count, uint32_t skip,
+                          float *tmax, appm__hit *h, int scalar)
+{
+    int found = 0;
+#if defined(APPM__PACKS)
+    const appm__tpack *pk = &s->pack[first], *end = pk + (count + 3) / 4;
+    if (!scalar) {
+        for (; pk < end; ++pk) {
+            float t[4], b1[4], b2[4];
+            unsigned m = appm__pack_hit(q, pk, *tmax, t, b1, b2);
+            while (m) { /* lanes in triangle order: the first nearest one is kept */
+                int j = APPM__CTZ(m);
+                uint32_t i = pk->tri[j];
+                m &= m - 1;
+                if (i == APPM__NO_TRI || i == skip || !(t[j] < *tmax)) continue;
+                *tmax = h->t = t[j];
+                h->b1 = b1[j];
+                h->b2 = b2[j];
+                h->tri = i;
+                found = 1;
+            }
+        }
+        return found;
+    }
+    first = pk->tri[0]; /* the scalar path: the leaf's triangles, consecutive */
+#endif
+    {
+        uint32_t i;
+        (void)scalar;
+        for (i = first; i < first + count; ++i) {
+            if (i == skip) continue;
+            q->tmax = *tmax;
+            if (appm__tri_hit(q, &s->tri[i], h)) {
+                *tmax = h->t;
+                h->tri = i;
+                found = 1;
+            }
+        }
+    }
+    return found;
+}
+
+/* Whether a leaf's triangles other than skip0 and skip1 hold a hit in (tmin, tmax). */
+static int appm__leaf_any(const appm_scene *s, const appm__ray *r, uint32_t first, uint32_t count, uint32_t skip0,
+                          uint32_t skip1, int scalar)
+{
+    appm__hit h;
+    uint32_t i;
+#if defined(APPM__PACKS)
+    const appm__tpack *pk = &s->pack[first], *end = pk + (count + 3) / 4;
+    if (!scalar) {
+        for (; pk < end; ++pk) {
+            float t[4], b1[4], b2[4];
+            unsigned m = appm__pack_hit(r, pk, r->tmax, t, b1, b2);
+            while (m) {
+                i = pk->tri[APPM__CTZ(m)];
+                m &= m - 1;
+                if (i != APPM__NO_TRI && i != skip0 && i != skip1) return 1;
+            }
+        }
+        return 0;
+    }
+    first = pk->tri[0];
+#endif
+    (void)scalar;
+    for (i = first; i < first + count; ++i)
+        if (i != skip0 && i != skip1 && appm__tri_hit(r, &s->tri[i], &h)) return 1;
+    return 0;
+}
 
 /* Closest hit in (tmin, tmax) through the wide tree, ignoring triangle `skip`.
  * Triangles are tested by the same appm__tri_hit with the same shrinking tmax
@@ -3643,17 +3884,8 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
                 cur = kid[0];
                 continue;
             }
-        } else {
-            uint32_t i;
-            for (i = cur.first; i < cur.first + cur.count; ++i) {
-                if (i == skip) continue;
-                q.tmax = tmax;
-                if (appm__tri_hit(&q, &s->tri[i], h)) {
-                    tmax = h->t;
-                    h->tri = i;
-                    found = 1;
-                }
-            }
+        } else if (appm__leaf_hit(s, &q, cur.first, cur.count, skip, &tmax, h, scalar)) {
+            found = 1;
         }
         do { /* pop, dropping boxes entered beyond the closest hit: the test
               * t0 <= min(t1, tmax) + slack at push time, redone with the new tmax */
@@ -3670,7 +3902,6 @@ static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t
     appm__wentry stack[APPM__WSTACK], cur;
     appm__bray b;
     float tn[APPM__BVH_W];
-    appm__hit h;
     int sp = 0;
     appm__bray_init(&b, r, appm__box_slack(r, &s->root));
     cur.first = 0;
@@ -3688,10 +3919,8 @@ static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t
                 APPM__PREFETCH_ENTRY(s, &stack[sp]);
                 sp++;
             }
-        } else {
-            uint32_t i;
-            for (i = cur.first; i < cur.first + cur.count; ++i)
-                if (i != skip0 && i != skip1 && appm__tri_hit(r, &s->tri[i], &h)) return 1;
+        } else if (appm__leaf_any(s, r, cur.first, cur.count, skip0, skip1, scalar)) {
+            return 1;
         }
         if (sp == 0) return 0;
         cur = stack[--sp];
@@ -3936,23 +4165,65 @@ nomem:
 /* Collapse of the binary tree into the wide one.  A wide node starts as the
  * two children of a binary interior node; the interior child of largest surface
  * area (the one a random ray most likely enters) is replaced by its own two
- * children until there are W children or only leaves.  Every wide node so
- * consumes at least one binary interior node, so there are at most
- * (nnode - 1) / 2 + 1 of them, and the tree is no deeper than the binary one.
- * Nodes are laid out depth first, the children of a node consecutively. */
+ * children until there are W children or only leaves.  A binary subtree of at
+ * most APPM__LEAF_MAX triangles counts as a leaf: its triangles are consecutive
+ * (the build puts them in leaf order) and one pack tests them together, for
+ * about the cost of one triangle, where its binary nodes would cost box tests
+ * and visits.  Every wide node so consumes at least one binary interior node,
+ * so there are at most (nnode - 1) / 2 + 1 of them, and the tree is no deeper
+ * than the binary one.  Nodes are laid out depth first, the children of a node
+ * consecutively; a leaf's packs are consecutive, in the order leaves are made. */
 typedef struct appm__collapse_item {
-    uint32_t bin, wide;
+    uint32_t bin, wide, depth;
 } appm__collapse_item;
 
+typedef struct appm__collapse { /* scratch of the collapse */
+    uint32_t *cnt, *fst;        /* per binary node: its subtree's triangles, the first of them */
+    uint32_t npack;             /* packs written so far */
+} appm__collapse;
+
+#define APPM__LEAFLIKE(s, c, i) ((s)->node[i].count || (c)->cnt[i] <= APPM__LEAF_MAX)
+
+/* The leaf of triangles [first, first + count): its packs, written at the end
+ * (the last one padded with copies of its first lane, marked APPM__NO_TRI);
+ * returns what appm__wnode.first holds for it (its first pack, or in a scalar
+ * build its first triangle). */
+static uint32_t appm__emit_leaf(appm_scene *s, appm__collapse *c, uint32_t first, uint32_t count)
+{
+#if defined(APPM__PACKS)
+    uint32_t p0 = c->npack, k, l, a;
+    for (k = 0; k < count; k += 4) {
+        appm__tpack *pk = &s->pack[c->npack++];
+        for (l = 0; l < 4; ++l) {
+            uint32_t i = first + (k + l < count ? k + l : k);
+            const appm__tri *t = &s->tri[i];
+            for (a = 0; a < 3; ++a) {
+                pk->v[0][a][l] = appm__comp(t->p0, (int)a);
+                pk->v[1][a][l] = appm__comp(t->p1, (int)a);
+                pk->v[2][a][l] = appm__comp(t->p2, (int)a);
+            }
+            pk->tri[l] = k + l < count ? i : APPM__NO_TRI;
+        }
+    }
+    return p0;
+#else
+    (void)s;
+    (void)c;
+    (void)count;
+    return first;
+#endif
+}
+
 /* Fills wide node w from binary interior node b; pushes its interior children. */
-static void appm__collapse_node(appm_scene *s, uint32_t b, uint32_t w, appm__collapse_item *stack, uint32_t *sp)
+static void appm__collapse_node(appm_scene *s, appm__collapse *cs, appm__collapse_item it,
+                                appm__collapse_item *stack, uint32_t *sp)
 {
     const appm__node *bn = s->node;
-    appm__wnode *wn = &s->wnode[w];
+    appm__wnode *wn = &s->wnode[it.wide];
     uint32_t kid[APPM__BVH_W], nk = 2, i, j;
     const float inf = (float)HUGE_VAL;
-    kid[0] = bn[b].first;
-    kid[1] = bn[b].first + 1;
+    kid[0] = bn[it.bin].first;
+    kid[1] = bn[it.bin].first + 1;
     while (nk < APPM__BVH_W) {
         uint32_t best = nk;
         double area = -1.0;
@@ -3960,7 +4231,7 @@ static void appm__collapse_node(appm_scene *s, uint32_t b, uint32_t w, appm__col
             const appm__node *c = &bn[kid[i]];
             double dx = c->bmax[0] - c->bmin[0], dy = c->bmax[1] - c->bmin[1], dz = c->bmax[2] - c->bmin[2];
             double a = dx * dy + dy * dz + dz * dx;
-            if (c->count == 0 && a > area) {
+            if (!APPM__LEAFLIKE(s, cs, kid[i]) && a > area) {
                 area = a;
                 best = i;
             }
@@ -3977,66 +4248,121 @@ static void appm__collapse_node(appm_scene *s, uint32_t b, uint32_t w, appm__col
         }
         if (!c) {
             wn->first[i] = wn->count[i] = 0;
-        } else if (c->count) {
-            wn->first[i] = c->first;
-            wn->count[i] = c->count;
+        } else if (APPM__LEAFLIKE(s, cs, kid[i])) {
+            wn->first[i] = appm__emit_leaf(s, cs, cs->fst[kid[i]], cs->cnt[kid[i]]);
+            wn->count[i] = cs->cnt[kid[i]];
         } else {
             wn->count[i] = APPM__W_INNER;
             stack[*sp].bin = kid[i];
+            stack[*sp].depth = it.depth + 1;
             stack[(*sp)++].wide = i; /* slot for now: numbered below */
         }
     }
 }
 
-static appm_status appm__bvh_collapse(appm_scene *s)
+/* The subtree sizes and first triangles (children follow their parent in the
+ * array, so one backward sweep), and the number of packs the leaves need. */
+static uint32_t appm__collapse_count(const appm_scene *s, appm__collapse *c)
 {
-    appm__mem *m = &s->mem;
-    uint32_t cap = (s->nnode - 1) / 2 + 1, sp = 0, nw = 1;
-    appm__collapse_item *stack;
-    uintptr_t addr;
-    s->wnode_mem = appm__alloc(m, (size_t)cap + 1, sizeof *s->wnode);
-    stack = (appm__collapse_item *)appm__alloc(m, (APPM__BVH_W - 1) * (size_t)APPM__BVH_MAX_DEPTH + APPM__BVH_W,
-                                               sizeof *stack);
-    if (!s->wnode_mem || !stack) {
-        appm__free(m, stack);
-        appm__free(m, s->wnode_mem);
-        s->wnode_mem = NULL;
-        return APPM_ERR_NOMEM;
+    uint32_t i = s->nnode, np = 0;
+    while (i-- > 0) {
+        const appm__node *n = &s->node[i];
+        c->cnt[i] = n->count ? n->count : c->cnt[n->first] + c->cnt[n->first + 1];
+        c->fst[i] = n->count ? n->first : c->fst[n->first];
     }
-    addr = (uintptr_t)s->wnode_mem;
-    s->wnode = (appm__wnode *)((char *)s->wnode_mem + (64 - addr % 64) % 64);
-    if (s->node[0].count) { /* a single leaf: one wide node with one child */
-        const float inf = (float)HUGE_VAL;
-        appm__wnode *wn = &s->wnode[0];
-        uint32_t i, j;
-        for (i = 0; i < APPM__BVH_W; ++i)
-            for (j = 0; j < 3; ++j) {
-                wn->lo[j][i] = i ? inf : s->node[0].bmin[j];
-                wn->hi[j][i] = i ? -inf : s->node[0].bmax[j];
-            }
-        wn->first[0] = s->node[0].first;
-        wn->count[0] = s->node[0].count;
-    } else {
-        stack[sp].bin = 0;
-        stack[sp++].wide = 0;
-        while (sp > 0) {
-            appm__collapse_item it = stack[--sp];
-            uint32_t base = sp, k;
-            appm__collapse_node(s, it.bin, it.wide, stack, &sp);
-            for (k = base; k < sp; ++k) { /* number the new children, in slot order */
-                s->wnode[it.wide].first[stack[k].wide] = nw;
-                stack[k].wide = nw++;
-            }
-            for (k = 0; 2 * k + 1 < sp - base; ++k) { /* reversed: slot 0 is popped first */
-                appm__collapse_item t = stack[base + k];
-                stack[base + k] = stack[sp - 1 - k];
-                stack[sp - 1 - k] = t;
-            }
+    for (i = 0; i < s->nnode; ++i) {
+        const appm__node *n = &s->node[i];
+        uint32_t k;
+        if (APPM__LEAFLIKE(s, c, i)) continue; /* opened: its leaf-like children become leaves */
+        for (k = 0; k < 2; ++k)
+            if (APPM__LEAFLIKE(s, c, n->first + k)) np += (c->cnt[n->first + k] + 3) / 4;
+    }
+    if (APPM__LEAFLIKE(s, c, 0)) np = (c->cnt[0] + 3) / 4;
+#if !defined(APPM__PACKS)
+    np = 0;
+#endif
+    return np;
+}
+
+/* The root as a single leaf: one wide node with one child. */
+static void appm__collapse_single(appm_scene *s, appm__collapse *c)
+{
+    const float inf = (float)HUGE_VAL;
+    appm__wnode *wn = &s->wnode[0];
+    uint32_t i, j;
+    for (i = 0; i < APPM__BVH_W; ++i) {
+        for (j = 0; j < 3; ++j) {
+            wn->lo[j][i] = i ? inf : s->node[0].bmin[j];
+            wn->hi[j][i] = i ? -inf : s->node[0].bmax[j];
+        }
+        wn->first[i] = wn->count[i] = 0;
+    }
+    wn->first[0] = appm__emit_leaf(s, c, c->fst[0], c->cnt[0]);
+    wn->count[0] = c->cnt[0];
+}
+
+static void appm__collapse_tree(appm_scene *s, appm__collapse *c, appm__collapse_item *stack)
+{
+    uint32_t sp = 0, nw = 1;
+    s->wdepth = 1;
+    stack[sp].bin = 0;
+    stack[sp].depth = 1;
+    stack[sp++].wide = 0;
+    while (sp > 0) {
+        appm__collapse_item it = stack[--sp];
+        uint32_t base = sp, k;
+        if (it.depth > s->wdepth) s->wdepth = it.depth;
+        appm__collapse_node(s, c, it, stack, &sp);
+        for (k = base; k < sp; ++k) { /* number the new children, in slot order */
+            s->wnode[it.wide].first[stack[k].wide] = nw;
+            stack[k].wide = nw++;
+        }
+        for (k = 0; 2 * k + 1 < sp - base; ++k) { /* reversed: slot 0 is popped first */
+            appm__collapse_item t = stack[base + k];
+            stack[base + k] = stack[sp - 1 - k];
+            stack[sp - 1 - k] = t;
         }
     }
     s->nwnode = nw;
+}
+
+static appm_status appm__bvh_collapse(appm_scene *s)
+{
+    appm__mem *m = &s->mem;
+    uint32_t cap = (s->nnode - 1) / 2 + 1;
+    appm__collapse c;
+    appm__collapse_item *stack;
+    uintptr_t addr;
+    appm_status st = APPM_ERR_NOMEM;
+    c.npack = 0;
+    c.cnt = (uint32_t *)appm__alloc(m, s->nnode, sizeof *c.cnt);
+    c.fst = (uint32_t *)appm__alloc(m, s->nnode, sizeof *c.fst);
+    stack = (appm__collapse_item *)appm__alloc(m, (APPM__BVH_W - 1) * (size_t)APPM__BVH_MAX_DEPTH + APPM__BVH_W,
+                                               sizeof *stack);
+    s->wnode_mem = NULL;
+    if (c.cnt && c.fst && stack) {
+        /* in 64 bits: the sum can exceed a 32-bit size_t (wasm32) */
+        uint64_t bytes;
+        s->npack = appm__collapse_count(s, &c);
+        bytes = ((uint64_t)cap + 1) * sizeof *s->wnode + (uint64_t)s->npack * sizeof *s->pack;
+        if (bytes == (uint64_t)(size_t)bytes) s->wnode_mem = appm__alloc(m, (size_t)bytes, 1);
+    }
+    if (s->wnode_mem) {
+        addr = (uintptr_t)s->wnode_mem;
+        s->wnode = (appm__wnode *)((char *)s->wnode_mem + (64 - addr % 64) % 64);
+        s->pack = (appm__tpack *)(s->wnode + cap); /* 64-byte aligned too */
+        if (APPM__LEAFLIKE(s, &c, 0)) {
+            appm__collapse_single(s, &c);
+            s->nwnode = s->wdepth = 1;
+        } else {
+            appm__collapse_tree(s, &c, stack);
+        }
+        st = APPM_OK;
+    }
     appm__free(m, stack);
-    return APPM_OK;
+    appm__free(m, c.cnt);
+    appm__free(m, c.fst);
+    return st;
 }
 
 /* The binary SAH build, then its collapse into the wide tree the renderer
@@ -4046,7 +4372,8 @@ static appm_status appm__bvh_build(appm_scene *s, appm_diag *diag)
     appm_status st = appm__bvh_build_binary(s, diag);
     s->wnode = NULL;
     s->wnode_mem = NULL;
-    s->nwnode = 0;
+    s->nwnode = s->wdepth = s->npack = 0;
+    s->pack = NULL;
     if (st != APPM_OK || s->nnode == 0) return st;
     s->root = s->node[0];
     st = appm__bvh_collapse(s);
@@ -6733,8 +7060,8 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
     info->bbox_max[0] = s->bmax.x;
     info->bbox_max[1] = s->bmax.y;
     info->bbox_max[2] = s->bmax.z;
-    info->bvh_nodes = s->nnode;
-    info->bvh_depth = s->depth;
+    info->bvh_nodes = s->nwnode; /* the wide tree the renderer traverses */
+    info->bvh_depth = s->wdepth;
     info->width = s->width;
     info->height = s->height;
     info->memory_bytes = s->mem.live;

@@ -59,7 +59,9 @@
  *     SIMD: the BVH (8 children per node) tests a node's child boxes with SSE2
  *     on every x86-64 build, with AVX2 given -mavx2 or -march=native, and with
  *     NEON on aarch64, as the compiler's own macros say; tcc, other targets and
- *     -DAPPM_SIMD=0 use a portable scalar test.  The scalar test computes the
+ *     -DAPPM_SIMD=0 use a portable scalar test.  Its leaves (up to 4
+ *     triangles) are tested four triangles at once in SSE2/NEON lanes, with the
+ *     scalar watertight test's float operations per lane.  The scalar tests compute the
  *     same floats, so a SIMD build and its -DAPPM_SIMD=0 twin (same compiler,
  *     same other flags) render the same bytes, and so do gcc's default and
  *     -mavx2 builds (make portability checks both).
@@ -308,8 +310,8 @@ typedef struct appm_scene_info {
     double power_area[3];           /* emitted power (W) per kind, RGB                   */
     double power_point[3], power_spot[3], power_environment[3];
     double bbox_min[3], bbox_max[3];
-    uint64_t bvh_nodes;
-    uint32_t bvh_depth;
+    uint64_t bvh_nodes;             /* nodes of the wide BVH the renderer traverses      */
+    uint32_t bvh_depth;             /* and its depth (root = 1)                          */
     uint32_t width, height;         /* the scene's image size                            */
     uint64_t memory_bytes;          /* bytes the scene holds                            */
     uint64_t peak_bytes;            /* the most that loading held at once               */

@@ -438,6 +438,68 @@ static appm__v3 tri_target(const appm_scene *s, int kind)
 
 static float signed_zero(void) { return uf() < 0.5f ? 0.0f : -0.0f; }
 
+/* The wide tree's structure: every triangle in exactly one leaf, used slots
+ * first, a leaf's packs holding its triangles in order with the padding lanes
+ * marked, every leaf box holding its triangles, and nwnode / wdepth (also the
+ * scene info's bvh_nodes / bvh_depth) those of the tree reached from the root. */
+static void wide_walk(const appm_scene *s, uint32_t ni, uint32_t depth, unsigned char *seen, uint32_t *nodes,
+                      uint32_t *maxd, long *bad)
+{
+    const appm__wnode *n = &s->wnode[ni];
+    int j, used = 1;
+    (*nodes)++;
+    if (depth > *maxd) *maxd = depth;
+    for (j = 0; j < APPM__BVH_W; ++j) {
+        uint32_t c = n->count[j], first = n->first[j], k, a;
+        if (!c) {
+            used = 0;
+            continue;
+        }
+        if (!used) ++*bad; /* a used slot after an empty one */
+        if (c == APPM__W_INNER) {
+            wide_walk(s, first, depth + 1, seen, nodes, maxd, bad);
+            continue;
+        }
+#if defined(APPM__PACKS)
+        for (k = 0; k < (c + 3) / 4 * 4; ++k) {
+            uint32_t t = s->pack[first + k / 4].tri[k % 4];
+            if (k >= c ? t != APPM__NO_TRI : t != s->pack[first].tri[0] + k) ++*bad;
+        }
+        first = s->pack[first].tri[0];
+#endif
+        for (k = first; k < first + c; ++k) {
+            const appm__v3 *p;
+            if (k >= s->ntri || seen[k]++) {
+                ++*bad;
+                continue;
+            }
+            p = &s->tri[k].p0;
+            for (a = 0; a < 9; ++a) {
+                float x = appm__comp(p[a / 3], (int)(a % 3));
+                if (x < n->lo[a % 3][j] || x > n->hi[a % 3][j]) ++*bad;
+            }
+        }
+    }
+}
+
+static void check_wide_tree(const appm_scene *s, const char *name)
+{
+    unsigned char *seen = (unsigned char *)calloc(s->ntri ? s->ntri : 1, 1);
+    uint32_t nodes = 0, maxd = 0, i, missing = 0;
+    long bad = 0;
+    appm_scene_info in;
+    CHECK(seen != NULL);
+    if (!seen) return;
+    wide_walk(s, 0, 1, seen, &nodes, &maxd, &bad);
+    for (i = 0; i < s->ntri; ++i) missing += seen[i] != 1;
+    printf("%s: wide tree %u nodes, depth %u, %u packs\n", name, s->nwnode, s->wdepth, s->npack);
+    CHECK(bad == 0 && missing == 0);
+    CHECK(nodes == s->nwnode && maxd == s->wdepth && maxd <= s->depth);
+    appm_scene_get_info(s, &in);
+    CHECK(in.bvh_nodes == s->nwnode && in.bvh_depth == s->wdepth);
+    free(seen);
+}
+
 /* All ray families against one scene.  n: number of uniform random rays; the
  * other families get n/10 each; `npure` rays are also run through the plain loop. */
 static void bvh_vs_brute(const appm_scene *s, const char *name, long n, long npure, int use_cull)
@@ -459,6 +521,7 @@ static void bvh_vs_brute(const appm_scene *s, const char *name, long n, long npu
     ihi = lerp3(lo, hi, 0.65f);
     printf("%s: %u triangles, %u nodes, depth %u\n", name, s->ntri, s->nnode, s->depth);
     CHECK(s->depth < APPM__BVH_MAX_DEPTH);
+    check_wide_tree(s, name);
 
     snprintf(label, sizeof label, "%s random", name);
     stats_start(&st, label);
@@ -921,6 +984,7 @@ static void test_degenerate(void)
         printf("10000 copies: %u nodes, depth %u\n", s->nnode, s->depth);
         CHECK(s->ntri == 10000);
         CHECK(s->depth < APPM__BVH_MAX_DEPTH);
+        check_wide_tree(s, "copies");
         aimed_rays(s, "copies", n, 1);
         appm_scene_destroy(s);
     }
@@ -948,6 +1012,7 @@ static void test_degenerate(void)
     s = hand_scene(tris, nchain);
     printf("geometric chain: %u triangles, %u nodes, depth %u\n", s->ntri, s->nnode, s->depth);
     CHECK(s->depth < APPM__BVH_MAX_DEPTH);
+    check_wide_tree(s, "geometric chain");
     aimed_rays(s, "geometric chain", n, 1);
     hand_free(s);
 
