@@ -4934,8 +4934,8 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 92 
     appm__v3 rd;          /* glossy: reflect(wo, n_shading), the lobe's axis */
     float ns;             /* glossy: the Phong exponent */
     float footprint;      /* width of the pixel at x, scene units */
-    float r;              /* the radius of this pass (appm: of the diffuse photons) */
-    float rc;             /* appm: the caustic photons' radius of this pass; 0: none */
+    float R;              /* the radius of this pass (appm: of the diffuse photons) */
+    float Rc;             /* appm: the caustic photons' radius of this pass; 0: none */
     uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
     uint8_t pad[3];
 } appm__vp;
@@ -6172,7 +6172,7 @@ static void appm__appm_update(appm__appm_state *p, uint64_t pass, const double *
  * through it; a new method is one entry plus its own functions.  Hooks that a
  * method does not need are NULL.  Per pass j the renderer calls:
  *   start       once, on pass 1, after r1 is known (initialise state)
- *   radius      per pixel: the gather radius of pass j (stored in appm__vp.r)
+ *   radius      per pixel: the gather radius of pass j (stored in appm__vp.R)
  *   commit      per pixel, after the gather: fold it into the state (the
  *               direct term is already committed to appm__pixel)
  *   pass_end    once, after the gather (global schedules)
@@ -6181,7 +6181,7 @@ static void appm__appm_update(appm__appm_state *p, uint64_t pass, const double *
  *   bias        the estimated bias of the pixel (luminance), for the error
  *   aux_value   the RADIUS and LAPLACIAN maps (and the per-component radii)
  * and, where a method needs them:
- *   radius_c    per pixel: the caustic component's radius (appm__vp.rc; < 0:
+ *   radius_c    per pixel: the caustic component's radius (appm__vp.Rc; < 0:
  *               the same as the radius; without the hook rc is 0 and every
  *               photon gathers with r) */
 enum {
@@ -6414,8 +6414,8 @@ static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const
 {
     appm__appm_px *a = (appm__appm_px *)st;
     double e[3], s, dl, ec[3], sc, dlc, hr = g->h / r->r_auto, w = g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0;
-    a->k[APPM__COMP_DIFFUSE].R = vp->r;
-    a->k[APPM__COMP_CAUSTIC].R = vp->rc;
+    a->k[APPM__COMP_DIFFUSE].R = vp->R;
+    a->k[APPM__COMP_CAUSTIC].R = vp->Rc;
     appm__gather_estimates(r, g, worker, e, &s, &dl);
     appm__gather_finish_caustic(g, 1.0 / (double)r->M, ec, &sc, &dlc);
     appm__drop_nonfinite(r, worker, ec, &sc, &dlc);
@@ -6583,8 +6583,8 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.ns = vp->ns;
             g.max_p = r->max_depth - vp->segs;
             g.biweight = (est->caps & APPM__CAP_BIWEIGHT) != 0;
-            g.R = vp->r;
-            g.Rc = vp->rc;
+            g.R = vp->R;
+            g.Rc = vp->Rc;
             g.h = (float)r->lap_h;
             appm__gather_query(&r->pmap, &g);
         }
@@ -7364,9 +7364,9 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
     (void)worker;
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
-        r->vp[i].r = r->est->radius(r, appm__state(r, i));
-        r->vp[i].rc = r->est->radius_c ? r->est->radius_c(r, appm__state(r, i)) : 0.0f;
-        if (r->vp[i].rc < 0.0f) r->vp[i].rc = r->vp[i].r;
+        r->vp[i].R = r->est->radius(r, appm__state(r, i));
+        r->vp[i].Rc = r->est->radius_c ? r->est->radius_c(r, appm__state(r, i)) : 0.0f;
+        if (r->vp[i].Rc < 0.0f) r->vp[i].Rc = r->vp[i].R;
     }
 }
 
@@ -7399,7 +7399,7 @@ static float appm__median_gather_radius(appm_renderer *r)
     for (i = 0; i < npix; ++i) {
         double g;
         if (r->vp[i].segs == 0) continue;
-        g = (double)r->vp[i].r > r->vp[i].rc ? (double)r->vp[i].r : (double)r->vp[i].rc;
+        g = (double)r->vp[i].R > r->vp[i].Rc ? (double)r->vp[i].R : (double)r->vp[i].Rc;
         tmp[n++] = (float)(h2 > g ? h2 : g);
     }
     if (n == 0) return (float)(r->r1 > 0 ? r->r1 : 1.0);

@@ -488,18 +488,18 @@ static double toy2_progressive(int split, int passes, int runs, uint64_t seed, d
             float h, reach;
             fr.pass = (uint64_t)j;
             memset(&vp, 0, sizeof vp);
-            vp.r = appm__appm_radius_hook(&fr, &a);
-            vp.rc = appm__appm_radius_caustic(&fr, &a);
-            if (vp.rc < 0.0f) vp.rc = vp.r;
+            vp.R = appm__appm_radius_hook(&fr, &a);
+            vp.Rc = appm__appm_radius_caustic(&fr, &a);
+            if (vp.Rc < 0.0f) vp.Rc = vp.R;
             h = appm__lap_pass((uint64_t)j) ? (float)appm__lap_h(TOY_RB, (uint64_t)j) : 0.0f;
-            toy_gather_init(&g, vp.r, h, 1);
-            g.Rc = vp.rc;
-            g.Rc2 = vp.rc * vp.rc;
-            reach = vp.r > vp.rc ? vp.r : vp.rc;
+            toy_gather_init(&g, vp.R, h, 1);
+            g.Rc = vp.Rc;
+            g.Rc2 = vp.Rc * vp.Rc;
+            reach = vp.R > vp.Rc ? vp.R : vp.Rc;
             reach = reach > 2.0f * h ? reach : 2.0f * h;
             for (i = 0; i < 1000; ++i) {
                 appm__photon p = toy2_photon(&rng, split);
-                appm__gather_photon(&g, &p, vp.r * vp.r, reach * reach);
+                appm__gather_photon(&g, &p, vp.R * vp.R, reach * reach);
             }
             appm__appm_commit(&fr, &px, &a, &vp, &g, 0);
         }

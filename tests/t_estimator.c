@@ -132,7 +132,7 @@ static void test_seam(appm_scene *s)
         b->est = &halved;
         if (check_passes(b, 1)) {
             n = (size_t)b->w * b->h;
-            for (i = 0; i < n; ++i) half &= b->vp[i].r == 0.5f * (float)sqrt(b->r1 * b->r1);
+            for (i = 0; i < n; ++i) half &= b->vp[i].R == 0.5f * (float)sqrt(b->r1 * b->r1);
             CHECK_MSG(half, "the gather did not use the radius hook's radius");
         }
     }
