@@ -30,45 +30,13 @@
  *      many chains are refused.
  */
 #include "../appm.c"
+#define CHECK_GAMMA_Q
 #include "check.h"
 
 static uint32_t g_tab[APPM__SOBOL_TAB_SIZE];
 
-/* ---- Chi-square (as in t_sampling.c) ---------------------------------------- */
+/* ---- Chi-square (gamma_q from check.h, as t_sampling.c) --------------------- */
 
-static double gamma_q(double a, double x)
-{
-    double lpre;
-    int i;
-    if (!(x > 0.0)) return 1.0;
-    lpre = -x + a * log(x) - lgamma(a);
-    if (x < a + 1.0) {
-        double ap = a, del = 1.0 / a, sum = del;
-        for (i = 0; i < 10000; ++i) {
-            ap += 1.0;
-            del *= x / ap;
-            sum += del;
-            if (fabs(del) < fabs(sum) * 1e-16) break;
-        }
-        return 1.0 - sum * exp(lpre);
-    } else {
-        const double tiny = 1e-300;
-        double b = x + 1.0 - a, c = 1.0 / tiny, d = 1.0 / b, h = d;
-        for (i = 1; i < 10000; ++i) {
-            double an = -i * (i - a), del;
-            b += 2.0;
-            d = an * d + b;
-            if (fabs(d) < tiny) d = tiny;
-            c = b + an / c;
-            if (fabs(c) < tiny) c = tiny;
-            d = 1.0 / d;
-            del = d * c;
-            h *= del;
-            if (fabs(del - 1.0) < 1e-16) break;
-        }
-        return exp(lpre) * h;
-    }
-}
 
 /* Pearson's X^2 of counts against equal expectations; returns p. */
 static double chi2_uniform(const long *obs, int cells, long n)

@@ -28,6 +28,7 @@
  *   small and p close to 1: a wrong mapping still shows as p = 0.
  */
 #include "../appm.c"
+#define CHECK_GAMMA_Q
 #include "check.h"
 
 #define GROUP "sampling"
@@ -54,44 +55,6 @@ static float uf(void)
 
 /* ---- Chi-square machinery --------------------------------------------------- */
 
-/* Regularised upper incomplete gamma function Q(a, x) = Gamma(a, x) / Gamma(a):
- * the power series of P = 1 - Q for x < a + 1, where it converges fast, and
- * Lentz's continued fraction for Q otherwise (Numerical Recipes, 6.2). */
-static double gamma_q(double a, double x)
-{
-    double lpre;
-    int i;
-    if (!(x > 0.0)) return 1.0;
-    lpre = -x + a * log(x) - lgamma(a);
-    if (x < a + 1.0) {
-        double ap = a, del = 1.0 / a, sum = del;
-        for (i = 0; i < 10000; ++i) {
-            ap += 1.0;
-            del *= x / ap;
-            sum += del;
-            if (fabs(del) < fabs(sum) * 1e-16) break;
-        }
-        return 1.0 - sum * exp(lpre);
-    } else {
-        const double tiny = 1e-300;
-        double b = x + 1.0 - a, c = 1.0 / tiny, d = 1.0 / b, h = d;
-        for (i = 1; i < 10000; ++i) {
-            double an = -i * (i - a), del;
-            b += 2.0;
-            d = an * d + b;
-            if (fabs(d) < tiny) d = tiny;
-            c = b + an / c;
-            if (fabs(c) < tiny) c = tiny;
-            d = 1.0 / d;
-            del = d * c;
-            h *= del;
-            if (fabs(del - 1.0) < 1e-16) break;
-        }
-        return exp(lpre) * h;
-    }
-}
-
-/* Survival function of the chi-square distribution with `dof` degrees. */
 static double chi2_sf(double x, double dof) { return gamma_q(0.5 * dof, 0.5 * x); }
 
 static double sidak_alpha(void) { return 1.0 - pow(1.0 - 0.01, 1.0 / NTESTS_CHI2); }
