@@ -372,6 +372,25 @@ typedef struct fuzz__buf2 {
     uint32_t h;
 } fuzz__buf2;
 
+/* The common case of a target with one input: a NUL-terminated copy of the
+ * data (edited in place by `prep` when given), run twice by fuzz__twice. */
+static int fuzz__twice_one(const char *target, fuzz__run_fn run, void (*prep)(char *, size_t),
+                           const unsigned char *data, size_t size)
+{
+    char *buf = fuzz__dup(data, size);
+    fuzz__buf2 in;
+    int st;
+    if (prep) prep(buf, size);
+    in.a = buf;
+    in.alen = size;
+    in.b = NULL;
+    in.blen = 0;
+    in.h = fuzz__hash(data, size);
+    st = fuzz__twice(target, run, &in, in.h);
+    free(buf);
+    return st;
+}
+
 static int fuzz__obj_public(const void *ctx, fuzz_env *e)
 {
     const fuzz__buf2 *in = (const fuzz__buf2 *)ctx;
@@ -565,18 +584,7 @@ static int fuzz__scene_run(const void *ctx, fuzz_env *e)
 
 static int fuzz_scene_one(const unsigned char *data, size_t size)
 {
-    char *buf = fuzz__dup(data, size);
-    fuzz__buf2 in;
-    int st;
-    fuzz__scene_confine(buf, size);
-    in.a = buf;
-    in.alen = size;
-    in.b = NULL;
-    in.blen = 0;
-    in.h = fuzz__hash(data, size);
-    st = fuzz__twice("scene", fuzz__scene_run, &in, in.h);
-    free(buf);
-    return st;
+    return fuzz__twice_one("scene", fuzz__scene_run, fuzz__scene_confine, data, size);
 }
 
 /* ---- PFM ------------------------------------------------------------------------- */
@@ -660,17 +668,7 @@ static int fuzz__pfm_run(const void *ctx, fuzz_env *e)
 
 static int fuzz_pfm_one(const unsigned char *data, size_t size)
 {
-    char *buf = fuzz__dup(data, size);
-    fuzz__buf2 in;
-    int st;
-    in.a = buf;
-    in.alen = size;
-    in.b = NULL;
-    in.blen = 0;
-    in.h = fuzz__hash(data, size);
-    st = fuzz__twice("pfm", fuzz__pfm_run, &in, in.h);
-    free(buf);
-    return st;
+    return fuzz__twice_one("pfm", fuzz__pfm_run, NULL, data, size);
 }
 
 /* ---- Checkpoints --------------------------------------------------------------- */
@@ -768,17 +766,7 @@ static int fuzz__ck_run(const void *ctx, fuzz_env *e)
 
 static int fuzz_checkpoint_one(const unsigned char *data, size_t size)
 {
-    char *buf = fuzz__dup(data, size);
-    fuzz__buf2 in;
-    int st;
-    in.a = buf;
-    in.alen = size;
-    in.b = NULL;
-    in.blen = 0;
-    in.h = fuzz__hash(data, size);
-    st = fuzz__twice("checkpoint", fuzz__ck_run, &in, in.h);
-    free(buf);
-    return st;
+    return fuzz__twice_one("checkpoint", fuzz__ck_run, NULL, data, size);
 }
 
 /* ---- Table ------------------------------------------------------------------- */
