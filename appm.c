@@ -4979,6 +4979,11 @@ typedef struct appm__pmap {
     uint32_t bits;     /* log2 of the number of buckets */
     float cell_size, inv_cell;
     appm__v3 lo;       /* the grid's origin: the photons' bounding-box corner */
+    float *hot;        /* the positions again, in map order, as three arrays x[cap], y[cap], z[cap]:
+                        * all a query's distance test reads, contiguous (section 9) */
+    float *side;       /* per photon, in map order: its normal n decoded (not normalised) and
+                        * c^2 |n|^2 (c = APPM__NORMAL_COS), what the same-surface test reads */
+    size_t hot_cap;    /* photons hot[] and side[] have room for (only grow: memory stays flat) */
 } appm__pmap;
 
 #define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius (speed only) */
@@ -5072,6 +5077,8 @@ static appm__v3 appm__oct_unpack(float a, float b)
     return appm__v(a, b, z);
 }
 
+#define APPM__NORMAL_COS 0.5f /* the gather's same-surface test: normals within 60 degrees */
+
 /* A photon's stored directions as unit vectors: wi (towards where it came
  * from, 16 bits per coordinate: about 3e-5 rad), which the glossy gather reads
  * (10), and the normal on its side (8 bits: about 1e-2 rad); the diffuse
@@ -5081,6 +5088,18 @@ static appm__v3 appm__oct_unpack(float a, float b)
 #else
 #define APPM__UNUSED
 #endif
+/* The same-surface test's view of a photon (section 10): out[0..2] its normal
+ * decoded without normalisation, out[3] = c^2 |n|^2 with c = APPM__NORMAL_COS
+ * (cos 60 deg, so c^2 = 1/4 exactly). */
+static void appm__photon_side(const appm__photon *p, float *out)
+{
+    appm__v3 pn = appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f));
+    out[0] = pn.x;
+    out[1] = pn.y;
+    out[2] = pn.z;
+    out[3] = APPM__NORMAL_COS * APPM__NORMAL_COS * appm__dot(pn, pn);
+}
+
 static appm__v3 appm__photon_wi(const appm__photon *p)
 {
     return appm__normalize(appm__oct_unpack((float)p->wi[0] * (1.0f / 32767.0f), (float)p->wi[1] * (1.0f / 32767.0f)));
@@ -5603,6 +5622,19 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
         m->cell = cell;
         m->cell_cap = (size_t)nb + 1;
     }
+    if (n > m->hot_cap || !m->hot) { /* so do hot[] and side[] */
+        float *hot = (float *)appm__alloc(mem, 3 * (n ? n : 1), sizeof *hot);
+        float *side = hot ? (float *)appm__alloc(mem, 4 * (n ? n : 1), sizeof *side) : NULL;
+        if (!side) {
+            appm__free(mem, hot);
+            return APPM_ERR_NOMEM;
+        }
+        appm__free(mem, m->hot);
+        appm__free(mem, m->side);
+        m->hot = hot;
+        m->side = side;
+        m->hot_cap = n ? n : 1;
+    }
     m->bits = bits;
     m->ph = ph;
     m->n = n;
@@ -5640,32 +5672,68 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
             dest[i] = tj;
         }
     }
+    for (i = 0; i < n; ++i) {
+        m->hot[i] = ph[i].x;
+        m->hot[m->hot_cap + i] = ph[i].y;
+        m->hot[2 * m->hot_cap + i] = ph[i].z;
+        appm__photon_side(&ph[i], m->side + 4 * i);
+    }
     return APPM_OK;
 }
 
-typedef void (*appm__pmap_visit)(void *ctx, const appm__photon *p);
+/* visit(ctx, p, d2): photon p lies at squared distance d2 < R^2 from the query
+ * point, d2 = dx^2 + dy^2 + dz^2 in float with d = x - p, summed left to right
+ * (the expression every caller would write, so a visitor needs not redo it). */
+typedef void (*appm__pmap_visit)(void *ctx, const appm__photon *p, float d2);
 
-/* The photons of bucket b that lie within R of x (d2 computed as the gather
- * does, so both agree on the boundary); with `cx` non-NULL only those whose
- * own cell is cx (several cells can share a bucket). */
-static void appm__pmap_bucket_visit(const appm__pmap *m, uint32_t b, const int32_t *cx, appm__v3 x, float R2,
-                                    appm__pmap_visit visit, void *ctx)
+/* Photon i of the map, at squared distance d2 < R^2: visited unless `cx` is
+ * non-NULL and names a cell other than its own (several cells can share a
+ * bucket). */
+static void appm__pmap_accept(const appm__pmap *m, size_t i, float d2, const int32_t *cx, appm__pmap_visit visit,
+                              void *ctx)
 {
-    size_t i, end = m->cell[b + 1];
-    for (i = m->cell[b]; i < end; ++i) {
-        const appm__photon *p = &m->ph[i];
-        float dx = x.x - p->x, dy = x.y - p->y, dz = x.z - p->z;
-        if (!(dx * dx + dy * dy + dz * dz < R2)) continue;
-        if (cx && (appm__grid_coord(p->x, m->lo.x, m->inv_cell) != cx[0] ||
-                   appm__grid_coord(p->y, m->lo.y, m->inv_cell) != cx[1] ||
-                   appm__grid_coord(p->z, m->lo.z, m->inv_cell) != cx[2]))
-            continue;
-        visit(ctx, p);
+    const float *hx = m->hot, *hy = hx + m->hot_cap, *hz = hy + m->hot_cap;
+    if (cx && (appm__grid_coord(hx[i], m->lo.x, m->inv_cell) != cx[0] ||
+               appm__grid_coord(hy[i], m->lo.y, m->inv_cell) != cx[1] ||
+               appm__grid_coord(hz[i], m->lo.z, m->inv_cell) != cx[2]))
+        return;
+    visit(ctx, &m->ph[i], d2);
+}
+
+/* The photons i in [i0, i1) of the map that lie within R of x (R2 = R^2), in
+ * index order.  The distance test reads only the hot position arrays, where a
+ * bucket's photons are contiguous; 4 at a time with SSE (each lane computes
+ * the scalar expression's exact float value: no contraction, same order), the
+ * rest one by one. */
+static void appm__pmap_range(const appm__pmap *m, size_t i0, size_t i1, const int32_t *cx, appm__v3 x, float R2,
+                             appm__pmap_visit visit, void *ctx)
+{
+    const float *hx = m->hot, *hy = hx + m->hot_cap, *hz = hy + m->hot_cap;
+    size_t i = i0;
+#if defined(APPM__SSE)
+    if (i1 - i0 >= 4) {
+        const __m128 qx = _mm_set1_ps(x.x), qy = _mm_set1_ps(x.y), qz = _mm_set1_ps(x.z), r2 = _mm_set1_ps(R2);
+        for (; i + 4 <= i1; i += 4) {
+            __m128 dx = _mm_sub_ps(qx, _mm_loadu_ps(hx + i)), dy = _mm_sub_ps(qy, _mm_loadu_ps(hy + i));
+            __m128 dz = _mm_sub_ps(qz, _mm_loadu_ps(hz + i));
+            __m128 d2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+            int mask = _mm_movemask_ps(_mm_cmplt_ps(d2, r2)), k;
+            float d[4];
+            if (!mask) continue;
+            _mm_storeu_ps(d, d2);
+            for (k = 0; k < 4; ++k)
+                if (mask >> k & 1) appm__pmap_accept(m, i + (size_t)k, d[k], cx, visit, ctx);
+        }
+    }
+#endif
+    for (; i < i1; ++i) {
+        float dx = x.x - hx[i], dy = x.y - hy[i], dz = x.z - hz[i], d2 = dx * dx + dy * dy + dz * dz;
+        if (d2 < R2) appm__pmap_accept(m, i, d2, cx, visit, ctx);
     }
 }
 
-/* Calls visit(ctx, p) once for every photon p with |x - p|^2 < R^2, in map
- * order (bucket by bucket, chunk order within a bucket).  Visits every cell
+/* Calls visit(ctx, p, d2) once for every photon p with d2 = |x - p|^2 < R^2, in
+ * map order (bucket by bucket, chunk order within a bucket).  Visits every cell
  * overlapping the box [x - R, x + R]; a query larger than the grid itself
  * scans the array instead. */
 static void appm__pmap_query(const appm__pmap *m, appm__v3 x, float R, appm__pmap_visit visit, void *ctx)
@@ -5674,8 +5742,8 @@ static void appm__pmap_query(const appm__pmap *m, appm__v3 x, float R, appm__pma
     int32_t lo[3], hi[3], cc[3];
     double ncells;
     uint32_t seen[27];
+    uint64_t seen_bits = 0; /* bit (b mod 64) of every bucket in seen[]: most buckets need no scan of it */
     int nseen = 0, check;
-    size_t i;
     if (m->n == 0) return;
     lo[0] = appm__grid_coord(x.x - R, m->lo.x, m->inv_cell);
     lo[1] = appm__grid_coord(x.y - R, m->lo.y, m->inv_cell);
@@ -5685,35 +5753,41 @@ static void appm__pmap_query(const appm__pmap *m, appm__v3 x, float R, appm__pma
     hi[2] = appm__grid_coord(x.z + R, m->lo.z, m->inv_cell);
     ncells = ((double)hi[0] - lo[0] + 1) * ((double)hi[1] - lo[1] + 1) * ((double)hi[2] - lo[2] + 1);
     if (ncells > (double)m->n || ncells > (double)(1u << m->bits)) {
-        for (i = 0; i < m->n; ++i) {
-            const appm__photon *p = &m->ph[i];
-            float dx = x.x - p->x, dy = x.y - p->y, dz = x.z - p->z;
-            if (dx * dx + dy * dy + dz * dz < R2) visit(ctx, p);
-        }
+        appm__pmap_range(m, 0, m->n, NULL, x, R2, visit, ctx);
         return;
     }
     /* small queries read each bucket once (deduplicated); large ones accept a
-     * photon only in the cell it belongs to */
+     * photon only in the cell it belongs to.  Empty buckets are passed over
+     * before either. */
     check = ncells > 27.0;
     for (cc[2] = lo[2]; cc[2] <= hi[2]; ++cc[2])
         for (cc[1] = lo[1]; cc[1] <= hi[1]; ++cc[1])
             for (cc[0] = lo[0]; cc[0] <= hi[0]; ++cc[0]) {
                 uint32_t b = appm__grid_hash(cc[0], cc[1], cc[2], m->bits);
+                size_t i0 = m->cell[b], i1 = m->cell[b + 1];
+                if (i0 == i1) continue;
                 if (!check) {
-                    int k, dup = 0;
-                    for (k = 0; k < nseen; ++k) dup |= seen[k] == b;
-                    if (dup) continue;
+                    uint64_t bit = (uint64_t)1 << (b & 63u);
+                    if (seen_bits & bit) {
+                        int k, dup = 0;
+                        for (k = 0; k < nseen; ++k) dup |= seen[k] == b;
+                        if (dup) continue;
+                    }
+                    seen_bits |= bit;
                     seen[nseen++] = b;
                 }
-                appm__pmap_bucket_visit(m, b, check ? cc : NULL, x, R2, visit, ctx);
+                appm__pmap_range(m, i0, i1, check ? cc : NULL, x, R2, visit, ctx);
             }
 }
 
 static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 {
     appm__free(mem, m->cell);
+    appm__free(mem, m->hot);
+    appm__free(mem, m->side);
     m->cell = NULL;
-    m->cell_cap = 0;
+    m->hot = m->side = NULL;
+    m->cell_cap = m->hot_cap = 0;
 }
 
 /* ==== 10. ESTIMATORS ======================================================
@@ -5795,7 +5869,6 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
 #define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
-#define APPM__NORMAL_COS 0.5f
 
 /* Per-pixel state of each method (beside appm__pixel, which all share), named
  * after its paper's symbols as pbrt-v4's SPPMPixel is.  Plain doubles and
@@ -5838,6 +5911,10 @@ typedef struct appm__gather {
     float R;             /* kernel radius */
     float h;             /* appm: Laplacian bandwidth (0: none) */
     float R2, Rg2;       /* R^2 and max(R, 2h)^2, set by the query */
+    double ih;           /* 1 / h (0: no Laplacian), set by the query */
+    double qw[3];        /* off glossy points: the luminance weights times W f, so lum(Psi) =
+                          * qw . gamma; set by the query */
+    const appm__pmap *map; /* the map being queried (its side[] array), set by the query */
     unsigned max_p;      /* longest photon path that still counts */
     int biweight;
     double e[3];         /* sum of K-weighted gamma (scaled at the end) */
@@ -5852,43 +5929,58 @@ typedef struct appm__gather {
     uint64_t ccount;
 } appm__gather;
 
-static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, float dx, float dy,
-                              float dz, double q, float lobe, double *e, double *eg, double *s, double *dl,
-                              uint64_t *count);
+static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih, double q,
+                              float lobe, double *e, double *eg, double *s, double *dl, uint64_t *count);
 
-static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
+/* Photon p at squared distance d2 (< the query's reach, max(R, Rc, 2h)^2)
+ * into g's sums; R2 = R^2, ih = 1/h.  The cheap rejections come first (path
+ * length, one byte; then the normal), and lum(Psi), which only the second
+ * moment and the Laplacian read, is not formed for the uniform kernel. */
+static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
+                              const float *side)
 {
-    float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
-    float d2 = dx * dx + dy * dy + dz * dz, lobe = 0.0f;
-    appm__v3 pn, wf;
-    double q;
-    if (!(d2 < Rg2) || p->segs > g->max_p) return;
-    { /* same surface: angle(n_photon, n) < 60 deg.  The octahedral decode without
-       * its normalisation: cos >= c  <=>  dot > 0 and dot^2 >= c^2 |v|^2 */
-        float dn;
-        pn = appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f));
-        dn = appm__dot(pn, g->n);
-        if (!(dn > 0.0f) || dn * dn < APPM__NORMAL_COS * APPM__NORMAL_COS * appm__dot(pn, pn)) return;
-    }
-    wf = g->wf;
+    float lobe = 0.0f, dn;
+    double q = 0.0;
+    if (p->segs > g->max_p) return;
+    /* same surface: angle(n_photon, n) < 60 deg.  With the octahedral decode
+     * not normalised (side, from appm__photon_side): cos >= c <=> dot > 0 and
+     * dot^2 >= c^2 |n|^2 */
+    dn = side[0] * g->n.x + side[1] * g->n.y + side[2] * g->n.z;
+    if (!(dn > 0.0f) || dn * dn < side[3]) return;
     if (g->glossy) { /* the lobe at the photon's own direction (section 6.1) */
         float c = appm__dot(appm__photon_wi(p), g->rd);
+        appm__v3 wf;
         lobe = c > 0.0f ? powf(c > 1.0f ? 1.0f : c, g->ns) : 0.0f;
-        wf = appm__add(wf, appm__scale(g->wg, lobe));
+        wf = appm__add(g->wf, appm__scale(g->wg, lobe));
+        q = 0.2126 * wf.x * p->power[0] + 0.7152 * wf.y * p->power[1] + 0.0722 * wf.z * p->power[2];
+    } else if (g->biweight || g->h > 0.0f) {
+        q = g->qw[0] * p->power[0] + g->qw[1] * p->power[1] + g->qw[2] * p->power[2];
     }
-    q = 0.2126 * wf.x * p->power[0] + 0.7152 * wf.y * p->power[1] + 0.0722 * wf.z * p->power[2];
     if (p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f) {
-        appm__gather_sums(g, p, d2, g->Rc2, dx, dy, dz, q, lobe, g->ce, g->ceg, &g->cs, &g->cdl, &g->ccount);
+        appm__gather_sums(g, p, d2, g->Rc2, ih, q, lobe, g->ce, g->ceg, &g->cs, &g->cdl, &g->ccount);
         return;
     }
-    appm__gather_sums(g, p, d2, R2, dx, dy, dz, q, lobe, g->e, g->eg, &g->s, &g->dl, &g->count);
+    appm__gather_sums(g, p, d2, R2, ih, q, lobe, g->e, g->eg, &g->s, &g->dl, &g->count);
+}
+
+/* Photon p into g's sums if it lies within Rg2 = (reach)^2 of g->x (R2 = R^2):
+ * the entry for callers that hold a photon but no query (the tests' toys). */
+APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
+{
+    float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
+    float d2 = dx * dx + dy * dy + dz * dz, side[4];
+    if (!(d2 < Rg2)) return;
+    appm__photon_side(p, side);
+    g->qw[0] = 0.2126 * g->wf.x;
+    g->qw[1] = 0.7152 * g->wf.y;
+    g->qw[2] = 0.0722 * g->wf.z;
+    appm__gather_near(g, p, d2, R2, g->h > 0.0f ? 1.0 / g->h : 0.0, side);
 }
 
 /* One photon's share of a gather's sums (e, eg, s, dl, count: one component's;
  * lobe: the glossy lobe's value at the photon's direction). */
-static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, float dx, float dy,
-                              float dz, double q, float lobe, double *e, double *eg, double *s, double *dl,
-                              uint64_t *count)
+static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih, double q,
+                              float lobe, double *e, double *eg, double *s, double *dl, uint64_t *count)
 {
     if (d2 < R2) {
         double k = 1.0;
@@ -5909,31 +6001,37 @@ static void appm__gather_sums(const appm__gather *g, const appm__photon *p, floa
     }
     if (g->h > 0.0f) {
         /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
-         * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h. */
-        double ih = 1.0 / g->h, a = (double)d2 * ih * ih, sum = 0.0, v;
-        double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
-        double db = (dx * g->b.x + dy * g->b.y + dz * g->b.z) * ih;
-        double c[4];
-        int k;
-        c[0] = a + 1.0 + 2.0 * dt;
-        c[1] = a + 1.0 - 2.0 * dt;
-        c[2] = a + 1.0 + 2.0 * db;
-        c[3] = a + 1.0 - 2.0 * db;
-        for (k = 0; k < 4; ++k)
-            if (c[k] < 1.0) sum += (1.0 - c[k]) * (1.0 - c[k]);
-        if (a < 1.0) sum -= 4.0 * (1.0 - a) * (1.0 - a);
-        v = sum * q;
-        *dl += v;
+         * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h.
+         * Beyond 2h (a >= 4) every term is 0, since a + 1 - 2 |d.t| / h >= (sqrt(a) - 1)^2 >= 1:
+         * such photons (inside a wider R or Rc) are skipped (the power is finite, checked
+         * at emission, so 0 * q is 0). */
+        double a = (double)d2 * ih * ih, sum = 0.0;
+        if (a < 4.0) {
+            float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
+            double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
+            double db = (dx * g->b.x + dy * g->b.y + dz * g->b.z) * ih;
+            double c[4];
+            int k;
+            c[0] = a + 1.0 + 2.0 * dt;
+            c[1] = a + 1.0 - 2.0 * dt;
+            c[2] = a + 1.0 + 2.0 * db;
+            c[3] = a + 1.0 - 2.0 * db;
+            for (k = 0; k < 4; ++k)
+                if (c[k] < 1.0) sum += (1.0 - c[k]) * (1.0 - c[k]);
+            if (a < 1.0) sum -= 4.0 * (1.0 - a) * (1.0 - a);
+            *dl += sum * q;
+        }
     }
 }
 
-static void appm__gather_visit(void *ctx, const appm__photon *p)
+static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
 {
     appm__gather *g = (appm__gather *)ctx;
-    appm__gather_photon(g, p, g->R2, g->Rg2);
+    appm__gather_near(g, p, d2, g->R2, g->ih, g->map->side + 4 * (size_t)(p - g->map->ph));
 }
 
-/* Visits every photon within max(R, 2h) of g->x (section 9's query). */
+/* Visits every photon within max(R, Rc, 2h) of g->x (section 9's query), with
+ * the per-pixel constants of the visit computed once. */
 static void appm__gather_query(const appm__pmap *m, appm__gather *g)
 {
     float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h;
@@ -5941,6 +6039,11 @@ static void appm__gather_query(const appm__pmap *m, appm__gather *g)
     g->Rc2 = g->Rc * g->Rc;
     g->R2 = g->R * g->R;
     g->Rg2 = Rg * Rg;
+    g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
+    g->qw[0] = 0.2126 * g->wf.x; /* the product's first factor: (0.2126 W f_x) gamma_x, as before */
+    g->qw[1] = 0.7152 * g->wf.y;
+    g->qw[2] = 0.0722 * g->wf.z;
+    g->map = m;
     appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
 }
 

@@ -4,7 +4,10 @@
  *   1. Query == linear scan.  appm__pmap_query must visit exactly the photons
  *      a plain loop over the array finds with |x - y|^2 < R^2 (the same float
  *      expression), each once: the visited set is sorted and compared with the
- *      scan's.  Cases: random photon clouds and random points and radii; radius
+ *      scan's; the squared distance it hands each visit must be the scan's,
+ *      bit for bit (the gather uses it in place of its own, and the query's
+ *      four-wide test must agree with the scalar expression), and the photons
+ *      must come in map order (increasing index: the order the gather sums in).  Cases: random photon clouds and random points and radii; radius
  *      0; radii larger than the whole grid (the scan path); query points and
  *      photons exactly on cell boundaries; radii that reach exactly one cell
  *      further; the empty map; all photons in one cell; duplicate positions;
@@ -14,7 +17,9 @@
  *   2. The build's invariants: the photons are a permutation of the input;
  *      every photon in [cell[b], cell[b+1]) hashes to bucket b; within a
  *      bucket the input order (or the order of the runs given) is kept, which
- *      is what makes sums over photons independent of the thread count.
+ *      is what makes sums over photons independent of the thread count.  The
+ *      hot position arrays repeat each photon's position, and side[] holds
+ *      appm__photon_side of each, in map order.
  *   3. The photon record: the octahedral encoding round-trips (16-bit wi to
  *      within 1e-4 rad, 8-bit normals to within 2e-2 rad, the axes exactly), and
  *      appm__store_photon keeps the incident direction that glossy gathering
@@ -32,13 +37,32 @@ typedef struct visit_log {
     size_t *idx;
     size_t n, cap;
     int overflow;
+    appm__v3 x;      /* the query point */
+    int d2_ok;       /* every d2 handed over equals the scan's expression */
+    int ordered;     /* indices came in increasing order (small queries: map order) */
 } visit_log;
 
-static void log_visit(void *ctx, const appm__photon *p)
+static void log_visit(void *ctx, const appm__photon *p, float d2)
 {
     visit_log *v = (visit_log *)ctx;
-    if (v->n < v->cap) v->idx[v->n++] = (size_t)(p - v->base);
+    float dx = v->x.x - p->x, dy = v->x.y - p->y, dz = v->x.z - p->z, e2 = dx * dx + dy * dy + dz * dz;
+    size_t i = (size_t)(p - v->base);
+    v->d2_ok &= memcmp(&e2, &d2, sizeof d2) == 0;
+    if (v->n > 0 && v->idx[v->n - 1] >= i) v->ordered = 0;
+    if (v->n < v->cap) v->idx[v->n++] = i;
     else v->overflow = 1;
+}
+
+static void log_init(visit_log *v, const appm__pmap *m, size_t *buf, size_t cap, appm__v3 x)
+{
+    v->base = m->ph;
+    v->idx = buf;
+    v->n = 0;
+    v->cap = cap;
+    v->overflow = 0;
+    v->x = x;
+    v->d2_ok = 1;
+    v->ordered = 1;
 }
 
 static int cmp_size(const void *a, const void *b)
@@ -55,6 +79,8 @@ static appm__photon make_photon(float x, float y, float z, float tag)
     p.y = y;
     p.z = z;
     p.power[0] = tag; /* the photon's index in the input, to check orders */
+    p.n[0] = (int8_t)((int)tag % 255 - 127); /* some normal, for side[] */
+    p.n[1] = (int8_t)(((int)tag * 37) % 255 - 127);
     return p;
 }
 
@@ -65,12 +91,13 @@ static int same_as_scan(const appm__pmap *m, appm__v3 x, float R, size_t *buf_a,
     visit_log v;
     size_t i, ns = 0;
     float R2 = R * R;
-    v.base = m->ph;
-    v.idx = buf_a;
-    v.n = 0;
-    v.cap = m->n + 1;
-    v.overflow = 0;
+    log_init(&v, m, buf_a, m->n + 1, x);
     appm__pmap_query(m, x, R, log_visit, &v);
+    if (!v.d2_ok) {
+        fprintf(stderr, "%s: query (%.9g %.9g %.9g) R %.9g: a visit got a d2 other than the scan's\n", what, x.x,
+                x.y, x.z, R);
+        return 0;
+    }
     for (i = 0; i < m->n; ++i) {
         const appm__photon *p = &m->ph[i];
         float dx = x.x - p->x, dy = x.y - p->y, dz = x.z - p->z;
@@ -106,9 +133,16 @@ static appm__photon *build(appm__pmap *m, appm__mem *mem, const appm__photon *sr
 static void check_build(const appm__pmap *m, size_t n, const char *what)
 {
     size_t i, nb = (size_t)1 << m->bits;
-    int bucket_ok = 1, order_ok = 1, perm_ok = 1;
+    int bucket_ok = 1, order_ok = 1, perm_ok = 1, hot_ok = 1;
     unsigned char *seen = (unsigned char *)calloc(n ? n : 1, 1);
     CHECK(m->n == n && m->cell[0] == 0 && m->cell[nb] == n);
+    for (i = 0; i < n; ++i) {
+        float side[4];
+        appm__photon_side(&m->ph[i], side);
+        hot_ok &= m->hot[i] == m->ph[i].x && m->hot[m->hot_cap + i] == m->ph[i].y &&
+                  m->hot[2 * m->hot_cap + i] == m->ph[i].z && memcmp(side, m->side + 4 * i, sizeof side) == 0;
+    }
+    CHECK_MSG(hot_ok, "%s: the hot positions or side[] do not repeat the photons in map order", what);
     for (i = 0; i < nb; ++i) {
         size_t k;
         for (k = m->cell[i]; k < m->cell[i + 1]; ++k) {
@@ -253,12 +287,9 @@ static void test_degenerate(appm__mem *mem)
             bad += !same_as_scan(&m, appm__v(0.5f * (float)i, 0, 0), 0.5f, a, b, "duplicates");
             bad += !same_as_scan(&m, appm__v(0.5f * (float)i, 0, 0), 0.0f, a, b, "duplicates");
         }
-        v.base = m.ph;
-        v.idx = a;
-        v.n = 0;
-        v.cap = N + 1;
-        v.overflow = 0;
+        log_init(&v, &m, a, N + 1, appm__v(0.5f, 0, 0));
         appm__pmap_query(&m, appm__v(0.5f, 0, 0), 0.5f, log_visit, &v);
+        CHECK_MSG(v.ordered, "duplicates: one bucket's photons not visited in map order");
         CHECK_MSG(v.n == 500, "duplicates: %lu photons within 0.5 of a point holding 500, expected 500",
                   (unsigned long)v.n);
         free(ph);
