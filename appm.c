@@ -4975,6 +4975,7 @@ typedef struct appm__pmap {
     appm__photon *ph;  /* borrowed; photons [cell[b], cell[b+1]) lie in bucket b */
     size_t n;          /* photons in the map */
     uint32_t *cell;    /* 2^bits + 1 bucket starts */
+    float *bbox;       /* per bucket its photons' bounding box, lo xyz then hi xyz (section 9) */
     size_t cell_cap;   /* entries allocated (the largest table so far: memory stays flat) */
     uint32_t bits;     /* log2 of the number of buckets */
     float cell_size, inv_cell;
@@ -5617,9 +5618,15 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
     nb = 1u << bits;
     if ((size_t)nb + 1 > m->cell_cap) { /* the table only grows: memory stays flat */
         uint32_t *cell = (uint32_t *)appm__alloc(mem, (size_t)nb + 1, sizeof *cell);
-        if (!cell) return APPM_ERR_NOMEM;
+        float *bbox = cell ? (float *)appm__alloc(mem, (size_t)nb * 6, sizeof *bbox) : NULL;
+        if (!bbox) {
+            appm__free(mem, cell);
+            return APPM_ERR_NOMEM;
+        }
         appm__free(mem, m->cell);
+        appm__free(mem, m->bbox);
         m->cell = cell;
+        m->bbox = bbox;
         m->cell_cap = (size_t)nb + 1;
     }
     if (n > m->hot_cap || !m->hot) { /* so do hot[] and side[] */
@@ -5678,6 +5685,23 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
         m->hot[2 * m->hot_cap + i] = ph[i].z;
         appm__photon_side(&ph[i], m->side + 4 * i);
     }
+    /* (5) each non-empty bucket's bounding box (an empty one's is never read) */
+    for (k = 0; k < nb; ++k) {
+        float *bx = m->bbox + 6 * k;
+        size_t e = m->cell[k + 1];
+        if ((i = m->cell[k]) == e) continue;
+        bx[0] = bx[3] = ph[i].x;
+        bx[1] = bx[4] = ph[i].y;
+        bx[2] = bx[5] = ph[i].z;
+        for (++i; i < e; ++i) {
+            if (ph[i].x < bx[0]) bx[0] = ph[i].x;
+            if (ph[i].y < bx[1]) bx[1] = ph[i].y;
+            if (ph[i].z < bx[2]) bx[2] = ph[i].z;
+            if (ph[i].x > bx[3]) bx[3] = ph[i].x;
+            if (ph[i].y > bx[4]) bx[4] = ph[i].y;
+            if (ph[i].z > bx[5]) bx[5] = ph[i].z;
+        }
+    }
     return APPM_OK;
 }
 
@@ -5689,8 +5713,8 @@ typedef void (*appm__pmap_visit)(void *ctx, const appm__photon *p, float d2);
 /* Photon i of the map, at squared distance d2 < R^2: visited unless `cx` is
  * non-NULL and names a cell other than its own (several cells can share a
  * bucket). */
-static void appm__pmap_accept(const appm__pmap *m, size_t i, float d2, const int32_t *cx, appm__pmap_visit visit,
-                              void *ctx)
+static inline void appm__pmap_accept(const appm__pmap *m, size_t i, float d2, const int32_t *cx,
+                                     appm__pmap_visit visit, void *ctx)
 {
     const float *hx = m->hot, *hy = hx + m->hot_cap, *hz = hy + m->hot_cap;
     if (cx && (appm__grid_coord(hx[i], m->lo.x, m->inv_cell) != cx[0] ||
@@ -5717,12 +5741,13 @@ static void appm__pmap_range(const appm__pmap *m, size_t i0, size_t i1, const in
             __m128 dx = _mm_sub_ps(qx, _mm_loadu_ps(hx + i)), dy = _mm_sub_ps(qy, _mm_loadu_ps(hy + i));
             __m128 dz = _mm_sub_ps(qz, _mm_loadu_ps(hz + i));
             __m128 d2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
-            int mask = _mm_movemask_ps(_mm_cmplt_ps(d2, r2)), k;
+            /* lowest set bit of a 4-bit mask */
+            static const unsigned char low[16] = {0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
+            unsigned mask = (unsigned)_mm_movemask_ps(_mm_cmplt_ps(d2, r2));
             float d[4];
             if (!mask) continue;
             _mm_storeu_ps(d, d2);
-            for (k = 0; k < 4; ++k)
-                if (mask >> k & 1) appm__pmap_accept(m, i + (size_t)k, d[k], cx, visit, ctx);
+            for (; mask; mask &= mask - 1u) appm__pmap_accept(m, i + low[mask], d[low[mask]], cx, visit, ctx);
         }
     }
 #endif
@@ -5730,6 +5755,21 @@ static void appm__pmap_range(const appm__pmap *m, size_t i0, size_t i1, const in
         float dx = x.x - hx[i], dy = x.y - hy[i], dz = x.z - hz[i], d2 = dx * dx + dy * dy + dz * dz;
         if (d2 < R2) appm__pmap_accept(m, i, d2, cx, visit, ctx);
     }
+}
+
+/* Whether bounding box bb (lo xyz, hi xyz) holds no point within R of x
+ * (R2 = R^2), tested so that it never rejects a photon the query would
+ * accept: with c the point of the box nearest x and d = x - c in float, each
+ * |x - y| of a photon y in the box, rounded, is at least |d| in its axis
+ * (rounding is monotone), and so is the sum of squares; d^2 >= R^2 rules out
+ * every photon.  A NaN x is far from every box, as it is from every photon. */
+static int appm__pmap_far(const float *bb, appm__v3 x, float R2)
+{
+    float cx = x.x < bb[0] ? bb[0] : (x.x > bb[3] ? bb[3] : x.x);
+    float cy = x.y < bb[1] ? bb[1] : (x.y > bb[4] ? bb[4] : x.y);
+    float cz = x.z < bb[2] ? bb[2] : (x.z > bb[5] ? bb[5] : x.z);
+    float dx = x.x - cx, dy = x.y - cy, dz = x.z - cz;
+    return !(dx * dx + dy * dy + dz * dz < R2);
 }
 
 /* Calls visit(ctx, p, d2) once for every photon p with d2 = |x - p|^2 < R^2, in
@@ -5765,7 +5805,7 @@ static void appm__pmap_query(const appm__pmap *m, appm__v3 x, float R, appm__pma
             for (cc[0] = lo[0]; cc[0] <= hi[0]; ++cc[0]) {
                 uint32_t b = appm__grid_hash(cc[0], cc[1], cc[2], m->bits);
                 size_t i0 = m->cell[b], i1 = m->cell[b + 1];
-                if (i0 == i1) continue;
+                if (i0 == i1 || appm__pmap_far(m->bbox + 6 * (size_t)b, x, R2)) continue;
                 if (!check) {
                     uint64_t bit = (uint64_t)1 << (b & 63u);
                     if (seen_bits & bit) {
@@ -5783,10 +5823,11 @@ static void appm__pmap_query(const appm__pmap *m, appm__v3 x, float R, appm__pma
 static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 {
     appm__free(mem, m->cell);
+    appm__free(mem, m->bbox);
     appm__free(mem, m->hot);
     appm__free(mem, m->side);
     m->cell = NULL;
-    m->hot = m->side = NULL;
+    m->bbox = m->hot = m->side = NULL;
     m->cell_cap = m->hot_cap = 0;
 }
 
@@ -5929,58 +5970,11 @@ typedef struct appm__gather {
     uint64_t ccount;
 } appm__gather;
 
-static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih, double q,
-                              float lobe, double *e, double *eg, double *s, double *dl, uint64_t *count);
-
-/* Photon p at squared distance d2 (< the query's reach, max(R, Rc, 2h)^2)
- * into g's sums; R2 = R^2, ih = 1/h.  The cheap rejections come first (path
- * length, one byte; then the normal), and lum(Psi), which only the second
- * moment and the Laplacian read, is not formed for the uniform kernel. */
-static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
-                              const float *side)
-{
-    float lobe = 0.0f, dn;
-    double q = 0.0;
-    if (p->segs > g->max_p) return;
-    /* same surface: angle(n_photon, n) < 60 deg.  With the octahedral decode
-     * not normalised (side, from appm__photon_side): cos >= c <=> dot > 0 and
-     * dot^2 >= c^2 |n|^2 */
-    dn = side[0] * g->n.x + side[1] * g->n.y + side[2] * g->n.z;
-    if (!(dn > 0.0f) || dn * dn < side[3]) return;
-    if (g->glossy) { /* the lobe at the photon's own direction (section 6.1) */
-        float c = appm__dot(appm__photon_wi(p), g->rd);
-        appm__v3 wf;
-        lobe = c > 0.0f ? powf(c > 1.0f ? 1.0f : c, g->ns) : 0.0f;
-        wf = appm__add(g->wf, appm__scale(g->wg, lobe));
-        q = 0.2126 * wf.x * p->power[0] + 0.7152 * wf.y * p->power[1] + 0.0722 * wf.z * p->power[2];
-    } else if (g->biweight || g->h > 0.0f) {
-        q = g->qw[0] * p->power[0] + g->qw[1] * p->power[1] + g->qw[2] * p->power[2];
-    }
-    if (p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f) {
-        appm__gather_sums(g, p, d2, g->Rc2, ih, q, lobe, g->ce, g->ceg, &g->cs, &g->cdl, &g->ccount);
-        return;
-    }
-    appm__gather_sums(g, p, d2, R2, ih, q, lobe, g->e, g->eg, &g->s, &g->dl, &g->count);
-}
-
-/* Photon p into g's sums if it lies within Rg2 = (reach)^2 of g->x (R2 = R^2):
- * the entry for callers that hold a photon but no query (the tests' toys). */
-APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
-{
-    float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
-    float d2 = dx * dx + dy * dy + dz * dz, side[4];
-    if (!(d2 < Rg2)) return;
-    appm__photon_side(p, side);
-    g->qw[0] = 0.2126 * g->wf.x;
-    g->qw[1] = 0.7152 * g->wf.y;
-    g->qw[2] = 0.0722 * g->wf.z;
-    appm__gather_near(g, p, d2, R2, g->h > 0.0f ? 1.0 / g->h : 0.0, side);
-}
-
 /* One photon's share of a gather's sums (e, eg, s, dl, count: one component's;
  * lobe: the glossy lobe's value at the photon's direction). */
-static void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih, double q,
-                              float lobe, double *e, double *eg, double *s, double *dl, uint64_t *count)
+static inline void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
+                                     double q, float lobe, double *e, double *eg, double *s, double *dl,
+                                     uint64_t *count)
 {
     if (d2 < R2) {
         double k = 1.0;
@@ -6022,6 +6016,52 @@ static void appm__gather_sums(const appm__gather *g, const appm__photon *p, floa
             *dl += sum * q;
         }
     }
+}
+
+/* Photon p at squared distance d2 (< the query's reach, max(R, Rc, 2h)^2)
+ * into g's sums; R2 = R^2, ih = 1/h.  The cheap rejections come first (path
+ * length, one byte; then the normal), and lum(Psi), which only the second
+ * moment and the Laplacian read, is not formed for the uniform kernel. */
+static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
+                              const float *side)
+{
+    float lobe = 0.0f, dn;
+    double q = 0.0;
+    if (p->segs > g->max_p) return;
+    /* same surface: angle(n_photon, n) < 60 deg.  With the octahedral decode
+     * not normalised (side, from appm__photon_side): cos >= c <=> dot > 0 and
+     * dot^2 >= c^2 |n|^2 */
+    dn = side[0] * g->n.x + side[1] * g->n.y + side[2] * g->n.z;
+    if (!(dn > 0.0f) || dn * dn < side[3]) return;
+    if (g->glossy) { /* the lobe at the photon's own direction (section 6.1) */
+        float c = appm__dot(appm__photon_wi(p), g->rd);
+        appm__v3 wf;
+        lobe = c > 0.0f ? powf(c > 1.0f ? 1.0f : c, g->ns) : 0.0f;
+        wf = appm__add(g->wf, appm__scale(g->wg, lobe));
+        q = 0.2126 * wf.x * p->power[0] + 0.7152 * wf.y * p->power[1] + 0.0722 * wf.z * p->power[2];
+    } else if (g->biweight || g->h > 0.0f) {
+        q = g->qw[0] * p->power[0] + g->qw[1] * p->power[1] + g->qw[2] * p->power[2];
+    }
+    { /* one call site, so that the compiler inlines it: the caustic component's
+       * radius and sums, or the diffuse (or only) one's */
+        int c = p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f;
+        appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, ih, q, lobe, c ? g->ce : g->e, c ? g->ceg : g->eg,
+                          c ? &g->cs : &g->s, c ? &g->cdl : &g->dl, c ? &g->ccount : &g->count);
+    }
+}
+
+/* Photon p into g's sums if it lies within Rg2 = (reach)^2 of g->x (R2 = R^2):
+ * the entry for callers that hold a photon but no query (the tests' toys). */
+APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
+{
+    float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
+    float d2 = dx * dx + dy * dy + dz * dz, side[4];
+    if (!(d2 < Rg2)) return;
+    appm__photon_side(p, side);
+    g->qw[0] = 0.2126 * g->wf.x;
+    g->qw[1] = 0.7152 * g->wf.y;
+    g->qw[2] = 0.0722 * g->wf.z;
+    appm__gather_near(g, p, d2, R2, g->h > 0.0f ? 1.0 / g->h : 0.0, side);
 }
 
 static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
