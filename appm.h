@@ -437,8 +437,14 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which);
  * never interrupted.  A checkpoint of another scene, method, option set, image
  * size or version is refused with APPM_ERR_INVALID_ARG and a message naming
  * the difference; a truncated or altered one gives APPM_ERR_PARSE (a checksum
- * covers every byte).  A refused load leaves the renderer as it was.  The
- * layout is described in appm.c, section 12.2.
+ * covers every byte).  A refused load leaves the renderer as it was.  "Another
+ * scene" is one whose files state other values: geometry, materials (Kd, Ks,
+ * Ns, Ke, Ni, illum), shading normals (vn), lights or camera, each named when
+ * it differs; another machine reading the same files has the same scene.  The
+ * format version changes with the layout and with what the scene hash covers;
+ * a checkpoint of another format version is refused as such (compatibility is
+ * exact: same format and library version, or nothing).  The layout is
+ * described in appm.c, section 12.2.
  *
  * appm_renderer_save writes into buf (cap bytes) and sets *size to the bytes
  * the checkpoint takes; buf NULL only measures.  APPM_ERR_INVALID_ARG when cap
