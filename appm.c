@@ -2221,6 +2221,8 @@ typedef struct appm__loader {
     int bare_obj;           /* an OBJ read as a whole scene: no light gets a white environment */
     const char *mem_mtl;    /* in-memory MTL text (appm_scene_load_obj_memory) */
     size_t mem_mtl_len;
+    const appm_memory_file *files; /* appm_scene_load_memory: the texts meshes and mtllibs name */
+    size_t nfiles;
 } appm__loader;
 
 enum {
@@ -2432,6 +2434,33 @@ static int appm__join_path(char *out, size_t cap, const char *path, const char *
     return 1;
 }
 
+/* The text at `path` (as joined by appm__join_path): one of the loader's
+ * in-memory files if it has them (*owned NULL, a name none matches is a
+ * missing file), else the file read into *owned, which the caller frees. */
+static appm_status appm__loader_read(appm__loader *L, const char *path, const char **text, size_t *len,
+                                     char **owned, appm_diag *diag)
+{
+    size_t i;
+    *owned = NULL;
+    *text = NULL;
+    *len = 0;
+    if (!L->files) {
+        appm_status st = appm__read_file(L->mem, path, owned, len, diag);
+        *text = *owned;
+        return st;
+    }
+    for (i = 0; i < L->nfiles; ++i)
+        if (L->files[i].name && strcmp(L->files[i].name, path) == 0) {
+            if (!L->files[i].text && L->files[i].len)
+                return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no text for %.0f bytes",
+                                  (double)L->files[i].len);
+            *text = L->files[i].text;
+            *len = L->files[i].len;
+            return APPM_OK;
+        }
+    return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot open file (none of the files given has this name)");
+}
+
 /* ---- 4.2 MTL --------------------------------------------------------------- */
 
 static const char *appm__mat_name(const appm__loader *L, const appm__material *m)
@@ -2619,7 +2648,8 @@ static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const c
                                   size_t rel_len, unsigned line)
 {
     char path[4096];
-    char *buf;
+    char *owned;
+    const char *buf;
     size_t len;
     appm_status st;
     const char *saved_file = L->file;
@@ -2637,7 +2667,7 @@ static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const c
         return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "mtllib path too long");
     appm__diag_clear(&quiet);
     L->mem->diag = &quiet;
-    st = appm__read_file(L->mem, path, &buf, &len, &quiet);
+    st = appm__loader_read(L, path, &buf, &len, &owned, &quiet);
     L->mem->diag = L->diag;
     if (st == APPM_ERR_IO) {
         appm__warn(L, APPM__W_NO_MTL, line, "cannot open material library '%s': default material used",
@@ -2650,7 +2680,7 @@ static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const c
     st = appm__mtl_parse(L, buf, len);
     L->file = saved_file;
     L->warned = saved_warned;
-    appm__free(L->mem, buf);
+    appm__free(L->mem, owned);
     return st;
 }
 
@@ -2892,7 +2922,8 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
 
 static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned line)
 {
-    char *buf;
+    char *owned;
+    const char *buf;
     size_t len;
     appm_status st;
     const char *saved_file = L->file;
@@ -2900,7 +2931,7 @@ static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned li
     appm_diag quiet;
     appm__diag_clear(&quiet);
     L->mem->diag = &quiet;
-    st = appm__read_file(L->mem, path, &buf, &len, &quiet);
+    st = appm__loader_read(L, path, &buf, &len, &owned, &quiet);
     L->mem->diag = L->diag;
     if (st == APPM_ERR_IO)
         return appm__fail(L->diag, APPM_ERR_IO, saved_file ? saved_file : path, saved_file ? line : 0,
@@ -2911,7 +2942,7 @@ static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned li
     st = appm__obj_parse(L, buf, len, path);
     L->file = saved_file;
     L->warned = saved_warned;
-    appm__free(L->mem, buf);
+    appm__free(L->mem, owned);
     return st;
 }
 
@@ -6965,10 +6996,12 @@ static appm_status appm__loader_begin(appm__loader *L, appm__mem *m, const appm_
 enum { APPM__TEXT_NONE = 0, APPM__TEXT_OBJ, APPM__TEXT_SCENE };
 
 /* Common path of the public loaders.  text_kind NONE: read `path` (a .scene or
- * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead. */
+ * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead.
+ * files (SCENE only): the texts its meshes and material libraries name, instead
+ * of files on disk (NULL: read from disk). */
 static appm_status appm__scene_load(const char *path, int text_kind, const char *text, size_t text_len,
-                                    const char *mtl, size_t mtl_len, const appm_config *cfg,
-                                    appm_scene **out, appm_diag *diag)
+                                    const char *mtl, size_t mtl_len, const appm_memory_file *files,
+                                    size_t nfiles, const appm_config *cfg, appm_scene **out, appm_diag *diag)
 {
     appm__mem m;
     appm__loader L;
@@ -6987,6 +7020,8 @@ static appm_status appm__scene_load(const char *path, int text_kind, const char 
     st = appm__loader_begin(&L, &m, cfg, diag, path);
     L.mem_mtl = mtl;
     L.mem_mtl_len = mtl ? mtl_len : 0;
+    L.files = files;
+    L.nfiles = files ? nfiles : 0;
     appm__copy_str(s->name, sizeof s->name, path);
     if (st == APPM_OK) {
         if (text_kind == APPM__TEXT_OBJ) {
@@ -7029,7 +7064,7 @@ static appm_status appm__scene_load(const char *path, int text_kind, const char 
 APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
                                      appm_diag *diag)
 {
-    return appm__scene_load(path, APPM__TEXT_NONE, NULL, 0, NULL, 0, cfg, out, diag);
+    return appm__scene_load(path, APPM__TEXT_NONE, NULL, 0, NULL, 0, NULL, 0, cfg, out, diag);
 }
 
 APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len, const char *mtl,
@@ -7042,8 +7077,22 @@ APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len,
         if (out) *out = NULL;
         return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, "no OBJ text");
     }
-    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_OBJ, obj, obj_len, mtl, mtl_len, cfg, out,
-                            diag);
+    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_OBJ, obj, obj_len, mtl, mtl_len, NULL, 0, cfg,
+                            out, diag);
+}
+
+APPM_API appm_status appm_scene_load_memory(const char *scene, size_t scene_len, const char *name,
+                                            const appm_memory_file *files, size_t nfiles,
+                                            const appm_config *cfg, appm_scene **out, appm_diag *diag)
+{
+    static const appm_memory_file none = {NULL, NULL, 0};
+    if (!scene || (!files && nfiles)) {
+        appm__diag_clear(diag);
+        if (out) *out = NULL;
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, scene ? "no files" : "no scene text");
+    }
+    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_SCENE, scene, scene_len, NULL, 0,
+                            files ? files : &none, files ? nfiles : 0, cfg, out, diag);
 }
 
 APPM_API void appm_scene_destroy(appm_scene *scene)

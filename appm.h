@@ -279,6 +279,26 @@ APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len,
                                                 const appm_config *cfg, appm_scene **out,
                                                 appm_diag *diag);
 
+/* A file held in memory, for appm_scene_load_memory: `name` is the path that
+ * appm_scene_load would open for it (a `mesh` or `mtllib` name joined to the
+ * folder of the file naming it; so with a scene named "box.scene", the names
+ * as written), `text` its len bytes (no terminating NUL needed). */
+typedef struct appm_memory_file {
+    const char *name;
+    const char *text;
+    size_t len;
+} appm_memory_file;
+
+/* Loads a `.scene` text held in memory, as appm_scene_load loads the file
+ * `name` - its camera, lens, image size, lights and meshes - except that every
+ * mesh and material library it names is one of files[0 .. nfiles-1], matched
+ * by name, and nothing is read from disk: a name that none matches is a
+ * missing file (an error for a mesh, a warning and the default material for a
+ * material library).  Neither the scene text nor the files need a NUL. */
+APPM_API appm_status appm_scene_load_memory(const char *scene, size_t scene_len, const char *name,
+                                            const appm_memory_file *files, size_t nfiles,
+                                            const appm_config *cfg, appm_scene **out, appm_diag *diag);
+
 APPM_API void appm_scene_destroy(appm_scene *scene);
 
 /* Lights for any scene, added after loading (a model downloaded from the web
