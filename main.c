@@ -323,6 +323,117 @@ static int parse_light(int argc, char **argv, int *i, render_opts *o)
     return -1;
 }
 
+/* The options about files and their formats: whether `a` (with value v) is
+ * one, and then *rc = -1 when fine, else the usage error's exit code. */
+static int parse_output_option(const char *a, const char *v, render_opts *o, int *rc)
+{
+    unsigned long long u;
+    double d;
+    *rc = -1;
+    if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) o->output = v;
+    else if (strcmp(a, "--reference") == 0) o->reference = v;
+    else if (strcmp(a, "--log") == 0) o->log = v;
+    else if (strcmp(a, "--aux") == 0) o->aux = v;
+    else if (strcmp(a, "--checkpoint") == 0) o->checkpoint = v;
+    else if (strcmp(a, "--resume") == 0) o->resume = v;
+    else if (strcmp(a, "--checkpoint-every") == 0) {
+        if (!parse_u64(v, &u) || u == 0) *rc = usage_error("--checkpoint-every needs passes >= 1, not '%s'", v);
+        else o->checkpoint_every = u;
+    } else if (strcmp(a, "--exr") == 0) {
+        if (strcmp(v, "float") == 0) o->write.exr_half = 0;
+        else if (strcmp(v, "half") == 0) o->write.exr_half = 1;
+        else *rc = usage_error("--exr must be float or half, not '%s'", v);
+    } else if (strcmp(a, "--exr-compression") == 0) {
+        if (strcmp(v, "zip") == 0) o->write.exr_uncompressed = 0;
+        else if (strcmp(v, "none") == 0) o->write.exr_uncompressed = 1;
+        else *rc = usage_error("--exr-compression must be zip or none, not '%s'", v);
+    } else if (strcmp(a, "--exposure") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) *rc = usage_error("--exposure needs a number > 0, not '%s'", v);
+        else o->exposure = d;
+    } else {
+        return 0;
+    }
+    return 1;
+}
+
+/* The options of the render itself (method, sampler, stopping rules, the
+ * appm_config numbers): as parse_output_option. */
+static int parse_render_option(const char *a, const char *v, render_opts *o, int *rc)
+{
+    unsigned long long u;
+    double d;
+    *rc = -1;
+    if (strcmp(a, "--method") == 0) {
+        char names[256];
+        if (appm_method_parse(v, &o->cfg.method) != APPM_OK)
+            *rc = usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
+    } else if (strcmp(a, "--sampler") == 0) {
+        if (strcmp(v, "qmc") == 0) o->cfg.sampler = APPM_SAMPLER_QMC;
+        else if (strcmp(v, "random") == 0) o->cfg.sampler = APPM_SAMPLER_RANDOM;
+        else *rc = usage_error("--sampler must be qmc or random, not '%s'", v);
+    } else if (strcmp(a, "--direct") == 0) {
+        if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
+        else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
+        else *rc = usage_error("--direct must be nee or photons, not '%s'", v);
+    } else if (strcmp(a, "--time") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) {
+            *rc = usage_error("--time needs seconds > 0, not '%s'", v);
+        } else {
+            o->time_limit = d;
+            o->have_time = 1;
+        }
+    } else if (strcmp(a, "--until-error") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) {
+            *rc = usage_error("--until-error needs a number > 0, not '%s'", v);
+        } else {
+            o->until_error = d;
+            o->have_until = 1;
+        }
+    } else if (strcmp(a, "--passes") == 0) {
+        if (!parse_u64(v, &u) || u == 0) {
+            *rc = usage_error("--passes needs an integer >= 1, not '%s'", v);
+        } else {
+            o->passes = u;
+            o->have_passes = 1;
+        }
+    } else if (strcmp(a, "--photons") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 4294967296ull)
+            *rc = usage_error("--photons needs an integer in 1..2^32, not '%s'", v);
+        else o->cfg.photons = u;
+    } else if (strcmp(a, "--radius") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) *rc = usage_error("--radius needs a length > 0, not '%s'", v);
+        else o->cfg.radius = d;
+    } else if (strcmp(a, "--alpha") == 0) {
+        if (!parse_double(v, &d) || !(d > 0 && d <= 1)) *rc = usage_error("--alpha must be in (0, 1], not '%s'", v);
+        else o->cfg.alpha = d;
+    } else if (strcmp(a, "--threads") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 256) *rc = usage_error("--threads needs 1..256, not '%s'", v);
+        else o->cfg.threads = (unsigned)u;
+    } else if (strcmp(a, "--seed") == 0) {
+        if (!parse_u64(v, &u)) *rc = usage_error("--seed needs a non-negative integer, not '%s'", v);
+        else o->cfg.seed = u;
+    } else if (strcmp(a, "--chains") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 64) *rc = usage_error("--chains needs 1..64, not '%s'", v);
+        else o->cfg.chains = (unsigned)u;
+    } else if (strcmp(a, "--max-depth") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 254) *rc = usage_error("--max-depth needs 1..254, not '%s'", v);
+        else o->cfg.max_depth = (unsigned)u;
+    } else if (strcmp(a, "--size") == 0) {
+        unsigned long w, h;
+        char x, extra;
+        if (sscanf(v, "%lu%c%lu%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') || w < 1 || h < 1 ||
+            w > 32768 || h > 32768) {
+            *rc = usage_error("--size needs WxH with 1 <= W, H <= 32768, not '%s'", v);
+        } else {
+            o->cfg.width = (uint32_t)w;
+            o->cfg.height = (uint32_t)h;
+        }
+    } else {
+        return 0;
+    }
+    return 1;
+}
+
 static int parse_render(int argc, char **argv, render_opts *o)
 {
     int i;
@@ -331,8 +442,7 @@ static int parse_render(int argc, char **argv, render_opts *o)
     o->exposure = 1.0;
     for (i = 2; i < argc; ++i) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        double d;
-        unsigned long long u;
+        int rc;
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(RENDER_HELP, stdout);
             exit(EXIT_OK);
@@ -342,8 +452,7 @@ static int parse_render(int argc, char **argv, render_opts *o)
             continue;
         }
         if (strcmp(a, "--light") == 0 || strcmp(a, "--environment") == 0) {
-            int rc = parse_light(argc, argv, &i, o);
-            if (rc >= 0) return rc;
+            if ((rc = parse_light(argc, argv, &i, o)) >= 0) return rc;
             continue;
         }
         if (a[0] != '-' || a[1] == 0) {
@@ -353,85 +462,9 @@ static int parse_render(int argc, char **argv, render_opts *o)
         }
         if (!v) return usage_error("option %s needs a value", a);
         i++;
-        if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) o->output = v;
-        else if (strcmp(a, "--reference") == 0) o->reference = v;
-        else if (strcmp(a, "--log") == 0) o->log = v;
-        else if (strcmp(a, "--aux") == 0) o->aux = v;
-        else if (strcmp(a, "--checkpoint") == 0) o->checkpoint = v;
-        else if (strcmp(a, "--resume") == 0) o->resume = v;
-        else if (strcmp(a, "--checkpoint-every") == 0) {
-            if (!parse_u64(v, &u) || u == 0) return usage_error("--checkpoint-every needs passes >= 1, not '%s'", v);
-            o->checkpoint_every = u;
-        } else if (strcmp(a, "--exr") == 0) {
-            if (strcmp(v, "float") == 0) o->write.exr_half = 0;
-            else if (strcmp(v, "half") == 0) o->write.exr_half = 1;
-            else return usage_error("--exr must be float or half, not '%s'", v);
-        } else if (strcmp(a, "--exr-compression") == 0) {
-            if (strcmp(v, "zip") == 0) o->write.exr_uncompressed = 0;
-            else if (strcmp(v, "none") == 0) o->write.exr_uncompressed = 1;
-            else return usage_error("--exr-compression must be zip or none, not '%s'", v);
-        } else if (strcmp(a, "--method") == 0) {
-            if (appm_method_parse(v, &o->cfg.method) != APPM_OK) {
-                char names[256];
-                return usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
-            }
-        } else if (strcmp(a, "--sampler") == 0) {
-            if (strcmp(v, "qmc") == 0) o->cfg.sampler = APPM_SAMPLER_QMC;
-            else if (strcmp(v, "random") == 0) o->cfg.sampler = APPM_SAMPLER_RANDOM;
-            else return usage_error("--sampler must be qmc or random, not '%s'", v);
-        } else if (strcmp(a, "--direct") == 0) {
-            if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
-            else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
-            else return usage_error("--direct must be nee or photons, not '%s'", v);
-        } else if (strcmp(a, "--time") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--time needs seconds > 0, not '%s'", v);
-            o->time_limit = d;
-            o->have_time = 1;
-        } else if (strcmp(a, "--until-error") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--until-error needs a number > 0, not '%s'", v);
-            o->until_error = d;
-            o->have_until = 1;
-        } else if (strcmp(a, "--exposure") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--exposure needs a number > 0, not '%s'", v);
-            o->exposure = d;
-        } else if (strcmp(a, "--passes") == 0) {
-            if (!parse_u64(v, &u) || u == 0) return usage_error("--passes needs an integer >= 1, not '%s'", v);
-            o->passes = u;
-            o->have_passes = 1;
-        } else if (strcmp(a, "--photons") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 4294967296ull)
-                return usage_error("--photons needs an integer in 1..2^32, not '%s'", v);
-            o->cfg.photons = u;
-        } else if (strcmp(a, "--radius") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--radius needs a length > 0, not '%s'", v);
-            o->cfg.radius = d;
-        } else if (strcmp(a, "--alpha") == 0) {
-            if (!parse_double(v, &d) || !(d > 0 && d <= 1))
-                return usage_error("--alpha must be in (0, 1], not '%s'", v);
-            o->cfg.alpha = d;
-        } else if (strcmp(a, "--threads") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 256) return usage_error("--threads needs 1..256, not '%s'", v);
-            o->cfg.threads = (unsigned)u;
-        } else if (strcmp(a, "--seed") == 0) {
-            if (!parse_u64(v, &u)) return usage_error("--seed needs a non-negative integer, not '%s'", v);
-            o->cfg.seed = u;
-        } else if (strcmp(a, "--chains") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 64) return usage_error("--chains needs 1..64, not '%s'", v);
-            o->cfg.chains = (unsigned)u;
-        } else if (strcmp(a, "--max-depth") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 254) return usage_error("--max-depth needs 1..254, not '%s'", v);
-            o->cfg.max_depth = (unsigned)u;
-        } else if (strcmp(a, "--size") == 0) {
-            unsigned long w, h;
-            char x, extra;
-            if (sscanf(v, "%lu%c%lu%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') || w < 1 ||
-                h < 1 || w > 32768 || h > 32768)
-                return usage_error("--size needs WxH with 1 <= W, H <= 32768, not '%s'", v);
-            o->cfg.width = (uint32_t)w;
-            o->cfg.height = (uint32_t)h;
-        } else {
+        if (!parse_output_option(a, v, o, &rc) && !parse_render_option(a, v, o, &rc))
             return usage_error("unknown option '%s'", a);
-        }
+        if (rc >= 0) return rc;
     }
     if (!o->scene) return usage_error("render needs a scene file");
     if (o->checkpoint_every && !o->checkpoint) return usage_error("--checkpoint-every needs --checkpoint FILE");
