@@ -2811,8 +2811,8 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
             /* shading normals are stored per triangle corner, three in a row */
             size_t base = L->nrm.count, j;
             const int64_t idx[3] = {f[1], f[2 * k + 1], f[2 * k + 3]};
-            if (!appm__array_reserve(L->mem, &L->nrm, base + 3)) return APPM_ERR_NOMEM;
             uint64_t h = 0;
+            if (!appm__array_reserve(L->mem, &L->nrm, base + 3)) return APPM_ERR_NOMEM;
             for (j = 0; j < 3; ++j) {
                 appm__v3 vn = ((appm__v3 *)L->vn.data)[idx[j]];
                 ((appm__v3 *)L->nrm.data)[base + j] = appm__normalize(vn);
