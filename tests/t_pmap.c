@@ -18,8 +18,10 @@
  *      every photon in [cell[b], cell[b+1]) hashes to bucket b; within a
  *      bucket the input order (or the order of the runs given) is kept, which
  *      is what makes sums over photons independent of the thread count.  The
- *      hot position arrays repeat each photon's position, and side[] holds
- *      appm__photon_side of each, in map order.
+ *      hot position arrays repeat each photon's position, side[] holds
+ *      appm__photon_side of each, in map order, and every photon lies in its
+ *      bucket's bounding box (a box too small would drop photons from queries,
+ *      which (1) catches too).
  *   3. The photon record: the octahedral encoding round-trips (16-bit wi to
  *      within 1e-4 rad, 8-bit normals to within 2e-2 rad, the axes exactly), and
  *      appm__store_photon keeps the incident direction that glossy gathering
@@ -133,7 +135,7 @@ static appm__photon *build(appm__pmap *m, appm__mem *mem, const appm__photon *sr
 static void check_build(const appm__pmap *m, size_t n, const char *what)
 {
     size_t i, nb = (size_t)1 << m->bits;
-    int bucket_ok = 1, order_ok = 1, perm_ok = 1, hot_ok = 1;
+    int bucket_ok = 1, order_ok = 1, perm_ok = 1, hot_ok = 1, box_ok = 1;
     unsigned char *seen = (unsigned char *)calloc(n ? n : 1, 1);
     CHECK(m->n == n && m->cell[0] == 0 && m->cell[nb] == n);
     for (i = 0; i < n; ++i) {
@@ -146,7 +148,10 @@ static void check_build(const appm__pmap *m, size_t n, const char *what)
     for (i = 0; i < nb; ++i) {
         size_t k;
         for (k = m->cell[i]; k < m->cell[i + 1]; ++k) {
+            const float *bb = m->bbox + 6 * i;
             bucket_ok &= appm__pmap_bucket(m, &m->ph[k]) == i;
+            box_ok &= bb[0] <= m->ph[k].x && m->ph[k].x <= bb[3] && bb[1] <= m->ph[k].y && m->ph[k].y <= bb[4] &&
+                      bb[2] <= m->ph[k].z && m->ph[k].z <= bb[5];
             if (k > m->cell[i]) order_ok &= m->ph[k - 1].power[0] < m->ph[k].power[0];
         }
     }
@@ -156,6 +161,7 @@ static void check_build(const appm__pmap *m, size_t n, const char *what)
         else perm_ok = 0;
     }
     CHECK_MSG(bucket_ok, "%s: a photon lies outside its bucket's range", what);
+    CHECK_MSG(box_ok, "%s: a photon lies outside its bucket's bounding box", what);
     CHECK_MSG(order_ok, "%s: the input order is not kept within a bucket", what);
     CHECK_MSG(perm_ok && seen, "%s: the map's photons are not a permutation of the input", what);
     free(seen);
