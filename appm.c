@@ -5680,6 +5680,24 @@ static float appm__select(float *a, size_t n, size_t k)
     return a[k];
 }
 
+/* Two arrays of n1 items of s1 bytes and n2 of s2 into *a and *b, and the old
+ * ones (old_a, old_b) freed: both or neither (0: out of memory, the old ones
+ * kept). */
+static int appm__pmap_grow(appm__mem *mem, void *old_a, void *old_b, size_t n1, size_t s1, size_t n2, size_t s2,
+                           void **a, void **b)
+{
+    void *x = appm__alloc(mem, n1, s1), *y = x ? appm__alloc(mem, n2, s2) : NULL;
+    if (!y) {
+        appm__free(mem, x);
+        return 0;
+    }
+    appm__free(mem, old_a);
+    appm__free(mem, old_b);
+    *a = x;
+    *b = y;
+    return 1;
+}
+
 /* Builds map `m` over photons ph[0..n) with cubic cells of size `cell_size` > 0,
  * reordering ph in place.  `dest` is scratch for n entries.  `runs` (NULL: the
  * whole array, in order) lists the stretches of ph in the order the photons
@@ -5695,30 +5713,22 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
     while (bits < 30 && ((size_t)1 << bits) < n) bits++;
     nb = 1u << bits;
     if ((size_t)nb + 1 > m->cell_cap) { /* the table only grows: memory stays flat */
-        uint32_t *cell = (uint32_t *)appm__alloc(mem, (size_t)nb + 1, sizeof *cell);
-        float *bbox = cell ? (float *)appm__alloc(mem, (size_t)nb * 6, sizeof *bbox) : NULL;
-        if (!bbox) {
-            appm__free(mem, cell);
+        void *cell, *bbox;
+        if (!appm__pmap_grow(mem, m->cell, m->bbox, (size_t)nb + 1, sizeof *m->cell, (size_t)nb * 6, sizeof *m->bbox,
+                             &cell, &bbox))
             return APPM_ERR_NOMEM;
-        }
-        appm__free(mem, m->cell);
-        appm__free(mem, m->bbox);
-        m->cell = cell;
-        m->bbox = bbox;
+        m->cell = (uint32_t *)cell;
+        m->bbox = (float *)bbox;
         m->cell_cap = (size_t)nb + 1;
     }
     if (n > m->hot_cap || !m->hot) { /* so do hot[] and side[] */
-        float *hot = (float *)appm__alloc(mem, 3 * (n ? n : 1), sizeof *hot);
-        float *side = hot ? (float *)appm__alloc(mem, 4 * (n ? n : 1), sizeof *side) : NULL;
-        if (!side) {
-            appm__free(mem, hot);
+        void *hot, *side;
+        size_t cap = n ? n : 1;
+        if (!appm__pmap_grow(mem, m->hot, m->side, 3 * cap, sizeof *m->hot, 4 * cap, sizeof *m->side, &hot, &side))
             return APPM_ERR_NOMEM;
-        }
-        appm__free(mem, m->hot);
-        appm__free(mem, m->side);
-        m->hot = hot;
-        m->side = side;
-        m->hot_cap = n ? n : 1;
+        m->hot = (float *)hot;
+        m->side = (float *)side;
+        m->hot_cap = cap;
     }
     m->bits = bits;
     m->ph = ph;
