@@ -5721,9 +5721,11 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
         m->bbox = (float *)bbox;
         m->cell_cap = (size_t)nb + 1;
     }
-    if (n > m->hot_cap || !m->hot) { /* so do hot[] and side[] */
+    /* so do hot[] and side[], sized with the table (2^bits >= n, bar the cap of
+     * 2^30): a pass with a few more photons than the last needs no new ones */
+    if (n > m->hot_cap || !m->hot) {
         void *hot, *side;
-        size_t cap = n ? n : 1;
+        size_t cap = n > nb ? n : nb;
         if (!appm__pmap_grow(mem, m->hot, m->side, 3 * cap, sizeof *m->hot, 4 * cap, sizeof *m->side, &hot, &side))
             return APPM_ERR_NOMEM;
         m->hot = (float *)hot;
