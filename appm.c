@@ -3273,7 +3273,7 @@ static int appm__tri_hit(const appm__ray *r, const appm__tri *tr, appm__hit *h)
  * Every vertex lies in the root box, so 64 epsilon times the farthest finite
  * distance to a root-box plane bounds that error for the whole traversal.  A
  * false hit costs a node visit; a false miss would be a hole. */
-static float appm__box_slack(const appm__ray *r, const appm__node *root)
+static inline float appm__box_slack(const appm__ray *r, const appm__node *root)
 {
     float v[6], m = 0.0f;
     int k;
@@ -3283,9 +3283,10 @@ static float appm__box_slack(const appm__ray *r, const appm__node *root)
     v[3] = (root->bmax[1] - r->o.y) * r->inv.y;
     v[4] = (root->bmin[2] - r->o.z) * r->inv.z;
     v[5] = (root->bmax[2] - r->o.z) * r->inv.z;
-    for (k = 0; k < 6; ++k) {
+    for (k = 0; k < 6; ++k) { /* branch-free: which plane is farthest is unpredictable */
         float a = fabsf(v[k]);
-        if (a > m && a <= FLT_MAX) m = a;
+        a = a <= FLT_MAX ? a : 0.0f; /* inf and NaN (0 * inf) do not count */
+        m = a > m ? a : m;
     }
     return 64.0f * FLT_EPSILON * m;
 }
@@ -3449,7 +3450,7 @@ typedef struct appm__bray { /* a ray prepared for the wide box test */
 #endif
 } appm__bray;
 
-static void appm__bray_init(appm__bray *b, const appm__ray *r, float slack)
+static inline void appm__bray_init(appm__bray *b, const appm__ray *r, float slack)
 {
     int k;
     for (k = 0; k < 3; ++k) {
@@ -3598,9 +3599,10 @@ static int appm__ctz(unsigned m)
 #define APPM__CTZ(m) appm__ctz(m)
 #endif
 
-/* The children of n in mask m, nearest first (ties by slot, as insertion sort
- * is stable: deterministic); returns how many. */
-static int appm__order_children(const appm__wnode *n, unsigned m, const float *tnear, appm__wentry *out)
+/* Pushes the children of n in mask m onto st (st[0] the bottom), farthest
+ * deepest, so that they pop nearest first, ties by slot (as a stable sort of
+ * the entry distances would order them: deterministic); returns how many. */
+static int appm__push_children(const appm__wnode *n, unsigned m, const float *tnear, appm__wentry *st)
 {
     int c = 0, i;
     while (m) {
@@ -3610,8 +3612,8 @@ static int appm__order_children(const appm__wnode *n, unsigned m, const float *t
         e.first = n->first[j];
         e.count = n->count[j];
         e.tnear = tnear[j];
-        for (i = c; i > 0 && out[i - 1].tnear > e.tnear; --i) out[i] = out[i - 1];
-        out[i] = e;
+        for (i = c; i > 0 && st[i - 1].tnear <= e.tnear; --i) st[i] = st[i - 1];
+        st[i] = e;
         c++;
     }
     return c;
@@ -3725,9 +3727,9 @@ static unsigned appm__neon_mask(uint32x4_t m)
 #endif
 
 #if defined(APPM__PACKS)
-/* The lanes of pk hit by r in (tmin, tmax), with their t, b1, b2. */
+/* The lanes of pk hit by r in (tmin, tmax), with their t and V, W, det (vw[0..11]). */
 static inline unsigned appm__pack_hit(const appm__ray *r, const appm__tpack *pk, float tmax, float *tt,
-                                      float *b1, float *b2)
+                                      float *vw)
 {
     const APPM__V4 z = APPM__SET(0.0f), sx = APPM__SET(r->sx), sy = APPM__SET(r->sy), sz = APPM__SET(r->sz);
     const APPM__V4 ox = APPM__SET(r->ok[0]), oy = APPM__SET(r->ok[1]), oz = APPM__SET(r->ok[2]);
@@ -3754,6 +3756,7 @@ static inline unsigned appm__pack_hit(const appm__ray *r, const appm__tpack *pk,
     }
     ok = APPM__AND(APPM__OR(APPM__OR(APPM__LT(U, z), APPM__LT(V, z)), APPM__LT(W, z)),
                    APPM__OR(APPM__OR(APPM__GT(U, z), APPM__GT(V, z)), APPM__GT(W, z))); /* mixed signs */
+    if (APPM__MASK(ok) == 15u) return 0; /* most tests end here: the ray passes beside all four */
     det = APPM__ADD(APPM__ADD(U, V), W);
     t = APPM__DIV(APPM__ADD(APPM__ADD(APPM__MUL(U, APPM__MUL(sz, Az)), APPM__MUL(V, APPM__MUL(sz, Bz))),
                             APPM__MUL(W, APPM__MUL(sz, Cz))),
@@ -3779,8 +3782,9 @@ static inline unsigned appm__pack_hit(const appm__ray *r, const appm__tpack *pk,
                    APPM__ABS(det));
     ok = APPM__AND(ok, APPM__GT(t, dt));
     APPM__ST(tt, t);
-    APPM__ST(b1, APPM__DIV(V, det));
-    APPM__ST(b2, APPM__DIV(W, det));
+    APPM__ST(vw, V); /* b1 = V / det, b2 = W / det: divided only for the lane kept */
+    APPM__ST(vw + 4, W);
+    APPM__ST(vw + 8, det);
     return APPM__MASK(ok);
 }
 #endif
@@ -3796,16 +3800,16 @@ static int appm__leaf_hit(const appm_scene *s, appm__ray *q, uint32_t first, uin
     const appm__tpack *pk = &s->pack[first], *end = pk + (count + 3) / 4;
     if (!scalar) {
         for (; pk < end; ++pk) {
-            float t[4], b1[4], b2[4];
-            unsigned m = appm__pack_hit(q, pk, *tmax, t, b1, b2);
+            float t[4], vw[12];
+            unsigned m = appm__pack_hit(q, pk, *tmax, t, vw);
             while (m) { /* lanes in triangle order: the first nearest one is kept */
                 int j = APPM__CTZ(m);
                 uint32_t i = pk->tri[j];
                 m &= m - 1;
                 if (i == APPM__NO_TRI || i == skip || !(t[j] < *tmax)) continue;
                 *tmax = h->t = t[j];
-                h->b1 = b1[j];
-                h->b2 = b2[j];
+                h->b1 = vw[j] / vw[8 + j]; /* the lane's V / det, as appm__tri_hit divides */
+                h->b2 = vw[4 + j] / vw[8 + j];
                 h->tri = i;
                 found = 1;
             }
@@ -3840,8 +3844,8 @@ static int appm__leaf_any(const appm_scene *s, const appm__ray *r, uint32_t firs
     const appm__tpack *pk = &s->pack[first], *end = pk + (count + 3) / 4;
     if (!scalar) {
         for (; pk < end; ++pk) {
-            float t[4], b1[4], b2[4];
-            unsigned m = appm__pack_hit(r, pk, r->tmax, t, b1, b2);
+            float t[4], vw[12];
+            unsigned m = appm__pack_hit(r, pk, r->tmax, t, vw);
             while (m) {
                 i = pk->tri[APPM__CTZ(m)];
                 m &= m - 1;
@@ -3863,7 +3867,7 @@ static int appm__leaf_any(const appm_scene *s, const appm__ray *r, uint32_t firs
  * as in a plain loop, so the answer is the loop's up to the order of exact ties. */
 static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_t skip, appm__hit *h, int scalar)
 {
-    appm__wentry stack[APPM__WSTACK], kid[APPM__BVH_W], cur;
+    appm__wentry stack[APPM__WSTACK], cur;
     appm__bray b;
     float tn[APPM__BVH_W], tmax = r->tmax;
     appm__ray q = *r;
@@ -3873,15 +3877,19 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
     cur.count = APPM__W_INNER;
     for (;;) {
         if (cur.count == APPM__W_INNER) {
-            unsigned m = APPM__BOXES(&b, &s->wnode[cur.first], tmax, tn, scalar);
-            if (m) {
-                int c = appm__order_children(&s->wnode[cur.first], m, tn, kid);
-                while (c > 1) { /* farthest deepest; fetched while the nearest is searched */
-                    stack[sp] = kid[--c];
-                    APPM__PREFETCH_ENTRY(s, &stack[sp]);
-                    sp++;
-                }
-                cur = kid[0];
+            const appm__wnode *n = &s->wnode[cur.first];
+            unsigned m = APPM__BOXES(&b, n, tmax, tn, scalar);
+            if (m & (m - 1)) { /* two or more: the far ones are fetched while the nearest is searched */
+                int c = appm__push_children(n, m, tn, stack + sp), k;
+                for (k = 0; k < c - 1; ++k) APPM__PREFETCH_ENTRY(s, &stack[sp + k]);
+                sp += c - 1;
+                cur = stack[sp];
+                continue;
+            }
+            if (m) { /* one: no stack */
+                int j = APPM__CTZ(m);
+                cur.first = n->first[j];
+                cur.count = n->count[j];
                 continue;
             }
         } else if (appm__leaf_hit(s, &q, cur.first, cur.count, skip, &tmax, h, scalar)) {
