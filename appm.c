@@ -3187,34 +3187,38 @@ typedef struct appm__hit {
     uint32_t tri;
 } appm__hit;
 
+/* Branch-free: a ray's dominant axis and the sign of its component are as
+ * good as random, so branches on them would mostly be mispredicted. */
 static void appm__ray_setup(appm__ray *r)
 {
+    static const int next[3] = {1, 2, 0};
+    static const size_t off[3] = {offsetof(appm__v3, x), offsetof(appm__v3, y), offsetof(appm__v3, z)};
     float ax = fabsf(r->d.x), ay = fabsf(r->d.y), az = fabsf(r->d.z), dz;
+    float dv[3], ov[3];
+    int xy, kx, ky, neg;
     r->valid = appm__finite3(r->o) && appm__finite3(r->d) && (ax > 0 || ay > 0 || az > 0) &&
                r->tmax == r->tmax && r->tmin == r->tmin;
     if (!r->valid) return;
-    r->kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
-    r->kx = (r->kz + 1) % 3;
-    r->ky = (r->kx + 1) % 3;
-    dz = appm__comp(r->d, r->kz);
-    if (dz < 0.0f) { /* keep the winding: swap x and y */
-        int t = r->kx;
-        r->kx = r->ky;
-        r->ky = t;
-    }
-    r->sx = appm__comp(r->d, r->kx) / dz;
-    r->sy = appm__comp(r->d, r->ky) / dz;
-    r->sz = 1.0f / dz;
+    dv[0] = r->d.x, dv[1] = r->d.y, dv[2] = r->d.z;
+    ov[0] = r->o.x, ov[1] = r->o.y, ov[2] = r->o.z;
+    xy = ax > ay; /* kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2) */
+    r->kz = 2 - (xy & (ax > az)) * 2 - (!xy & (ay > az));
+    kx = next[r->kz];
+    ky = next[kx];
+    dz = dv[r->kz];
+    neg = dz < 0.0f; /* keep the winding: swap x and y */
+    r->kx = neg ? ky : kx;
+    r->ky = neg ? kx : ky;
+    r->sx = dv[r->kx] / dz;
+    r->sy = dv[r->ky] / dz;
     r->inv = appm__v(1.0f / r->d.x, 1.0f / r->d.y, 1.0f / r->d.z); /* +-inf for 0 and -0 */
-    {
-        static const size_t off[3] = {offsetof(appm__v3, x), offsetof(appm__v3, y), offsetof(appm__v3, z)};
-        r->off[0] = off[r->kx];
-        r->off[1] = off[r->ky];
-        r->off[2] = off[r->kz];
-        r->ok[0] = appm__comp(r->o, r->kx);
-        r->ok[1] = appm__comp(r->o, r->ky);
-        r->ok[2] = appm__comp(r->o, r->kz);
-    }
+    r->sz = 1.0f / dz;
+    r->off[0] = off[r->kx];
+    r->off[1] = off[r->ky];
+    r->off[2] = off[r->kz];
+    r->ok[0] = ov[r->kx];
+    r->ok[1] = ov[r->ky];
+    r->ok[2] = ov[r->kz];
 }
 
 /* Component kx, ky or kz of a vertex, read through the ray's offsets: no
@@ -3496,18 +3500,31 @@ static inline void appm__bray_init(appm__bray *b, const appm__ray *r, float slac
  * all slots of a vector, give the same mask. */
 static unsigned appm__boxes_scalar(const appm__bray *b, const appm__wnode *n, float tmax, float *tnear)
 {
+    /* the planes and the ray in locals, the axes unrolled: compilers that do
+     * not unroll or keep values in registers (tcc) get a short loop too */
+    const float *nx = APPM__PLANE(n, b->near_off[0]), *fx = APPM__PLANE(n, b->far_off[0]);
+    const float *ny = APPM__PLANE(n, b->near_off[1]), *fy = APPM__PLANE(n, b->far_off[1]);
+    const float *nz = APPM__PLANE(n, b->near_off[2]), *fz = APPM__PLANE(n, b->far_off[2]);
+    const float ox = b->o[0], oy = b->o[1], oz = b->o[2], ix = b->inv[0], iy = b->inv[1], iz = b->inv[2];
+    const float tmin = b->tmin, slack = b->slack;
     unsigned m = 0;
-    int j, k;
+    int j;
     for (j = 0; j < APPM__BVH_W && n->count[j]; ++j) { /* used slots come first */
-        float t0 = b->tmin, t1 = tmax;
-        for (k = 0; k < 3; ++k) {
-            float tn = (APPM__PLANE(n, b->near_off[k])[j] - b->o[k]) * b->inv[k];
-            float tf = (APPM__PLANE(n, b->far_off[k])[j] - b->o[k]) * b->inv[k];
-            t0 = tn > t0 ? tn : t0;
-            t1 = tf < t1 ? tf : t1;
-        }
+        float t0 = tmin, t1 = tmax, tn, tf;
+        tn = (nx[j] - ox) * ix;
+        tf = (fx[j] - ox) * ix;
+        t0 = tn > t0 ? tn : t0;
+        t1 = tf < t1 ? tf : t1;
+        tn = (ny[j] - oy) * iy;
+        tf = (fy[j] - oy) * iy;
+        t0 = tn > t0 ? tn : t0;
+        t1 = tf < t1 ? tf : t1;
+        tn = (nz[j] - oz) * iz;
+        tf = (fz[j] - oz) * iz;
+        t0 = tn > t0 ? tn : t0;
+        t1 = tf < t1 ? tf : t1;
         tnear[j] = t0;
-        if (t0 <= t1 + b->slack) m |= 1u << j;
+        if (t0 <= t1 + slack) m |= 1u << j;
     }
     return m;
 }
@@ -3590,11 +3607,11 @@ typedef struct appm__wentry { /* a traversal stack entry */
 #if (defined(__GNUC__) || defined(__clang__)) && !defined(__TINYC__)
 #define APPM__CTZ(m) __builtin_ctz(m)
 #else
-static int appm__ctz(unsigned m)
+static int appm__ctz(unsigned m) /* de Bruijn: the lowest bit times B has a unique top 5 bits */
 {
-    int j = 0;
-    while (!(m >> j & 1u)) j++;
-    return j;
+    static const unsigned char pos[32] = {0,  1,  28, 2,  29, 14, 24, 3, 30, 22, 20, 15, 25, 17, 4,  8,
+                                          31, 27, 13, 23, 21, 19, 16, 7, 26, 12, 18, 6,  11, 5,  10, 9};
+    return pos[((m & (0u - m)) * 0x077CB531u & 0xffffffffu) >> 27];
 }
 #define APPM__CTZ(m) appm__ctz(m)
 #endif
