@@ -3498,6 +3498,15 @@ static inline void appm__bray_init(appm__bray *b, const appm__ray *r, float slac
  * node's children in its first slots, so the loop stops at the first empty
  * one; an empty slot's box is missed anyway, so the SIMD tests, which take
  * all slots of a vector, give the same mask. */
+/* t0 only grows and t1 only shrinks from axis to axis (neither is ever NaN),
+ * so a box missed after one or two axes stays missed: where every operation
+ * goes through memory (tcc) stopping there pays; elsewhere the branch costs
+ * more than the arithmetic it saves. */
+#if defined(__TINYC__)
+#define APPM__EARLY_MISS(t0, t1, slack) (!((t0) <= (t1) + (slack)))
+#else
+#define APPM__EARLY_MISS(t0, t1, slack) 0
+#endif
 static unsigned appm__boxes_scalar(const appm__bray *b, const appm__wnode *n, float tmax, float *tnear)
 {
     /* the planes and the ray in locals, the axes unrolled: compilers that do
@@ -3515,10 +3524,12 @@ static unsigned appm__boxes_scalar(const appm__bray *b, const appm__wnode *n, fl
         tf = (fx[j] - ox) * ix;
         t0 = tn > t0 ? tn : t0;
         t1 = tf < t1 ? tf : t1;
+        if (APPM__EARLY_MISS(t0, t1, slack)) continue;
         tn = (ny[j] - oy) * iy;
         tf = (fy[j] - oy) * iy;
         t0 = tn > t0 ? tn : t0;
         t1 = tf < t1 ? tf : t1;
+        if (APPM__EARLY_MISS(t0, t1, slack)) continue;
         tn = (nz[j] - oz) * iz;
         tf = (fz[j] - oz) * iz;
         t0 = tn > t0 ? tn : t0;
@@ -3935,14 +3946,23 @@ static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t
         if (cur.count == APPM__W_INNER) {
             const appm__wnode *n = &s->wnode[cur.first];
             unsigned m = APPM__BOXES(&b, n, r->tmax, tn, scalar);
-            while (m) { /* slot order: any hit ends the search, so no sort */
+            unsigned leaves = 0, k;
+            while (m) { /* interior children pushed, slot order: any hit ends the search, so no sort */
                 int j = APPM__CTZ(m);
                 m &= m - 1;
+                if (n->count[j] != APPM__W_INNER) {
+                    leaves |= 1u << j;
+                    continue;
+                }
                 stack[sp].first = n->first[j];
                 stack[sp].count = n->count[j];
                 stack[sp].tnear = tn[j];
                 APPM__PREFETCH_ENTRY(s, &stack[sp]);
                 sp++;
+            }
+            for (k = leaves; k; k &= k - 1) { /* leaves first: a hit there ends it all */
+                int j = APPM__CTZ(k);
+                if (appm__leaf_any(s, r, n->first[j], n->count[j], skip0, skip1, scalar)) return 1;
             }
         } else if (appm__leaf_any(s, r, cur.first, cur.count, skip0, skip1, scalar)) {
             return 1;
