@@ -125,8 +125,9 @@ typedef int appm__mutex;
 
 #define APPM__MAX_THREADS 256
 
-/* SIMD.  Only the BVH's child-box test (section 5) uses vector instructions,
- * and only those the compiler says the target has: SSE2 on x86-64 (part of the
+/* SIMD.  Only the BVH (section 5) uses vector instructions, in its child-box
+ * test and its leaves' four-triangle test, and only those the compiler says
+ * the target has: SSE2 on x86-64 (part of the
  * architecture, so every x86-64 build gets it: two 4-wide halves of a node;
  * with -mavx2 or -march=native all 8 children in one AVX2 vector; SSE4.1 adds
  * nothing the test needs), NEON on aarch64 (two halves).  There is no run-time
