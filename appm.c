@@ -3908,11 +3908,23 @@ static int appm__intersect_wide(const appm_scene *s, const appm__ray *r, uint32_
         if (cur.count == APPM__W_INNER) {
             const appm__wnode *n = &s->wnode[cur.first];
             unsigned m = APPM__BOXES(&b, n, tmax, tn, scalar);
-            if (m & (m - 1)) { /* two or more: the far ones are fetched while the nearest is searched */
+            unsigned m2 = m & (m - 1); /* m without its lowest child */
+            if (m2 & (m2 - 1)) { /* three or more: the far ones are fetched while the nearest is searched */
                 int c = appm__push_children(n, m, tn, stack + sp), k;
                 for (k = 0; k < c - 1; ++k) APPM__PREFETCH_ENTRY(s, &stack[sp + k]);
                 sp += c - 1;
                 cur = stack[sp];
+                continue;
+            }
+            if (m2) { /* two: one comparison (a tie goes to the lower slot, as in the sort) */
+                int j0 = APPM__CTZ(m), j1 = APPM__CTZ(m2), nj = tn[j1] < tn[j0] ? j1 : j0, fj = j0 + j1 - nj;
+                stack[sp].first = n->first[fj];
+                stack[sp].count = n->count[fj];
+                stack[sp].tnear = tn[fj];
+                APPM__PREFETCH_ENTRY(s, &stack[sp]);
+                sp++;
+                cur.first = n->first[nj];
+                cur.count = n->count[nj];
                 continue;
             }
             if (m) { /* one: no stack */
