@@ -11,8 +11,7 @@
  * Every figure is the median of 3 rounds; within a round the three traversals
  * take turns every 10000 rays (photon passes: pass by pass), so a change in
  * the machine's load hits all of them alike, each on rays no other one has
- * just traced and after an untimed warm-up of its own (see trace()).  Ray
- * rates are per processor second (clock()), photon rates per wall second.
+ * just traced and after an untimed warm-up of its own (see trace()).
  * One line per traversal (path=binary|scalar|simd):
  *   closest_per_s   closest hits (appm__ray_init + appm__intersect) per second
  *                   for RAYS rays, origins uniform in the mesh's bounding box,
@@ -30,7 +29,9 @@
  *   ratios new/old of each figure, triangles, node counts, depth, hit_fraction,
  *   sah_cost (of the binary tree: node visits plus triangle tests expected for a
  *   random line through the root box, a machine-independent quality figure).
- * Timing is wall-clock (CLOCK_MONOTONIC); run on an idle machine.
+ * Rays and builds are timed in processor time (clock(); one thread, so the
+ * time other jobs take from it does not count), photon passes in wall-clock
+ * time (the renderer's, with up to two threads); run on an idle machine.
  */
 #define APPM_BVH_BINARY 1 /* keep the binary tree and its traversal for the comparison */
 #include "../appm.c"
@@ -117,17 +118,17 @@ static int time_builds(appm_scene *s, double *full_ms, double *binary_ms)
     for (b = 0; b < 2 * BUILDS; ++b) {
         appm__tri *tc = (appm__tri *)appm__alloc(&s->mem, n, sizeof *tc);
         appm__tri_info *ic = (appm__tri_info *)appm__alloc(&s->mem, n, sizeof *ic);
-        double t0, t1;
+        clock_t t0, t1;
         if (!tc || !ic) return 0;
         memcpy(tc, tri0, n * sizeof *tc);
         memcpy(ic, info0, n * sizeof *ic);
         s->tri = tc;
         s->info = ic;
         k = b / 2;
-        t0 = appm__seconds();
+        t0 = clock();
         if ((b % 2 ? appm__bvh_build(s, NULL) : appm__bvh_build_binary(s, NULL)) != APPM_OK) return 0;
-        t1 = appm__seconds();
-        (b % 2 ? full : bin)[k] = 1e3 * (t1 - t0);
+        t1 = clock();
+        (b % 2 ? full : bin)[k] = 1e3 * (double)(t1 - t0) / CLOCKS_PER_SEC;
         if (b + 1 < 2 * BUILDS) {
             appm__free(&s->mem, s->tri);
             appm__free(&s->mem, s->info);
