@@ -98,6 +98,7 @@ fuzz:
 WASMCC      ?= clang
 WASI_SYSROOT ?= /usr
 WEBSCENES    = $(patsubst scenes/%,web/scenes/%,$(wildcard scenes/CornellBox-*.obj scenes/CornellBox-*.mtl)) \
+               $(patsubst %,web/scenes/cornell-%.scene,sphere original mirror glossy empty-rg empty-white) \
                web/scenes/CREDITS-cornell.txt
 
 web: web/appm.wasm $(WEBSCENES)

@@ -2167,7 +2167,7 @@ typedef struct appm__tri_info { /* 32 bytes: what shading reads after a hit */
     uint32_t mat;
     int32_t light;   /* index of its area light, or -1 */
     int32_t n0;      /* first of three shading normals in scene->normals, or -1 */
-    uint32_t pad;
+    uint32_t nhash;  /* its corners' vn as written, hashed (for checkpoints, 12.2); 0 if flat */
 } appm__tri_info;
 
 enum { APPM__LIGHT_AREA = 0, APPM__LIGHT_POINT, APPM__LIGHT_SPOT, APPM__LIGHT_ENV };
@@ -2179,6 +2179,8 @@ typedef struct appm__light {
     appm__v3 axis;   /* spot: unit axis */
     appm__v3 value;  /* area, environment: radiance; point, spot: intensity (W/sr) */
     float cos_cone, cos_inner; /* spot: cos(cone), cos(cone - falloff) */
+    appm__v3 target;           /* spot: as written (axis is derived from it) */
+    double cone, falloff;      /* spot: degrees, as written */
     double power[3]; /* emitted power (W), RGB */
     double pick;     /* probability of choosing this light for a photon or a shadow ray */
     unsigned line;   /* line of the `.scene` statement (0 for area lights) */
@@ -2188,6 +2190,11 @@ typedef struct appm__camera {
     appm__v3 eye, forward, right, up;
     float fov, tan_half; /* full vertical field of view, degrees; tan(fov/2) */
     float aperture, focus;
+    /* The camera statement as written, which the basis and tan_half derive from
+     * (for checkpoints, 12.2); framed: no statement, the loader framed the scene. */
+    appm__v3 target, sky;
+    double fov_deg;
+    int framed;
 } appm__camera;
 
 typedef struct appm__loader {
@@ -2198,7 +2205,7 @@ typedef struct appm__loader {
     const char *file;       /* file being read, for messages */
     uint64_t warned;        /* warning kinds already sent for `file` (one bit each) */
     appm__array pos;        /* appm__v3: the current OBJ's `v` */
-    appm__array vn;         /* appm__v3: the current OBJ's `vn` */
+    appm__array vn;         /* appm__v3: the current OBJ's `vn`, as written (not normalised) */
     appm__array nrm;        /* appm__v3: shading normals, three per smooth triangle */
     size_t nvt;             /* `vt` count of the current OBJ (read, unused) */
     appm__array tri;        /* appm__tri */
@@ -2215,6 +2222,8 @@ typedef struct appm__loader {
     int bare_obj;           /* an OBJ read as a whole scene: no light gets a white environment */
     const char *mem_mtl;    /* in-memory MTL text (appm_scene_load_obj_memory) */
     size_t mem_mtl_len;
+    const appm_memory_file *files; /* appm_scene_load_memory: the texts meshes and mtllibs name */
+    size_t nfiles;
 } appm__loader;
 
 enum {
@@ -2426,6 +2435,33 @@ static int appm__join_path(char *out, size_t cap, const char *path, const char *
     return 1;
 }
 
+/* The text at `path` (as joined by appm__join_path): one of the loader's
+ * in-memory files if it has them (*owned NULL, a name none matches is a
+ * missing file), else the file read into *owned, which the caller frees. */
+static appm_status appm__loader_read(appm__loader *L, const char *path, const char **text, size_t *len,
+                                     char **owned, appm_diag *diag)
+{
+    size_t i;
+    *owned = NULL;
+    *text = NULL;
+    *len = 0;
+    if (!L->files) {
+        appm_status st = appm__read_file(L->mem, path, owned, len, diag);
+        *text = *owned;
+        return st;
+    }
+    for (i = 0; i < L->nfiles; ++i)
+        if (L->files[i].name && strcmp(L->files[i].name, path) == 0) {
+            if (!L->files[i].text && L->files[i].len)
+                return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no text for %.0f bytes",
+                                  (double)L->files[i].len);
+            *text = L->files[i].text;
+            *len = L->files[i].len;
+            return APPM_OK;
+        }
+    return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot open file (none of the files given has this name)");
+}
+
 /* ---- 4.2 MTL --------------------------------------------------------------- */
 
 static const char *appm__mat_name(const appm__loader *L, const appm__material *m)
@@ -2613,7 +2649,8 @@ static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const c
                                   size_t rel_len, unsigned line)
 {
     char path[4096];
-    char *buf;
+    char *owned;
+    const char *buf;
     size_t len;
     appm_status st;
     const char *saved_file = L->file;
@@ -2631,7 +2668,7 @@ static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const c
         return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "mtllib path too long");
     appm__diag_clear(&quiet);
     L->mem->diag = &quiet;
-    st = appm__read_file(L->mem, path, &buf, &len, &quiet);
+    st = appm__loader_read(L, path, &buf, &len, &owned, &quiet);
     L->mem->diag = L->diag;
     if (st == APPM_ERR_IO) {
         appm__warn(L, APPM__W_NO_MTL, line, "cannot open material library '%s': default material used",
@@ -2644,7 +2681,7 @@ static appm_status appm__mtl_load(appm__loader *L, const char *obj_path, const c
     st = appm__mtl_parse(L, buf, len);
     L->file = saved_file;
     L->warned = saved_warned;
-    appm__free(L->mem, buf);
+    appm__free(L->mem, owned);
     return st;
 }
 
@@ -2670,6 +2707,22 @@ static int64_t appm__obj_index(const char *s, const char *e, size_t count, int *
     else v = v - 1;
     if (v < 0 || (uint64_t)v >= (uint64_t)count) return -1;
     return v;
+}
+
+/* A step of the hash of a triangle's corner normals as written (tri_info.nhash).
+ * The normalised ones are not hashed: where float expressions are evaluated in
+ * double (s390x), the length's dot product rounds otherwise than on x86-64,
+ * and a checkpoint must recognise the same file on both. */
+static uint64_t appm__vn_hash(uint64_t h, appm__v3 n)
+{
+    const float c[3] = {n.x, n.y, n.z};
+    int k;
+    for (k = 0; k < 3; ++k) {
+        uint32_t u;
+        memcpy(&u, &c[k], sizeof u);
+        h = appm__mix64(h ^ u) + 0x9E3779B97F4A7C15ull;
+    }
+    return h;
 }
 
 static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e, unsigned line,
@@ -2759,11 +2812,16 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
             /* shading normals are stored per triangle corner, three in a row */
             size_t base = L->nrm.count, j;
             const int64_t idx[3] = {f[1], f[2 * k + 1], f[2 * k + 3]};
+            uint64_t h = 0;
             if (!appm__array_reserve(L->mem, &L->nrm, base + 3)) return APPM_ERR_NOMEM;
-            for (j = 0; j < 3; ++j)
-                ((appm__v3 *)L->nrm.data)[base + j] = ((appm__v3 *)L->vn.data)[idx[j]];
+            for (j = 0; j < 3; ++j) {
+                appm__v3 vn = ((appm__v3 *)L->vn.data)[idx[j]];
+                ((appm__v3 *)L->nrm.data)[base + j] = appm__normalize(vn);
+                h = appm__vn_hash(h, vn);
+            }
             L->nrm.count += 3;
             in->n0 = (int32_t)base;
+            in->nhash = (uint32_t)(h >> 32) | 1u;
         }
     }
     return APPM_OK;
@@ -2805,12 +2863,13 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
             if (!p) return APPM_ERR_NOMEM;
             *p = appm__v((float)v[0], (float)v[1], (float)v[2]);
         } else if (appm__token_is(ts, te, "vn")) {
-            appm__v3 *p;
+            appm__v3 *p, n;
             if ((st = appm__numbers(L, &s, e, it.line, "vn", v, 3)) != APPM_OK) return st;
             p = (appm__v3 *)appm__array_push(L->mem, &L->vn);
             if (!p) return APPM_ERR_NOMEM;
-            *p = appm__normalize(appm__v((float)v[0], (float)v[1], (float)v[2]));
-            if (!(appm__dot(*p, *p) > 0.5f))
+            *p = appm__v((float)v[0], (float)v[1], (float)v[2]);
+            n = appm__normalize(*p);
+            if (!(appm__dot(n, n) > 0.5f))
                 return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "zero-length normal");
         } else if (appm__token_is(ts, te, "vt")) {
             L->nvt++;
@@ -2864,7 +2923,8 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
 
 static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned line)
 {
-    char *buf;
+    char *owned;
+    const char *buf;
     size_t len;
     appm_status st;
     const char *saved_file = L->file;
@@ -2872,7 +2932,7 @@ static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned li
     appm_diag quiet;
     appm__diag_clear(&quiet);
     L->mem->diag = &quiet;
-    st = appm__read_file(L->mem, path, &buf, &len, &quiet);
+    st = appm__loader_read(L, path, &buf, &len, &owned, &quiet);
     L->mem->diag = L->diag;
     if (st == APPM_ERR_IO)
         return appm__fail(L->diag, APPM_ERR_IO, saved_file ? saved_file : path, saved_file ? line : 0,
@@ -2883,7 +2943,7 @@ static appm_status appm__obj_load(appm__loader *L, const char *path, unsigned li
     st = appm__obj_parse(L, buf, len, path);
     L->file = saved_file;
     L->warned = saved_warned;
-    appm__free(L->mem, buf);
+    appm__free(L->mem, owned);
     return st;
 }
 
@@ -2951,6 +3011,10 @@ static appm_status appm__camera_set(appm__loader *L, unsigned line, appm__v3 eye
     c->up = appm__cross(c->right, f);
     c->fov = (float)fov;
     c->tan_half = (float)tan(0.5 * fov * APPM__PI / 180.0);
+    c->target = target;
+    c->sky = up;
+    c->fov_deg = fov;
+    c->framed = 0;
     L->have_camera = 1;
     return APPM_OK;
 }
@@ -3055,6 +3119,9 @@ static appm_status appm__scene_parse(appm__loader *L, const char *buf, size_t le
                 l->value = appm__kv3(&kv[2]);
                 l->cos_cone = (float)cos(cone * APPM__PI / 180.0);
                 l->cos_inner = (float)cos((cone - fall) * APPM__PI / 180.0);
+                l->target = appm__kv3(&kv[1]);
+                l->cone = cone;
+                l->falloff = fall;
             } else {
                 return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
                                   "light: unknown kind '%.*s' (point or spot)", (int)(ke - ks > 30 ? 30 : ke - ks), ks);
@@ -6950,6 +7017,7 @@ static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char
         appm__v3 eye = appm__add(s->center, appm__v(0, 0, dist));
         L->file = name;
         if ((st = appm__camera_set(L, 0, eye, s->center, appm__v(0, 1, 0), 40.0)) != APPM_OK) return st;
+        L->cam.framed = 1;
     }
     s->cam = L->cam;
     s->width = L->width ? L->width : 512;
@@ -6995,10 +7063,12 @@ static appm_status appm__loader_begin(appm__loader *L, appm__mem *m, const appm_
 enum { APPM__TEXT_NONE = 0, APPM__TEXT_OBJ, APPM__TEXT_SCENE };
 
 /* Common path of the public loaders.  text_kind NONE: read `path` (a .scene or
- * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead. */
+ * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead.
+ * files (SCENE only): the texts its meshes and material libraries name, instead
+ * of files on disk (NULL: read from disk). */
 static appm_status appm__scene_load(const char *path, int text_kind, const char *text, size_t text_len,
-                                    const char *mtl, size_t mtl_len, const appm_config *cfg,
-                                    appm_scene **out, appm_diag *diag)
+                                    const char *mtl, size_t mtl_len, const appm_memory_file *files,
+                                    size_t nfiles, const appm_config *cfg, appm_scene **out, appm_diag *diag)
 {
     appm__mem m;
     appm__loader L;
@@ -7017,6 +7087,8 @@ static appm_status appm__scene_load(const char *path, int text_kind, const char 
     st = appm__loader_begin(&L, &m, cfg, diag, path);
     L.mem_mtl = mtl;
     L.mem_mtl_len = mtl ? mtl_len : 0;
+    L.files = files;
+    L.nfiles = files ? nfiles : 0;
     appm__copy_str(s->name, sizeof s->name, path);
     if (st == APPM_OK) {
         if (text_kind == APPM__TEXT_OBJ) {
@@ -7059,7 +7131,7 @@ static appm_status appm__scene_load(const char *path, int text_kind, const char 
 APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
                                      appm_diag *diag)
 {
-    return appm__scene_load(path, APPM__TEXT_NONE, NULL, 0, NULL, 0, cfg, out, diag);
+    return appm__scene_load(path, APPM__TEXT_NONE, NULL, 0, NULL, 0, NULL, 0, cfg, out, diag);
 }
 
 APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len, const char *mtl,
@@ -7072,8 +7144,22 @@ APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len,
         if (out) *out = NULL;
         return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, "no OBJ text");
     }
-    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_OBJ, obj, obj_len, mtl, mtl_len, cfg, out,
-                            diag);
+    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_OBJ, obj, obj_len, mtl, mtl_len, NULL, 0, cfg,
+                            out, diag);
+}
+
+APPM_API appm_status appm_scene_load_memory(const char *scene, size_t scene_len, const char *name,
+                                            const appm_memory_file *files, size_t nfiles,
+                                            const appm_config *cfg, appm_scene **out, appm_diag *diag)
+{
+    static const appm_memory_file none = {NULL, NULL, 0};
+    if (!scene || (!files && nfiles)) {
+        appm__diag_clear(diag);
+        if (out) *out = NULL;
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, scene ? "no files" : "no scene text");
+    }
+    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_SCENE, scene, scene_len, NULL, 0,
+                            files ? files : &none, files ? nfiles : 0, cfg, out, diag);
 }
 
 APPM_API void appm_scene_destroy(appm_scene *scene)
@@ -7674,7 +7760,8 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  *   "APPMCKPT", u32 format version, u32 x 3 library version,
  *   u32 method, direct, width, height, max_depth, sampler, chains;
  *   u64 photons, seed;
- *   f64 alpha, radius option (0: automatic); u64 scene hash (below);
+ *   f64 alpha, radius option (0: automatic); u64 x 5 scene hashes (below:
+ *   geometry, materials, shading normals, lights, camera and image size);
  *   u64 pass, photons emitted, photons stored, eye paths, dropped samples;
  *   f64 r1, r_auto, ppm R^2, ppm R, seconds (total, eye, photons, grid, gather);
  *   the field lists of appm__pixel, of the method's state and of the chains'
@@ -7682,12 +7769,16 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  *   count, then per field u32 name length, name, u32 count, u32 is_u64);
  *   per pixel, in reading order, those fields' values (8 bytes each);
  *   u64 FNV-1a hash of all bytes before it.
+ * The format version changes with this layout and with what the scene hashes
+ * cover, so that a checkpoint of an older build is refused as such, never
+ * misread nor taken for one of another scene (version 2: the hashes in five
+ * parts, with the glossy lobe, the normals and the statements as written).
  * A checkpoint of another format or library version, scene, method, option set,
  * image size or field list is refused (APPM_ERR_INVALID_ARG, saying which); a
  * truncated, altered or impossible one is APPM_ERR_PARSE.  Loading reads the
  * input twice - first to check everything, then to apply it - so a refused
  * checkpoint leaves the renderer as it was. */
-#define APPM__CK_FORMAT 1u
+#define APPM__CK_FORMAT 2u
 #define APPM__CK_BLOCK 65536              /* file buffer */
 #define APPM__CK_MAXFIELDS 64
 #define APPM__FNV_BASIS 14695981039346656037ull
@@ -7733,16 +7824,32 @@ static unsigned char *appm__ck_base(const appm_renderer *r, unsigned t, size_t i
     return (unsigned char *)appm__chain_sums(r, i);
 }
 
-/* The scene as the renderer sees it - triangles, materials, lights, camera,
- * image size - hashed value by value (struct padding never enters).  The
- * triangles enter as a set (a sum of their hashes), each with its material by
- * value, and area lights through their triangles' Ke: the BVH's triangle
- * order, which a build for another machine may choose otherwise, does not
- * change the hash, so a checkpoint of the same scene file is recognised there.
- * Values derived in floating point that differed in the last bit between an
- * x86-64 and an s390x build are left out for the same reason: the shading
- * normals (only whether a triangle has them enters), the lights' powers and
- * picking probabilities (sums in BVH order). */
+/* The scene as its files describe it, in five parts, so that a refusal can say
+ * which one differs: geometry, materials, shading normals, lights, camera and
+ * image size.  Values are hashed one by one (struct padding never enters).
+ * The triangles enter each of the first three as a set (a sum of per-triangle
+ * hashes, each of them over the triangle's vertices as well, so that a part
+ * says which triangle carries what), and area lights through their triangles'
+ * Ke: the BVH's triangle order, which a build for another machine may choose
+ * otherwise, does not change a hash, so a checkpoint of the same scene file is
+ * recognised there.  For the same reason only values as read from the files
+ * enter, or results of single IEEE operations on them (the vertices, a
+ * material's Kd and Ks after clamping and energy scaling, the geometric normal
+ * and area, computed in double): where float expressions are evaluated in
+ * double (s390x), a dot product or a cross product rounds otherwise than on
+ * x86-64, and libm's cos and tan may differ by an ulp between machines.  So the
+ * corner normals enter as written (tri_info.nhash), not normalised; the camera
+ * as its statement (eye, target, up, fov) or as "framed by the loader", not as
+ * its basis and tan(fov/2); a spot light by position, target, cone and
+ * falloff, not by its axis and cosines; and the lights' powers and picking
+ * probabilities (sums in BVH order) not at all - all of these are functions of
+ * what is hashed. */
+enum { APPM__SH_GEOMETRY, APPM__SH_MATERIALS, APPM__SH_NORMALS, APPM__SH_LIGHTS, APPM__SH_CAMERA, APPM__SH_PARTS };
+
+static const char *const appm__sh_part[APPM__SH_PARTS] = {
+    "its geometry differs", "its materials differ", "its shading normals differ", "its lights differ",
+    "its camera or image size differs"};
+
 static uint64_t appm__hash_u(uint64_t h, uint64_t v) { return appm__mix64(h ^ v) + 0x9E3779B97F4A7C15ull; }
 
 static uint64_t appm__hash_f(uint64_t h, float f)
@@ -7752,38 +7859,64 @@ static uint64_t appm__hash_f(uint64_t h, float f)
     return appm__hash_u(h, u);
 }
 
+static uint64_t appm__hash_d(uint64_t h, double d)
+{
+    uint64_t u;
+    memcpy(&u, &d, sizeof u);
+    return appm__hash_u(h, u);
+}
+
 static uint64_t appm__hash_v3(uint64_t h, appm__v3 v)
 {
     return appm__hash_f(appm__hash_f(appm__hash_f(h, v.x), v.y), v.z);
 }
 
-static uint64_t appm__hash_tri(const appm_scene *s, uint32_t i)
+/* Triangle i's terms of the three per-triangle parts, added to sum[]. */
+static void appm__hash_tri(const appm_scene *s, uint32_t i, uint64_t *sum)
 {
     const appm__tri_info *t = &s->info[i];
     const appm__material *m = &s->mat[t->mat];
-    uint64_t h = appm__hash_v3(appm__hash_v3(appm__hash_v3(1, s->tri[i].p0), s->tri[i].p1), s->tri[i].p2);
-    h = appm__hash_f(appm__hash_v3(h, t->ng), t->area);
-    h = appm__hash_u(appm__hash_u(h, (uint32_t)m->kind), (uint32_t)m->emissive);
-    h = appm__hash_f(appm__hash_v3(appm__hash_v3(h, m->color), m->ke), m->ior);
-    return appm__mix64(appm__hash_u(h, t->n0 >= 0)); /* smooth or flat (see above) */
+    uint64_t v = appm__hash_v3(appm__hash_v3(appm__hash_v3(1, s->tri[i].p0), s->tri[i].p1), s->tri[i].p2), h;
+    sum[APPM__SH_GEOMETRY] += appm__mix64(appm__hash_f(appm__hash_v3(v, t->ng), t->area));
+    h = appm__hash_u(appm__hash_u(v, (uint32_t)m->kind), (uint32_t)m->emissive);
+    h = appm__hash_v3(appm__hash_v3(appm__hash_v3(h, m->color), m->ke), m->ks);
+    sum[APPM__SH_MATERIALS] += appm__mix64(appm__hash_f(appm__hash_f(h, m->ns), m->ior));
+    sum[APPM__SH_NORMALS] += appm__mix64(appm__hash_u(v, t->nhash));
 }
 
-static uint64_t appm__scene_hash(const appm_scene *s)
+static uint64_t appm__hash_lights(const appm_scene *s)
 {
-    uint64_t h = appm__hash_u(appm__hash_u(0, s->ntri), s->nlight), set = 0;
-    const appm__camera *c = &s->cam;
+    uint64_t h = appm__hash_u(0, s->nlight);
     uint32_t i;
-    for (i = 0; i < s->ntri; ++i) set += appm__hash_tri(s, i);
-    h = appm__hash_u(h, set);
     for (i = 0; i < s->nlight; ++i) {
         const appm__light *l = &s->light[i];
         if (l->kind == APPM__LIGHT_AREA) continue;
-        h = appm__hash_v3(appm__hash_v3(appm__hash_v3(appm__hash_u(h, (uint32_t)l->kind), l->pos), l->axis), l->value);
-        h = appm__hash_f(appm__hash_f(h, l->cos_cone), l->cos_inner);
+        h = appm__hash_v3(appm__hash_u(h, (uint32_t)l->kind), l->value);
+        if (l->kind == APPM__LIGHT_ENV) continue;
+        h = appm__hash_v3(h, l->pos);
+        if (l->kind == APPM__LIGHT_SPOT)
+            h = appm__hash_d(appm__hash_d(appm__hash_v3(h, l->target), l->cone), l->falloff);
     }
-    h = appm__hash_v3(appm__hash_v3(appm__hash_v3(appm__hash_v3(h, c->eye), c->forward), c->right), c->up);
-    h = appm__hash_f(appm__hash_f(appm__hash_f(appm__hash_f(h, c->fov), c->tan_half), c->aperture), c->focus);
+    return h;
+}
+
+static uint64_t appm__hash_camera(const appm_scene *s)
+{
+    const appm__camera *c = &s->cam;
+    uint64_t h = appm__hash_u(0, (uint32_t)c->framed);
+    if (!c->framed) h = appm__hash_d(appm__hash_v3(appm__hash_v3(appm__hash_v3(h, c->eye), c->target), c->sky), c->fov_deg);
+    h = appm__hash_f(appm__hash_f(h, c->aperture), c->focus);
     return appm__hash_u(appm__hash_u(h, s->width), s->height);
+}
+
+static void appm__scene_hash(const appm_scene *s, uint64_t out[APPM__SH_PARTS])
+{
+    uint32_t i, k;
+    for (k = 0; k < 3; ++k) out[k] = 0;
+    for (i = 0; i < s->ntri; ++i) appm__hash_tri(s, i, out);
+    for (k = 0; k < 3; ++k) out[k] = appm__hash_u(appm__hash_u(k, s->ntri), out[k]);
+    out[APPM__SH_LIGHTS] = appm__hash_lights(s);
+    out[APPM__SH_CAMERA] = appm__hash_camera(s);
 }
 
 /* -- Byte sinks and sources.  The writer fills the caller's buffer (counting
@@ -7888,7 +8021,7 @@ static double appm__ckr_d(appm__ckr *r)
  *    renderer-wide state (applied on load). */
 typedef struct appm__ck_head {
     uint32_t format, version[3], method, direct, w, h, max_depth, sampler, chains;
-    uint64_t M, seed, scene;
+    uint64_t M, seed, scene[APPM__SH_PARTS];
     double alpha, radius;
 } appm__ck_head;
 
@@ -7897,7 +8030,7 @@ typedef struct appm__ck_glob {
     double r1, r_auto, ppm_R2, ppm_R, sec[5];
 } appm__ck_glob;
 
-static void appm__ck_head_of(const appm_renderer *r, uint64_t scene, appm__ck_head *h)
+static void appm__ck_head_of(const appm_renderer *r, appm__ck_head *h)
 {
     h->format = APPM__CK_FORMAT;
     h->version[0] = APPM_VERSION_MAJOR;
@@ -7912,7 +8045,7 @@ static void appm__ck_head_of(const appm_renderer *r, uint64_t scene, appm__ck_he
     h->chains = r->chains;
     h->M = r->M;
     h->seed = r->seed;
-    h->scene = scene;
+    appm__scene_hash(r->scene, h->scene);
     h->alpha = r->alpha;
     h->radius = r->r1_auto ? 0.0 : r->r1;
 }
@@ -7956,7 +8089,7 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
     appm__ck_glob g;
     size_t i, npix = (size_t)r->w * r->h;
     unsigned t, k;
-    appm__ck_head_of(r, appm__scene_hash(r->scene), &h);
+    appm__ck_head_of(r, &h);
     appm__ck_glob_of(r, &g);
     appm__ckw_bytes(w, (const unsigned char *)"APPMCKPT", 8);
     appm__ckw_u(w, h.format, 4);
@@ -7972,7 +8105,7 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
     appm__ckw_u(w, h.seed, 8);
     appm__ckw_d(w, h.alpha);
     appm__ckw_d(w, h.radius);
-    appm__ckw_u(w, h.scene, 8);
+    for (k = 0; k < APPM__SH_PARTS; ++k) appm__ckw_u(w, h.scene[k], 8);
     appm__ckw_u(w, g.pass, 8);
     appm__ckw_u(w, g.emitted, 8);
     appm__ckw_u(w, g.stored, 8);
@@ -8065,7 +8198,7 @@ static void appm__ck_read_front(appm__ckr *rd, appm__ck_file *F)
     h->seed = appm__ckr_u(rd, 8);
     h->alpha = appm__ckr_d(rd);
     h->radius = appm__ckr_d(rd);
-    h->scene = appm__ckr_u(rd, 8);
+    for (k = 0; k < APPM__SH_PARTS; ++k) h->scene[k] = appm__ckr_u(rd, 8);
     g->pass = appm__ckr_u(rd, 8);
     g->emitted = appm__ckr_u(rd, 8);
     g->stored = appm__ckr_u(rd, 8);
@@ -8157,9 +8290,10 @@ static appm_status appm__ck_compare(const appm__ck_file *F, const appm__ck_head 
     if (h->w != want->w || h->h != want->h)
         return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0, "a checkpoint of a %lux%lu image; this render is %lux%lu",
                           (unsigned long)h->w, (unsigned long)h->h, (unsigned long)want->w, (unsigned long)want->h);
-    if (h->scene != want->scene)
-        return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,
-                          "a checkpoint of another scene (its geometry, materials, lights or camera differ)");
+    for (k = 0; k < APPM__SH_PARTS; ++k)
+        if (h->scene[k] != want->scene[k])
+            return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0, "a checkpoint of another scene: %s",
+                              appm__sh_part[k]);
     if (h->direct != want->direct) return appm__ck_option(d, name, "direct", h->direct, want->direct);
     if (h->M != want->M) return appm__ck_option(d, name, "photons", (double)h->M, (double)want->M);
     if (h->seed != want->seed) return appm__ck_option(d, name, "seed", (double)h->seed, (double)want->seed);
@@ -8248,7 +8382,7 @@ static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck
     appm__ck_glob g;
     appm_status st;
     int nonfinite = 0, tr;
-    appm__ck_head_of(r, appm__scene_hash(r->scene), &want);
+    appm__ck_head_of(r, &want);
     appm__ck_read_front(rd, &F);
     if (!F.magic) return appm__fail(d, APPM_ERR_PARSE, name, 0, "not an appm checkpoint");
     if (!rd->ok) return appm__fail(d, APPM_ERR_PARSE, name, 0, "truncated checkpoint");

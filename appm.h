@@ -279,6 +279,26 @@ APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len,
                                                 const appm_config *cfg, appm_scene **out,
                                                 appm_diag *diag);
 
+/* A file held in memory, for appm_scene_load_memory: `name` is the path that
+ * appm_scene_load would open for it (a `mesh` or `mtllib` name joined to the
+ * folder of the file naming it; so with a scene named "box.scene", the names
+ * as written), `text` its len bytes (no terminating NUL needed). */
+typedef struct appm_memory_file {
+    const char *name;
+    const char *text;
+    size_t len;
+} appm_memory_file;
+
+/* Loads a `.scene` text held in memory, as appm_scene_load loads the file
+ * `name` - its camera, lens, image size, lights and meshes - except that every
+ * mesh and material library it names is one of files[0 .. nfiles-1], matched
+ * by name, and nothing is read from disk: a name that none matches is a
+ * missing file (an error for a mesh, a warning and the default material for a
+ * material library).  Neither the scene text nor the files need a NUL. */
+APPM_API appm_status appm_scene_load_memory(const char *scene, size_t scene_len, const char *name,
+                                            const appm_memory_file *files, size_t nfiles,
+                                            const appm_config *cfg, appm_scene **out, appm_diag *diag);
+
 APPM_API void appm_scene_destroy(appm_scene *scene);
 
 /* Lights for any scene, added after loading (a model downloaded from the web
@@ -437,8 +457,14 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which);
  * never interrupted.  A checkpoint of another scene, method, option set, image
  * size or version is refused with APPM_ERR_INVALID_ARG and a message naming
  * the difference; a truncated or altered one gives APPM_ERR_PARSE (a checksum
- * covers every byte).  A refused load leaves the renderer as it was.  The
- * layout is described in appm.c, section 12.2.
+ * covers every byte).  A refused load leaves the renderer as it was.  "Another
+ * scene" is one whose files state other values: geometry, materials (Kd, Ks,
+ * Ns, Ke, Ni, illum), shading normals (vn), lights or camera, each named when
+ * it differs; another machine reading the same files has the same scene.  The
+ * format version changes with the layout and with what the scene hash covers;
+ * a checkpoint of another format version is refused as such (compatibility is
+ * exact: same format and library version, or nothing).  The layout is
+ * described in appm.c, section 12.2.
  *
  * appm_renderer_save writes into buf (cap bytes) and sets *size to the bytes
  * the checkpoint takes; buf NULL only measures.  APPM_ERR_INVALID_ARG when cap

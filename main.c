@@ -323,6 +323,117 @@ static int parse_light(int argc, char **argv, int *i, render_opts *o)
     return -1;
 }
 
+/* The options about files and their formats: whether `a` (with value v) is
+ * one, and then *rc = -1 when fine, else the usage error's exit code. */
+static int parse_output_option(const char *a, const char *v, render_opts *o, int *rc)
+{
+    unsigned long long u;
+    double d;
+    *rc = -1;
+    if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) o->output = v;
+    else if (strcmp(a, "--reference") == 0) o->reference = v;
+    else if (strcmp(a, "--log") == 0) o->log = v;
+    else if (strcmp(a, "--aux") == 0) o->aux = v;
+    else if (strcmp(a, "--checkpoint") == 0) o->checkpoint = v;
+    else if (strcmp(a, "--resume") == 0) o->resume = v;
+    else if (strcmp(a, "--checkpoint-every") == 0) {
+        if (!parse_u64(v, &u) || u == 0) *rc = usage_error("--checkpoint-every needs passes >= 1, not '%s'", v);
+        else o->checkpoint_every = u;
+    } else if (strcmp(a, "--exr") == 0) {
+        if (strcmp(v, "float") == 0) o->write.exr_half = 0;
+        else if (strcmp(v, "half") == 0) o->write.exr_half = 1;
+        else *rc = usage_error("--exr must be float or half, not '%s'", v);
+    } else if (strcmp(a, "--exr-compression") == 0) {
+        if (strcmp(v, "zip") == 0) o->write.exr_uncompressed = 0;
+        else if (strcmp(v, "none") == 0) o->write.exr_uncompressed = 1;
+        else *rc = usage_error("--exr-compression must be zip or none, not '%s'", v);
+    } else if (strcmp(a, "--exposure") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) *rc = usage_error("--exposure needs a number > 0, not '%s'", v);
+        else o->exposure = d;
+    } else {
+        return 0;
+    }
+    return 1;
+}
+
+/* The options of the render itself (method, sampler, stopping rules, the
+ * appm_config numbers): as parse_output_option. */
+static int parse_render_option(const char *a, const char *v, render_opts *o, int *rc)
+{
+    unsigned long long u;
+    double d;
+    *rc = -1;
+    if (strcmp(a, "--method") == 0) {
+        char names[256];
+        if (appm_method_parse(v, &o->cfg.method) != APPM_OK)
+            *rc = usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
+    } else if (strcmp(a, "--sampler") == 0) {
+        if (strcmp(v, "qmc") == 0) o->cfg.sampler = APPM_SAMPLER_QMC;
+        else if (strcmp(v, "random") == 0) o->cfg.sampler = APPM_SAMPLER_RANDOM;
+        else *rc = usage_error("--sampler must be qmc or random, not '%s'", v);
+    } else if (strcmp(a, "--direct") == 0) {
+        if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
+        else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
+        else *rc = usage_error("--direct must be nee or photons, not '%s'", v);
+    } else if (strcmp(a, "--time") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) {
+            *rc = usage_error("--time needs seconds > 0, not '%s'", v);
+        } else {
+            o->time_limit = d;
+            o->have_time = 1;
+        }
+    } else if (strcmp(a, "--until-error") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) {
+            *rc = usage_error("--until-error needs a number > 0, not '%s'", v);
+        } else {
+            o->until_error = d;
+            o->have_until = 1;
+        }
+    } else if (strcmp(a, "--passes") == 0) {
+        if (!parse_u64(v, &u) || u == 0) {
+            *rc = usage_error("--passes needs an integer >= 1, not '%s'", v);
+        } else {
+            o->passes = u;
+            o->have_passes = 1;
+        }
+    } else if (strcmp(a, "--photons") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 4294967296ull)
+            *rc = usage_error("--photons needs an integer in 1..2^32, not '%s'", v);
+        else o->cfg.photons = u;
+    } else if (strcmp(a, "--radius") == 0) {
+        if (!parse_double(v, &d) || !(d > 0)) *rc = usage_error("--radius needs a length > 0, not '%s'", v);
+        else o->cfg.radius = d;
+    } else if (strcmp(a, "--alpha") == 0) {
+        if (!parse_double(v, &d) || !(d > 0 && d <= 1)) *rc = usage_error("--alpha must be in (0, 1], not '%s'", v);
+        else o->cfg.alpha = d;
+    } else if (strcmp(a, "--threads") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 256) *rc = usage_error("--threads needs 1..256, not '%s'", v);
+        else o->cfg.threads = (unsigned)u;
+    } else if (strcmp(a, "--seed") == 0) {
+        if (!parse_u64(v, &u)) *rc = usage_error("--seed needs a non-negative integer, not '%s'", v);
+        else o->cfg.seed = u;
+    } else if (strcmp(a, "--chains") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 64) *rc = usage_error("--chains needs 1..64, not '%s'", v);
+        else o->cfg.chains = (unsigned)u;
+    } else if (strcmp(a, "--max-depth") == 0) {
+        if (!parse_u64(v, &u) || u == 0 || u > 254) *rc = usage_error("--max-depth needs 1..254, not '%s'", v);
+        else o->cfg.max_depth = (unsigned)u;
+    } else if (strcmp(a, "--size") == 0) {
+        unsigned long w, h;
+        char x, extra;
+        if (sscanf(v, "%lu%c%lu%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') || w < 1 || h < 1 ||
+            w > 32768 || h > 32768) {
+            *rc = usage_error("--size needs WxH with 1 <= W, H <= 32768, not '%s'", v);
+        } else {
+            o->cfg.width = (uint32_t)w;
+            o->cfg.height = (uint32_t)h;
+        }
+    } else {
+        return 0;
+    }
+    return 1;
+}
+
 static int parse_render(int argc, char **argv, render_opts *o)
 {
     int i;
@@ -331,8 +442,7 @@ static int parse_render(int argc, char **argv, render_opts *o)
     o->exposure = 1.0;
     for (i = 2; i < argc; ++i) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
-        double d;
-        unsigned long long u;
+        int rc;
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(RENDER_HELP, stdout);
             exit(EXIT_OK);
@@ -342,8 +452,7 @@ static int parse_render(int argc, char **argv, render_opts *o)
             continue;
         }
         if (strcmp(a, "--light") == 0 || strcmp(a, "--environment") == 0) {
-            int rc = parse_light(argc, argv, &i, o);
-            if (rc >= 0) return rc;
+            if ((rc = parse_light(argc, argv, &i, o)) >= 0) return rc;
             continue;
         }
         if (a[0] != '-' || a[1] == 0) {
@@ -353,85 +462,9 @@ static int parse_render(int argc, char **argv, render_opts *o)
         }
         if (!v) return usage_error("option %s needs a value", a);
         i++;
-        if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) o->output = v;
-        else if (strcmp(a, "--reference") == 0) o->reference = v;
-        else if (strcmp(a, "--log") == 0) o->log = v;
-        else if (strcmp(a, "--aux") == 0) o->aux = v;
-        else if (strcmp(a, "--checkpoint") == 0) o->checkpoint = v;
-        else if (strcmp(a, "--resume") == 0) o->resume = v;
-        else if (strcmp(a, "--checkpoint-every") == 0) {
-            if (!parse_u64(v, &u) || u == 0) return usage_error("--checkpoint-every needs passes >= 1, not '%s'", v);
-            o->checkpoint_every = u;
-        } else if (strcmp(a, "--exr") == 0) {
-            if (strcmp(v, "float") == 0) o->write.exr_half = 0;
-            else if (strcmp(v, "half") == 0) o->write.exr_half = 1;
-            else return usage_error("--exr must be float or half, not '%s'", v);
-        } else if (strcmp(a, "--exr-compression") == 0) {
-            if (strcmp(v, "zip") == 0) o->write.exr_uncompressed = 0;
-            else if (strcmp(v, "none") == 0) o->write.exr_uncompressed = 1;
-            else return usage_error("--exr-compression must be zip or none, not '%s'", v);
-        } else if (strcmp(a, "--method") == 0) {
-            if (appm_method_parse(v, &o->cfg.method) != APPM_OK) {
-                char names[256];
-                return usage_error("unknown method '%s' (%s)", v, method_list(names, sizeof names));
-            }
-        } else if (strcmp(a, "--sampler") == 0) {
-            if (strcmp(v, "qmc") == 0) o->cfg.sampler = APPM_SAMPLER_QMC;
-            else if (strcmp(v, "random") == 0) o->cfg.sampler = APPM_SAMPLER_RANDOM;
-            else return usage_error("--sampler must be qmc or random, not '%s'", v);
-        } else if (strcmp(a, "--direct") == 0) {
-            if (strcmp(v, "nee") == 0) o->cfg.direct = APPM_DIRECT_NEE;
-            else if (strcmp(v, "photons") == 0) o->cfg.direct = APPM_DIRECT_PHOTONS;
-            else return usage_error("--direct must be nee or photons, not '%s'", v);
-        } else if (strcmp(a, "--time") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--time needs seconds > 0, not '%s'", v);
-            o->time_limit = d;
-            o->have_time = 1;
-        } else if (strcmp(a, "--until-error") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--until-error needs a number > 0, not '%s'", v);
-            o->until_error = d;
-            o->have_until = 1;
-        } else if (strcmp(a, "--exposure") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--exposure needs a number > 0, not '%s'", v);
-            o->exposure = d;
-        } else if (strcmp(a, "--passes") == 0) {
-            if (!parse_u64(v, &u) || u == 0) return usage_error("--passes needs an integer >= 1, not '%s'", v);
-            o->passes = u;
-            o->have_passes = 1;
-        } else if (strcmp(a, "--photons") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 4294967296ull)
-                return usage_error("--photons needs an integer in 1..2^32, not '%s'", v);
-            o->cfg.photons = u;
-        } else if (strcmp(a, "--radius") == 0) {
-            if (!parse_double(v, &d) || !(d > 0)) return usage_error("--radius needs a length > 0, not '%s'", v);
-            o->cfg.radius = d;
-        } else if (strcmp(a, "--alpha") == 0) {
-            if (!parse_double(v, &d) || !(d > 0 && d <= 1))
-                return usage_error("--alpha must be in (0, 1], not '%s'", v);
-            o->cfg.alpha = d;
-        } else if (strcmp(a, "--threads") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 256) return usage_error("--threads needs 1..256, not '%s'", v);
-            o->cfg.threads = (unsigned)u;
-        } else if (strcmp(a, "--seed") == 0) {
-            if (!parse_u64(v, &u)) return usage_error("--seed needs a non-negative integer, not '%s'", v);
-            o->cfg.seed = u;
-        } else if (strcmp(a, "--chains") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 64) return usage_error("--chains needs 1..64, not '%s'", v);
-            o->cfg.chains = (unsigned)u;
-        } else if (strcmp(a, "--max-depth") == 0) {
-            if (!parse_u64(v, &u) || u == 0 || u > 254) return usage_error("--max-depth needs 1..254, not '%s'", v);
-            o->cfg.max_depth = (unsigned)u;
-        } else if (strcmp(a, "--size") == 0) {
-            unsigned long w, h;
-            char x, extra;
-            if (sscanf(v, "%lu%c%lu%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X') || w < 1 ||
-                h < 1 || w > 32768 || h > 32768)
-                return usage_error("--size needs WxH with 1 <= W, H <= 32768, not '%s'", v);
-            o->cfg.width = (uint32_t)w;
-            o->cfg.height = (uint32_t)h;
-        } else {
+        if (!parse_output_option(a, v, o, &rc) && !parse_render_option(a, v, o, &rc))
             return usage_error("unknown option '%s'", a);
-        }
+        if (rc >= 0) return rc;
     }
     if (!o->scene) return usage_error("render needs a scene file");
     if (o->checkpoint_every && !o->checkpoint) return usage_error("--checkpoint-every needs --checkpoint FILE");
@@ -509,172 +542,227 @@ static int resume_render(appm_renderer *r, const render_opts *o, unsigned long l
     return EXIT_OK;
 }
 
-static int cmd_render(int argc, char **argv)
-{
+/* The state of one `appm render`, shared by its steps. */
+typedef struct render_run {
     render_opts o;
-    appm_scene *scene = NULL;
-    appm_renderer *r = NULL;
-    appm_diag d;
-    appm_image ref = {0, 0, NULL}, img;
+    char outbuf[1024];          /* the default output name */
+    appm_scene *scene;
+    appm_renderer *r;
+    appm_image ref, img;        /* --reference; the render's image */
     appm_stats st;
-    appm_compare_result cmp;
-    char outbuf[1024];
-    FILE *logf = NULL;
-    double t0, last_ck[2] = {0.0, -1.0}; /* time and pass of the last checkpoint */
-    unsigned long long resumed = 0;
-    clock_t c0; /* processor time of the render loop: the cost on a shared machine */
-    int rc = parse_render(argc, argv, &o), progress, have_cmp = 0;
+    appm_compare_result cmp;    /* of the image against ref, if have_cmp */
+    int have_cmp, progress;
+    FILE *logf;                 /* --log */
+    double t0, last_ck[2];      /* start of the passes; time and pass of the last checkpoint */
+    unsigned long long resumed; /* passes the --resume checkpoint held */
+    clock_t c0;                 /* processor time of the passes: the cost on a shared machine */
+} render_run;
+
+/* What the options leave open: the output name, the stopping rule (60 s), where warnings go. */
+static void render_defaults(render_run *R)
+{
+    render_opts *o = &R->o;
+    o->cfg.log = on_warning;
+    o->cfg.log_user = &o->quiet;
+    if (!o->output) {
+        default_output(o->scene, R->outbuf, sizeof R->outbuf);
+        o->output = R->outbuf;
+    }
+    if (!o->have_time && !o->have_passes && !o->have_until) {
+        o->time_limit = 60.0;
+        o->have_time = 1;
+    }
+}
+
+/* The scene with the command line's lights, the reference image, the renderer
+ * (resumed from --resume), the log; EXIT_OK or the exit code. */
+static int render_setup(render_run *R)
+{
+    const render_opts *o = &R->o;
+    appm_diag d;
     appm_status s;
-    if (rc >= 0) return rc;
-    rc = EXIT_OK;
-    o.cfg.log = on_warning;
-    o.cfg.log_user = &o.quiet;
-    if (!o.output) {
-        default_output(o.scene, outbuf, sizeof outbuf);
-        o.output = outbuf;
-    }
-    if (!o.have_time && !o.have_passes && !o.have_until) {
-        o.time_limit = 60.0;
-        o.have_time = 1;
-    }
-    if ((s = appm_scene_load(o.scene, &o.cfg, &scene, &d)) != APPM_OK) return lib_error(s, &d, o.scene);
-    if ((rc = add_cli_lights(&o, scene)) != EXIT_OK) {
-        appm_scene_destroy(scene);
-        return rc;
-    }
-    if (o.reference && (s = appm_image_read_pfm(o.reference, NULL, &ref, &d)) != APPM_OK) {
-        appm_scene_destroy(scene);
-        return lib_error(s, &d, o.reference);
-    }
-    if ((s = appm_renderer_create(scene, &o.cfg, &r, &d)) != APPM_OK) {
-        rc = lib_error(s, &d, NULL);
-        goto done;
-    }
-    if (o.resume && (rc = resume_render(r, &o, &resumed)) != EXIT_OK) goto done;
-    if (ref.rgb) {
-        appm_renderer_image(r, &img);
-        if (ref.width != img.width || ref.height != img.height) {
-            fprintf(stderr, "appm: %s: reference is %lux%lu, the render %lux%lu\n", o.reference,
-                    (unsigned long)ref.width, (unsigned long)ref.height, (unsigned long)img.width,
-                    (unsigned long)img.height);
-            rc = EXIT_INPUT;
-            goto done;
+    int rc;
+    if ((s = appm_scene_load(o->scene, &o->cfg, &R->scene, &d)) != APPM_OK) return lib_error(s, &d, o->scene);
+    if ((rc = add_cli_lights(o, R->scene)) != EXIT_OK) return rc;
+    if (o->reference && (s = appm_image_read_pfm(o->reference, NULL, &R->ref, &d)) != APPM_OK)
+        return lib_error(s, &d, o->reference);
+    if ((s = appm_renderer_create(R->scene, &o->cfg, &R->r, &d)) != APPM_OK) return lib_error(s, &d, NULL);
+    if (o->resume && (rc = resume_render(R->r, o, &R->resumed)) != EXIT_OK) return rc;
+    if (R->ref.rgb) {
+        appm_renderer_image(R->r, &R->img);
+        if (R->ref.width != R->img.width || R->ref.height != R->img.height) {
+            fprintf(stderr, "appm: %s: reference is %lux%lu, the render %lux%lu\n", o->reference,
+                    (unsigned long)R->ref.width, (unsigned long)R->ref.height, (unsigned long)R->img.width,
+                    (unsigned long)R->img.height);
+            return EXIT_INPUT;
         }
     }
-    if (o.log) {
-        logf = fopen(o.log, o.resume ? "a" : "w"); /* a resumed render continues its log */
-        if (!logf) {
-            fprintf(stderr, "appm: %s: cannot open the log for writing\n", o.log);
-            rc = EXIT_INPUT;
-            goto done;
+    if (o->log) {
+        R->logf = fopen(o->log, o->resume ? "a" : "w"); /* a resumed render continues its log */
+        if (!R->logf) {
+            fprintf(stderr, "appm: %s: cannot open the log for writing\n", o->log);
+            return EXIT_INPUT;
         }
-        if (!o.resume || ftell(logf) == 0) fprintf(logf, "pass,seconds,photons,rmse,relmse,est_relerr\n");
+        if (!o->resume || ftell(R->logf) == 0) fprintf(R->logf, "pass,seconds,photons,rmse,relmse,est_relerr\n");
     }
-    progress = !o.quiet && appm_isatty(2);
+    return EXIT_OK;
+}
+
+/* After a pass at el seconds: the comparison with --reference and the --log row. */
+static void render_log_pass(render_run *R, double el)
+{
+    const appm_stats *st = &R->st;
+    if (!R->ref.rgb && !R->logf) return;
+    R->have_cmp = 0;
+    if (R->ref.rgb) {
+        appm_renderer_image(R->r, &R->img);
+        R->have_cmp = appm_image_compare(&R->img, &R->ref, &R->cmp) == APPM_OK;
+    }
+    if (R->logf) {
+        fprintf(R->logf, "%llu,%.6f,%llu,", (unsigned long long)st->passes, el,
+                (unsigned long long)st->photons_emitted);
+        if (R->have_cmp) fprintf(R->logf, "%.9g,%.9g,", R->cmp.rmse, R->cmp.relmse);
+        else fprintf(R->logf, ",,");
+        if (st->est_relerr >= 0) fprintf(R->logf, "%.9g", st->est_relerr);
+        fprintf(R->logf, "\n");
+    }
+}
+
+/* The progress line on a terminal: the time left by --time or by the passes' pace. */
+static void render_progress(const render_run *R, double el)
+{
+    const render_opts *o = &R->o;
+    const appm_stats *st = &R->st;
+    double remaining = o->have_time ? o->time_limit - el : -1.0;
+    if (o->have_passes) {
+        double by_pass = el / (double)(st->passes - R->resumed) * (double)(o->passes - st->passes);
+        if (remaining < 0 || by_pass < remaining) remaining = by_pass;
+    }
+    fprintf(stderr, "\rpass %llu  photons %.3g  elapsed %.1fs  remaining %.1fs   ", (unsigned long long)st->passes,
+            (double)st->photons_emitted, el, remaining > 0 ? remaining : 0.0);
+    fflush(stderr);
+}
+
+/* Passes until a stopping rule holds (--passes, --time, --until-error, Ctrl-C)
+ * or a pass or a checkpoint fails; EXIT_OK or the exit code. */
+static int render_passes(render_run *R)
+{
+    const render_opts *o = &R->o;
+    appm_status s;
+    R->progress = !o->quiet && appm_isatty(2);
     signal(SIGINT, on_sigint);
-    t0 = last_ck[0] = now_seconds();
-    c0 = clock();
-    appm_renderer_stats(r, &st);
+    R->t0 = R->last_ck[0] = now_seconds();
+    R->c0 = clock();
+    appm_renderer_stats(R->r, &R->st);
     for (;;) {
         double el;
-        if (o.have_passes && st.passes >= o.passes) break; /* also a checkpoint already past N */
-        if ((s = appm_renderer_pass(r)) != APPM_OK) {
-            fprintf(stderr, "appm: pass failed: %s\n", appm_renderer_last_error(r)[0]
-                                                           ? appm_renderer_last_error(r)
-                                                           : appm_status_string(s));
-            rc = EXIT_RUNTIME;
-            break;
+        if (o->have_passes && R->st.passes >= o->passes) break; /* also a checkpoint already past N */
+        if ((s = appm_renderer_pass(R->r)) != APPM_OK) {
+            fprintf(stderr, "appm: pass failed: %s\n",
+                    appm_renderer_last_error(R->r)[0] ? appm_renderer_last_error(R->r) : appm_status_string(s));
+            return EXIT_RUNTIME;
         }
-        appm_renderer_stats(r, &st);
-        el = now_seconds() - t0;
-        if (ref.rgb || logf) {
-            have_cmp = 0;
-            if (ref.rgb) {
-                appm_renderer_image(r, &img);
-                have_cmp = appm_image_compare(&img, &ref, &cmp) == APPM_OK;
-            }
-            if (logf) {
-                fprintf(logf, "%llu,%.6f,%llu,", (unsigned long long)st.passes, el,
-                        (unsigned long long)st.photons_emitted);
-                if (have_cmp) fprintf(logf, "%.9g,%.9g,", cmp.rmse, cmp.relmse);
-                else fprintf(logf, ",,");
-                if (st.est_relerr >= 0) fprintf(logf, "%.9g", st.est_relerr);
-                fprintf(logf, "\n");
-            }
-        }
-        if (progress) {
-            double remaining = o.have_time ? o.time_limit - el : -1.0;
-            if (o.have_passes) {
-                double by_pass = el / (double)(st.passes - resumed) * (double)(o.passes - st.passes);
-                if (remaining < 0 || by_pass < remaining) remaining = by_pass;
-            }
-            fprintf(stderr, "\rpass %llu  photons %.3g  elapsed %.1fs  remaining %.1fs   ",
-                    (unsigned long long)st.passes, (double)st.photons_emitted, el,
-                    remaining > 0 ? remaining : 0.0);
-            fflush(stderr);
-        }
-        if (checkpoint_due(&o, &st, now_seconds(), last_ck) && !save_checkpoint(r, &o, now_seconds(), last_ck)) {
-            rc = EXIT_RUNTIME;
-            break;
-        }
+        appm_renderer_stats(R->r, &R->st);
+        el = now_seconds() - R->t0;
+        render_log_pass(R, el);
+        if (R->progress) render_progress(R, el);
+        if (checkpoint_due(o, &R->st, now_seconds(), R->last_ck) &&
+            !save_checkpoint(R->r, o, now_seconds(), R->last_ck))
+            return EXIT_RUNTIME;
         if (g_interrupted) break;
-        if (o.have_time && el >= o.time_limit) break;
-        if (o.have_until && st.est_relerr >= 0 && st.est_relerr < o.until_error) break;
+        if (o->have_time && el >= o->time_limit) break;
+        if (o->have_until && R->st.est_relerr >= 0 && R->st.est_relerr < o->until_error) break;
     }
-    if (progress) fprintf(stderr, "\n");
-    appm_renderer_stats(r, &st); /* also after a failed pass, even the first */
-    /* the last state, also after Ctrl-C or a failed pass (which commits nothing) */
-    if (o.checkpoint && (double)st.passes != last_ck[1] && !save_checkpoint(r, &o, now_seconds(), last_ck))
+    return EXIT_OK;
+}
+
+/* --aux: each map the method has, as PFM and false-colour PNG; 0 if one failed. */
+static int render_write_aux(render_run *R)
+{
+    static const char *const names[APPM_AUX_COUNT] = {"radius", "variance",       "laplacian",
+                                                      "error",  "radius-caustic", "radius-diffuse"};
+    static const int modes[APPM_AUX_COUNT] = {0, 1, 2, 1, 0, 0};
+    int k, ok = 1;
+    for (k = 0; k < APPM_AUX_COUNT; ++k) {
+        const float *a = appm_renderer_aux(R->r, (appm_aux)k);
+        if (a && !write_aux(R->o.aux, names[k], a, R->img.width, R->img.height, modes[k])) ok = 0;
+    }
+    return ok;
+}
+
+/* After the passes (rc: how they ended): the last checkpoint, then the image
+ * and the aux maps - also after Ctrl-C or a failed pass (which commits
+ * nothing), if any pass is done; rc, or the exit code of a failed write. */
+static int render_write(render_run *R, int rc)
+{
+    render_opts *o = &R->o;
+    appm_diag d;
+    appm_status s;
+    if (R->progress) fprintf(stderr, "\n");
+    appm_renderer_stats(R->r, &R->st); /* also after a failed pass, even the first */
+    if (o->checkpoint && (double)R->st.passes != R->last_ck[1] && !save_checkpoint(R->r, o, now_seconds(), R->last_ck))
         rc = EXIT_RUNTIME;
-    if (rc == 0 || st.passes > 0) {
-        appm_renderer_image(r, &img);
-        o.write.exposure = o.exposure;
-        if ((s = appm_image_write_ex(o.output, &img, &o.write, NULL, &d)) != APPM_OK) {
-            rc = lib_error(s, &d, o.output);
-            if (rc == EXIT_INPUT) rc = EXIT_RUNTIME;
-            goto done;
-        }
-        if (o.aux) {
-            static const char *const names[APPM_AUX_COUNT] = {"radius",         "variance",      "laplacian",
-                                                              "error",          "radius-caustic", "radius-diffuse"};
-            static const int modes[APPM_AUX_COUNT] = {0, 1, 2, 1, 0, 0};
-            int k;
-            for (k = 0; k < APPM_AUX_COUNT; ++k) {
-                const float *a = appm_renderer_aux(r, (appm_aux)k);
-                if (a && !write_aux(o.aux, names[k], a, img.width, img.height, modes[k])) rc = EXIT_RUNTIME;
-            }
-        }
+    if (rc != EXIT_OK && R->st.passes == 0) return rc;
+    appm_renderer_image(R->r, &R->img);
+    o->write.exposure = o->exposure;
+    if ((s = appm_image_write_ex(o->output, &R->img, &o->write, NULL, &d)) != APPM_OK) {
+        rc = lib_error(s, &d, o->output);
+        return rc == EXIT_INPUT ? EXIT_RUNTIME : rc;
     }
-    if (rc == 0) {
-        appm_renderer_stats(r, &st);
-        printf("passes=%llu photons=%llu seconds=%.2f radius=%.6g output=%s method=%s threads=%u "
-               "peak_bytes=%llu dropped=%llu",
-               (unsigned long long)st.passes, (unsigned long long)st.photons_emitted, st.seconds,
-               st.initial_radius, o.output, appm_method_name(o.cfg.method), st.threads,
-               (unsigned long long)st.peak_bytes, (unsigned long long)st.dropped_samples);
-        printf(" eye_s=%.3f photon_s=%.3f grid_s=%.3f gather_s=%.3f photons_stored=%llu",
-               st.seconds_eye, st.seconds_photons, st.seconds_grid, st.seconds_gather,
-               (unsigned long long)st.photons_stored);
-        if (st.est_relerr >= 0) printf(" est_relerr=%.4g", st.est_relerr);
-        if (st.clamped >= 0) printf(" clamped=%.4f", st.clamped);
-        printf(" sampler=%s", o.cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
-        if (o.cfg.sampler == APPM_SAMPLER_QMC) printf(" chains=%u", o.cfg.chains ? o.cfg.chains : 1u);
-        printf(" cpu_s=%.3f", (double)(clock() - c0) / CLOCKS_PER_SEC);
-        if (have_cmp) printf(" rmse=%.6g relmse=%.6g", cmp.rmse, cmp.relmse);
-        if (o.resume) printf(" resumed=%llu", resumed);
-        if (o.checkpoint) printf(" checkpoint=%s", o.checkpoint);
-        if (g_interrupted) printf(" interrupted=1");
-        printf("\n");
-    }
-done:
-    if (logf && fclose(logf) != 0 && rc == 0) {
-        fprintf(stderr, "appm: %s: write error\n", o.log);
-        rc = EXIT_RUNTIME;
-    }
-    appm_renderer_destroy(r);
-    appm_image_free(NULL, &ref);
-    appm_scene_destroy(scene);
+    if (o->aux && !render_write_aux(R)) rc = EXIT_RUNTIME;
     return rc;
+}
+
+/* The summary line of the interface contract (section 3), on stdout. */
+static void render_summary(render_run *R)
+{
+    const render_opts *o = &R->o;
+    appm_stats *st = &R->st;
+    appm_renderer_stats(R->r, st);
+    printf("passes=%llu photons=%llu seconds=%.2f radius=%.6g output=%s method=%s threads=%u "
+           "peak_bytes=%llu dropped=%llu",
+           (unsigned long long)st->passes, (unsigned long long)st->photons_emitted, st->seconds, st->initial_radius,
+           o->output, appm_method_name(o->cfg.method), st->threads, (unsigned long long)st->peak_bytes,
+           (unsigned long long)st->dropped_samples);
+    printf(" eye_s=%.3f photon_s=%.3f grid_s=%.3f gather_s=%.3f photons_stored=%llu", st->seconds_eye,
+           st->seconds_photons, st->seconds_grid, st->seconds_gather, (unsigned long long)st->photons_stored);
+    if (st->est_relerr >= 0) printf(" est_relerr=%.4g", st->est_relerr);
+    if (st->clamped >= 0) printf(" clamped=%.4f", st->clamped);
+    printf(" sampler=%s", o->cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
+    if (o->cfg.sampler == APPM_SAMPLER_QMC) printf(" chains=%u", o->cfg.chains ? o->cfg.chains : 1u);
+    printf(" cpu_s=%.3f", (double)(clock() - R->c0) / CLOCKS_PER_SEC);
+    if (R->have_cmp) printf(" rmse=%.6g relmse=%.6g", R->cmp.rmse, R->cmp.relmse);
+    if (o->resume) printf(" resumed=%llu", R->resumed);
+    if (o->checkpoint) printf(" checkpoint=%s", o->checkpoint);
+    if (g_interrupted) printf(" interrupted=1");
+    printf("\n");
+}
+
+/* Closes the log (a failed close is a write error) and frees everything. */
+static int render_cleanup(render_run *R, int rc)
+{
+    if (R->logf && fclose(R->logf) != 0 && rc == EXIT_OK) {
+        fprintf(stderr, "appm: %s: write error\n", R->o.log);
+        rc = EXIT_RUNTIME;
+    }
+    appm_renderer_destroy(R->r);
+    appm_image_free(NULL, &R->ref);
+    appm_scene_destroy(R->scene);
+    return rc;
+}
+
+static int cmd_render(int argc, char **argv)
+{
+    render_run R;
+    int rc;
+    memset(&R, 0, sizeof R);
+    R.last_ck[1] = -1.0; /* no checkpoint yet */
+    if ((rc = parse_render(argc, argv, &R.o)) >= 0) return rc;
+    render_defaults(&R);
+    rc = render_setup(&R);
+    if (rc == EXIT_OK) rc = render_write(&R, render_passes(&R));
+    if (rc == EXIT_OK) render_summary(&R);
+    return render_cleanup(&R, rc);
 }
 
 /* ---- appm compare / info --------------------------------------------------- */

@@ -16,7 +16,8 @@
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
 #   QEMU=1          t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
-#                   with -DAPPM_SIMD=0) and big-endian s390x (scalar) run under qemu-user
+#                   with -DAPPM_SIMD=0) and big-endian s390x (scalar) run under qemu-user,
+#                   and their appm resumes checkpoints that the native appm wrote
 # The BVH's box test: t_bvh built with SSE2, -DAPPM_SIMD=0, -mavx2 (where the CPU
 # has AVX2; clang with -mfma too), and renders of each SIMD build and its scalar
 # twin compared byte for byte.
@@ -339,6 +340,23 @@ if [ "${QEMU:-0}" = 1 ]; then
         if have $triple-gcc "$what" && have qemu-$arch "$what"; then
             step "$triple-gcc -Werror: appm.c main.c" \
                 $triple-gcc $C99 -O2 appm.c main.c -o "$OUT/appm-$arch" -lm -pthread
+            # a checkpoint written here resumes there: the scene hash takes values as the
+            # files state them (teapot: a framed camera and a spot light; cornell-glossy:
+            # smooth triangles, a glossy lobe), never ones that the machine rounds its own way
+            for sc in teapot cornell-glossy; do
+                what="qemu-$arch: resumes a checkpoint of scenes/$sc.scene written by the native build"
+                if [ ! -x "$OUT/appm-gcc" ] || [ ! -x "$OUT/appm-$arch" ]; then continue; fi
+                ck="$OUT/move-$sc.ckpt"
+                if "$OUT/appm-gcc" render "scenes/$sc.scene" --size 24x16 --passes 2 --threads 1 -q \
+                    --checkpoint "$ck" -o "$OUT/move-$sc.pfm" >"$log" 2>&1 &&
+                    qemu-$arch -L /usr/$triple "$OUT/appm-$arch" render "scenes/$sc.scene" --size 24x16 \
+                        --passes 3 --threads 1 -q --resume "$ck" -o "$OUT/move-$sc-$arch.pfm" >"$log" 2>&1 &&
+                    grep -q ' resumed=2' "$log"; then
+                    ok "$what"
+                else
+                    bad "$what"
+                fi
+            done
             if $triple-gcc $C99 -O2 tests/t_portable.c -o "$OUT/t_portable-$arch" -lm -pthread \
                 >"$log" 2>&1; then
                 run_test "qemu-$arch: t_portable" qemu-$arch -L /usr/$triple "$OUT/t_portable-$arch"

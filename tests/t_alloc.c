@@ -153,10 +153,11 @@ static char *slurp(const char *path, size_t *len)
     return buf;
 }
 
-/* Loads either a file (obj == NULL) or OBJ/MTL text, failing allocation 1,
- * 2, ... until a load succeeds. */
+/* Loads either a file (obj == NULL) or OBJ/MTL text, or (files != NULL) a
+ * .scene text in obj with its two files, failing allocation 1, 2, ... until a
+ * load succeeds. */
 static void fail_each_load(const char *what, const char *path, const char *obj, size_t obj_len,
-                           const char *mtl, size_t mtl_len)
+                           const char *mtl, size_t mtl_len, const appm_memory_file *files)
 {
     long n;
     int leaks = 0, wrong = 0;
@@ -169,8 +170,9 @@ static void fail_each_load(const char *what, const char *path, const char *obj, 
         memset(&cfg, 0, sizeof cfg);
         check_use_alloc(&cfg, &a, n);
         s = (appm_scene *)&cfg; /* must be cleared on failure */
-        st = obj ? appm_scene_load_obj_memory(obj, obj_len, mtl, mtl_len, path, &cfg, &s, &d)
-                 : appm_scene_load(path, &cfg, &s, &d);
+        st = files ? appm_scene_load_memory(obj, obj_len, path, files, 2, &cfg, &s, &d)
+             : obj ? appm_scene_load_obj_memory(obj, obj_len, mtl, mtl_len, path, &cfg, &s, &d)
+                   : appm_scene_load(path, &cfg, &s, &d);
         if (st == APPM_OK) break;
         if (st != APPM_ERR_NOMEM || d.status != APPM_ERR_NOMEM || s != NULL || a.count < n) {
             if (!wrong++)
@@ -205,12 +207,25 @@ static void test_scene_loads(void)
     size_t olen, mlen;
     char *obj = slurp("scenes/CornellBox-Original.obj", &olen);
     char *mtl = slurp("scenes/CornellBox-Original.mtl", &mlen);
-    fail_each_load("cornell-sphere.scene", "scenes/cornell-sphere.scene", NULL, 0, NULL, 0);
-    fail_each_load("CornellBox-Glossy.obj", "scenes/CornellBox-Glossy.obj", NULL, 0, NULL, 0);
-    CHECK(obj && mtl);
-    if (obj && mtl) fail_each_load("obj in memory", "CornellBox-Original.obj", obj, olen, mtl, mlen);
+    size_t slen;
+    char *scene = slurp("scenes/cornell-original.scene", &slen);
+    fail_each_load("cornell-sphere.scene", "scenes/cornell-sphere.scene", NULL, 0, NULL, 0, NULL);
+    fail_each_load("CornellBox-Glossy.obj", "scenes/CornellBox-Glossy.obj", NULL, 0, NULL, 0, NULL);
+    CHECK(obj && mtl && scene);
+    if (obj && mtl) fail_each_load("obj in memory", "CornellBox-Original.obj", obj, olen, mtl, mlen, NULL);
+    if (obj && mtl && scene) {
+        appm_memory_file files[2];
+        files[0].name = "CornellBox-Original.obj";
+        files[0].text = obj;
+        files[0].len = olen;
+        files[1].name = "CornellBox-Original.mtl";
+        files[1].text = mtl;
+        files[1].len = mlen;
+        fail_each_load(".scene in memory", "cornell-original.scene", scene, slen, NULL, 0, files);
+    }
     free(obj);
     free(mtl);
+    free(scene);
     /* a scene with point, spot and environment lights and no area light */
     {
         const char *path = check_path("alloc", "lights.scene");
@@ -218,7 +233,7 @@ static void test_scene_loads(void)
                                      "light point position 0 1 0 intensity 1 1 1\n"
                                      "light spot position 0 5 0 target 0 0 0 intensity 1 1 1 cone 20 falloff 5\n"
                                      "environment 0.1 0.1 0.1\n"));
-        fail_each_load("lights.scene", path, NULL, 0, NULL, 0);
+        fail_each_load("lights.scene", path, NULL, 0, NULL, 0, NULL);
     }
 }
 

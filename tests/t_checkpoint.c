@@ -25,8 +25,12 @@
  *   6. Byte order: the file is little-endian whatever the host: values read
  *      back byte by byte at their documented offsets.
  *   7. The scene hash ignores the triangles' order (a BVH built elsewhere may
- *      order them otherwise) and sees a moved vertex, another albedo, another
- *      camera, another point light.
+ *      order them otherwise) and sees, each in its own part, a moved vertex,
+ *      another albedo, Ks or Ns, another camera, another point light.  And a
+ *      checkpoint of scene files resumed after an edit of one Ns, one Ks, one
+ *      vn, a spot's cone or the fov is refused, the message naming the part
+ *      (materials, shading normals, lights, camera); the same files read
+ *      again are accepted.
  *   8. A tripwire: appm_config has exactly the fields the checkpoint header
  *      was written for, so a new option cannot slip past the comparison. */
 #include "../appm.c"
@@ -44,10 +48,10 @@
 #define OFF_FORMAT 8
 #define OFF_VERSION 12
 #define OFF_W 32
-#define OFF_PASS 92
-#define OFF_R1 132
-#define OFF_SECONDS 164
-#define OFF_LAYOUT 204
+#define OFF_PASS 124
+#define OFF_R1 164
+#define OFF_SECONDS 196
+#define OFF_LAYOUT 236
 
 static appm_config config(appm_method m, unsigned threads)
 {
@@ -520,13 +524,24 @@ static void test_byte_order(const appm_scene *s)
     appm_renderer_destroy(a);
 }
 
-/* 7. (the scene is changed in place and restored; no renderer uses it meanwhile) */
+/* 7. The first of the scene hash's parts in which a and b differ, or -1. */
+static int part_differs(const uint64_t *a, const uint64_t *b)
+{
+    int k;
+    for (k = 0; k < APPM__SH_PARTS; ++k)
+        if (a[k] != b[k]) return k;
+    return -1;
+}
+
+/* (the scene is changed in place and restored; no renderer uses it meanwhile) */
 static void test_scene_hash(appm_scene *s)
 {
-    uint64_t h0 = appm__scene_hash(s);
+    uint64_t h0[APPM__SH_PARTS], h[APPM__SH_PARTS];
     appm__tri t;
     appm__tri_info in;
+    appm__material *m = &s->mat[s->info[1].mat];
     float keep;
+    appm__scene_hash(s, h0);
     CHECK(s->ntri > 2);
     t = s->tri[0];
     in = s->info[0];
@@ -534,25 +549,107 @@ static void test_scene_hash(appm_scene *s)
     s->info[0] = s->info[s->ntri - 1];
     s->tri[s->ntri - 1] = t;
     s->info[s->ntri - 1] = in;
-    CHECK_MSG(appm__scene_hash(s) == h0, "the scene hash depends on the triangle order");
+    appm__scene_hash(s, h);
+    CHECK_MSG(part_differs(h, h0) == -1, "the scene hash depends on the triangle order");
     s->tri[s->ntri - 1] = s->tri[0];
     s->info[s->ntri - 1] = s->info[0];
     s->tri[0] = t;
     s->info[0] = in;
-    CHECK(appm__scene_hash(s) == h0);
     keep = s->tri[1].p2.y;
     s->tri[1].p2.y = nextafterf(keep, 1e30f);
-    CHECK_MSG(appm__scene_hash(s) != h0, "a vertex moved by one ulp: same hash");
+    appm__scene_hash(s, h);
+    CHECK_MSG(part_differs(h, h0) == APPM__SH_GEOMETRY, "a vertex moved by one ulp: part %d", part_differs(h, h0));
     s->tri[1].p2.y = keep;
-    keep = s->mat[s->info[1].mat].color.x;
-    s->mat[s->info[1].mat].color.x = keep * 0.5f;
-    CHECK_MSG(appm__scene_hash(s) != h0, "another albedo: same hash");
-    s->mat[s->info[1].mat].color.x = keep;
+    keep = m->color.x;
+    m->color.x = keep * 0.5f;
+    appm__scene_hash(s, h);
+    CHECK_MSG(part_differs(h, h0) == APPM__SH_MATERIALS, "another albedo: part %d", part_differs(h, h0));
+    m->color.x = keep;
+    keep = m->ks.y;
+    m->ks.y = keep + 0.125f;
+    appm__scene_hash(s, h);
+    CHECK_MSG(part_differs(h, h0) == APPM__SH_MATERIALS, "another Ks: part %d", part_differs(h, h0));
+    m->ks.y = keep;
+    keep = m->ns;
+    m->ns = keep + 1.0f;
+    appm__scene_hash(s, h);
+    CHECK_MSG(part_differs(h, h0) == APPM__SH_MATERIALS, "another Ns: part %d", part_differs(h, h0));
+    m->ns = keep;
     keep = s->cam.eye.z;
     s->cam.eye.z = keep + 1.0f;
-    CHECK_MSG(appm__scene_hash(s) != h0, "another camera: same hash");
+    appm__scene_hash(s, h);
+    CHECK_MSG(part_differs(h, h0) == APPM__SH_CAMERA, "another camera: part %d", part_differs(h, h0));
     s->cam.eye.z = keep;
-    CHECK(appm__scene_hash(s) == h0);
+    appm__scene_hash(s, h);
+    CHECK(part_differs(h, h0) == -1);
+}
+
+/* A scene of a glossy box on a smooth floor under a spot light, written with
+ * the given MTL Ks and Ns, the floor's second vn, the spot's cone and the fov,
+ * into files of its own (tag), and loaded. */
+static appm_scene *edit_scene(const char *tag, const char *ks, const char *ns, const char *vn, const char *cone,
+                              const char *fov)
+{
+    char obj[1024], mtl[256], scene[512], name[64];
+    appm_scene *s = NULL;
+    appm_diag d;
+    sprintf(mtl, "newmtl floor\nKd 0.6 0.6 0.6\nnewmtl gloss\nKd 0.3 0.3 0.3\nKs %s\nNs %s\n", ks, ns);
+    sprintf(obj,
+            "mtllib checkpoint-edit-%s.mtl\n"
+            "v -2 0 -2\nv 2 0 -2\nv 2 0 2\nv -2 0 2\nvn 0 1 0\nvn %s\n"
+            "usemtl floor\nf 4//1 3//2 2//1 1//1\n"
+            "v -0.5 0 0.5\nv 0.5 0 0.5\nv 0.5 1 0.5\nv -0.5 1 0.5\nv 0.5 0 -0.5\nv 0.5 1 -0.5\n"
+            "usemtl gloss\nf 5 6 7 8\nf 6 9 10 7\nf 8 7 10\n",
+            tag, vn);
+    sprintf(scene,
+            "mesh checkpoint-edit-%s.obj\ncamera eye 1 2.5 3.5 target 0 0.4 0 up 0 1 0 fov %s\n"
+            "light spot position 0.5 3 1.5 target 0 0 0 intensity 20 20 20 cone %s falloff 5\n"
+            "environment 0.05 0.05 0.05\n",
+            tag, fov, cone);
+    sprintf(name, "edit-%s.mtl", tag);
+    if (!check_write_file(check_path("checkpoint", name), mtl)) return NULL;
+    sprintf(name, "edit-%s.obj", tag);
+    if (!check_write_file(check_path("checkpoint", name), obj)) return NULL;
+    sprintf(name, "edit-%s.scene", tag);
+    if (!check_write_file(check_path("checkpoint", name), scene)) return NULL;
+    CHECK_MSG(appm_scene_load(check_path("checkpoint", name), NULL, &s, &d) == APPM_OK, "%s:%u: %s", d.file, d.line,
+              d.message);
+    return s;
+}
+
+/* A checkpoint of the scene files, resumed after an edit of one value in them:
+ * refused, naming the part that differs; after no edit (the files written and
+ * read again), accepted. */
+static void test_edits(void)
+{
+    static const struct {
+        const char *tag, *ks, *ns, *vn, *cone, *fov, *word;
+    } v[] = {{"same", "0.4 0.4 0.4", "20", "0.1 1 0", "40", "40", NULL},
+             {"ns", "0.4 0.4 0.4", "21", "0.1 1 0", "40", "40", "its materials differ"},
+             {"ks", "0.4 0.41 0.4", "20", "0.1 1 0", "40", "40", "its materials differ"},
+             {"vn", "0.4 0.4 0.4", "20", "0.1 1 0.001", "40", "40", "its shading normals differ"},
+             {"cone", "0.4 0.4 0.4", "20", "0.1 1 0", "40.5", "40", "its lights differ"},
+             {"fov", "0.4 0.4 0.4", "20", "0.1 1 0", "40", "40.001", "its camera or image size differs"}};
+    appm_scene *base = edit_scene("base", v[0].ks, v[0].ns, v[0].vn, v[0].cone, v[0].fov);
+    appm_config c = config(APPM_METHOD_APPM, 1);
+    appm_renderer *a = base ? make(base, &c, 2) : NULL;
+    size_t k, n_edit = 0;
+    unsigned char *buf = a ? save(a, &n_edit) : NULL;
+    CHECK(buf != NULL);
+    for (k = 0; buf && k < sizeof v / sizeof v[0]; ++k) {
+        appm_scene *s = edit_scene(v[k].tag, v[k].ks, v[k].ns, v[k].vn, v[k].cone, v[k].fov);
+        appm_renderer *r = s ? make(s, &c, 0) : NULL;
+        if (r && v[k].word)
+            expect_refused(r, buf, n_edit, APPM_ERR_INVALID_ARG, v[k].word, v[k].tag);
+        else if (r)
+            CHECK_MSG(appm_renderer_load(r, buf, n_edit, NULL) == APPM_OK, "the same files read again: refused");
+        CHECK(r != NULL);
+        appm_renderer_destroy(r);
+        appm_scene_destroy(s);
+    }
+    free(buf);
+    appm_renderer_destroy(a);
+    appm_scene_destroy(base);
 }
 
 static void test_point_light(void)
@@ -564,6 +661,7 @@ static void test_point_light(void)
                               "light point position 0 1.5 0 intensity 5 5 5\n";
     appm_scene *a = NULL, *b = NULL;
     appm_diag d;
+    uint64_t ha[APPM__SH_PARTS], hb[APPM__SH_PARTS];
     if (!check_write_file(check_path("checkpoint", "floor.obj"), obj) ||
         !check_write_file(check_path("checkpoint", "l1.scene"), sc1) ||
         !check_write_file(check_path("checkpoint", "l2.scene"), sc2)) {
@@ -572,7 +670,11 @@ static void test_point_light(void)
     }
     CHECK(appm_scene_load(check_path("checkpoint", "l1.scene"), NULL, &a, &d) == APPM_OK);
     CHECK(appm_scene_load(check_path("checkpoint", "l2.scene"), NULL, &b, &d) == APPM_OK);
-    if (a && b) CHECK_MSG(appm__scene_hash(a) != appm__scene_hash(b), "a moved point light: same hash");
+    if (a && b) {
+        appm__scene_hash(a, ha);
+        appm__scene_hash(b, hb);
+        CHECK_MSG(part_differs(ha, hb) == APPM__SH_LIGHTS, "a moved point light: part %d", part_differs(ha, hb));
+    }
     appm_scene_destroy(a);
     appm_scene_destroy(b);
 }
@@ -642,6 +744,7 @@ int main(void)
         test_scene_hash(s);
     }
     test_point_light();
+    test_edits();
     test_config_tripwire();
     appm_scene_destroy(s);
     appm_scene_destroy(other);

@@ -13,6 +13,8 @@
  *     (the sanitizer build turns out-of-bounds reads into failures);
  *   - warnings arrive through the log callback once per kind and file;
  *   - the MTL -> material table and the `.scene` statements, field by field;
+ *   - a `.scene` with its OBJ and MTL from memory is the scene read from the
+ *     files (same hash, same image), and takes nothing from disk;
  *   - the locale-free number parser, accepted and rejected forms.
  *
  * Fixtures live in tests/fixtures/ (each named after what it exercises); files
@@ -1261,6 +1263,131 @@ static void test_bare_obj_camera(void)
     appm_scene_destroy(s);
 }
 
+/* ---- .scene + OBJ + MTL from memory ---------------------------------------------- */
+
+/* The whole file at path (malloc'ed, *len bytes), or NULL. */
+static char *read_whole(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    char *buf = NULL;
+    long n;
+    *len = 0;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0 &&
+        (buf = (char *)malloc((size_t)n + 1)) != NULL && fread(buf, 1, (size_t)n, f) == (size_t)n)
+        *len = (size_t)n;
+    fclose(f);
+    return buf;
+}
+
+/* The image of 2 appm passes at 16 x 12 (malloc'ed), or NULL. */
+static float *render_small(const appm_scene *s)
+{
+    appm_config c;
+    appm_renderer *r;
+    appm_image img;
+    float *out = NULL;
+    appm_config_init(&c);
+    c.width = 16;
+    c.height = 12;
+    c.photons = 2000;
+    c.threads = 1;
+    r = check_renderer(s, &c);
+    if (r && check_passes(r, 2)) {
+        appm_renderer_image(r, &img);
+        out = (float *)malloc(sizeof(float) * 3 * 16 * 12);
+        if (out) memcpy(out, img.rgb, sizeof(float) * 3 * 16 * 12);
+    }
+    appm_renderer_destroy(r);
+    return out;
+}
+
+/* appm_scene_load_memory with the texts of scenes/cornell-sphere.scene, its
+ * OBJ and its MTL is the scene appm_scene_load reads from the files: the same
+ * counts, the same scene hash in all five parts (geometry, materials, normals,
+ * lights, and the .scene's camera, not a framed one), the same image.  Names
+ * are matched as appm_scene_load would open them, and nothing comes from disk:
+ * a mesh missing from the files is an error even where the file exists, a
+ * missing MTL the default material with a warning. */
+static void test_scene_memory(void)
+{
+    const char *paths[3] = {"scenes/cornell-sphere.scene", "scenes/CornellBox-Sphere.obj",
+                            "scenes/CornellBox-Sphere.mtl"};
+    char *text[3];
+    size_t len[3], k;
+    appm_memory_file files[2];
+    appm_scene *disk = NULL, *mem = NULL;
+    appm_scene_info a, b;
+    appm_diag d;
+    logbuf lb;
+    float *ia = NULL, *ib = NULL;
+    for (k = 0; k < 3; ++k) text[k] = read_whole(paths[k], &len[k]);
+    if (!text[0] || !text[1] || !text[2]) {
+        CHECK_MSG(0, "cannot read the Cornell box files");
+        goto done;
+    }
+    files[0].name = "scenes/CornellBox-Sphere.obj";
+    files[0].text = text[1];
+    files[0].len = len[1];
+    files[1].name = "scenes/CornellBox-Sphere.mtl";
+    files[1].text = text[2];
+    files[1].len = len[2];
+    CHECK(appm_scene_load(paths[0], NULL, &disk, &d) == APPM_OK);
+    CHECK_MSG(appm_scene_load_memory(text[0], len[0], paths[0], files, 2, NULL, &mem, &d) == APPM_OK, "%s: %s",
+              d.file, d.message);
+    if (disk && mem) {
+        uint64_t ha[APPM__SH_PARTS], hb[APPM__SH_PARTS];
+        appm_scene_get_info(disk, &a);
+        appm_scene_get_info(mem, &b);
+        CHECK(a.triangles == b.triangles && disk->nmat == mem->nmat && a.lights_area == b.lights_area);
+        CHECK(b.width == 512 && b.height == 512 && !mem->cam.framed);
+        CHECK_NEAR(mem->cam.fov_deg, 39.31, 0.0);
+        appm__scene_hash(disk, ha);
+        appm__scene_hash(mem, hb);
+        for (k = 0; k < APPM__SH_PARTS; ++k) CHECK_MSG(ha[k] == hb[k], "scene hash part %d differs", (int)k);
+        ia = render_small(disk);
+        ib = render_small(mem);
+        CHECK(ia && ib && memcmp(ia, ib, sizeof(float) * 3 * 16 * 12) == 0);
+    }
+    appm_scene_destroy(mem);
+    mem = NULL;
+    /* without a folder in the name, the names as written in the files */
+    files[0].name = "CornellBox-Sphere.obj";
+    files[1].name = "CornellBox-Sphere.mtl";
+    CHECK(appm_scene_load_memory(text[0], len[0], "cornell-sphere.scene", files, 2, NULL, &mem, &d) == APPM_OK);
+    appm_scene_destroy(mem);
+    mem = NULL;
+    /* the mesh is on disk at scenes/CornellBox-Sphere.obj, but not among the files */
+    CHECK(appm_scene_load_memory(text[0], len[0], paths[0], files, 2, NULL, &mem, &d) == APPM_ERR_IO && !mem);
+    CHECK(d.line == 3 && strstr(d.message, "cannot open mesh 'scenes/CornellBox-Sphere.obj'") != NULL);
+    /* the MTL missing: the default material, with a warning (and a light, since nothing emits then) */
+    files[0].name = "scenes/CornellBox-Sphere.obj";
+    memset(&lb, 0, sizeof lb);
+    {
+        static const char lit[] = "mesh CornellBox-Sphere.obj\nenvironment 1 1 1\n";
+        appm_config c;
+        appm_config_init(&c);
+        c.log = log_fn;
+        c.log_user = &lb;
+        CHECK(appm_scene_load_memory(lit, strlen(lit), "scenes/lit.scene", files, 1, &c, &mem, &d) == APPM_OK);
+    }
+    CHECK(log_count(&lb, "cannot open material library 'scenes/CornellBox-Sphere.mtl'") == 1);
+    if (mem) {
+        appm_scene_get_info(mem, &b);
+        CHECK(mem->nmat == 1 && b.lights_area == 0);
+    }
+    appm_scene_destroy(mem);
+    mem = NULL;
+    CHECK(appm_scene_load_memory(NULL, 0, "x.scene", files, 1, NULL, &mem, &d) == APPM_ERR_INVALID_ARG && !mem);
+    CHECK(appm_scene_load_memory(text[0], len[0], "x.scene", NULL, 2, NULL, &mem, &d) == APPM_ERR_INVALID_ARG);
+    CHECK(appm_scene_load_memory(text[0], len[0], "x.scene", NULL, 0, NULL, &mem, &d) == APPM_ERR_IO);
+done:
+    for (k = 0; k < 3; ++k) free(text[k]);
+    free(ia);
+    free(ib);
+    appm_scene_destroy(disk);
+}
+
 /* ---- the number parser ----------------------------------------------------------- */
 
 static int num(const char *text, double *v) { return appm__parse_number(text, text + strlen(text), v); }
@@ -1373,6 +1500,7 @@ int main(void)
     test_scene_malformed();
     test_scene_trailing_tokens();
     test_bare_obj_camera();
+    test_scene_memory();
     test_bom();
     return check_finish();
 }

@@ -15,6 +15,9 @@
  *     SplitMix64 finaliser, and the seeded streams' first values (integers, so
  *     they must be identical everywhere; computed on x86-64);
  *   - the locale-free number parser on a few exact values;
+ *   - the checkpoint's scene hash of two small scenes read from files against
+ *     the values from x86-64 (only values as read enter it, so a checkpoint
+ *     resumes on every machine);
  *   - a tiny render of a closed emissive box read from files (a furnace: every
  *     wall has Ke = Kd = 0.5, so the radiance is 1 everywhere): the image mean
  *     within a tolerance of 1, and of the reference machine's mean when
@@ -314,6 +317,51 @@ static void test_numbers(void)
     }
 }
 
+/* ---- The checkpoint's scene hash ------------------------------------------- */
+
+/* The five parts of appm.c 12.2's scene hash of two small scenes read from
+ * files - smooth triangles (vn), a glossy material whose Kd + Ks is scaled,
+ * a spot light, a lens, an explicit camera; and a mesh with a point light and
+ * the camera the loader frames - must be the values of x86-64 on every
+ * machine: otherwise a checkpoint would not resume there.  (Values computed on
+ * x86-64; they change only with what the hash covers, and then the checkpoint
+ * format version changes too.) */
+static void test_scene_hash(void)
+{
+    static const uint64_t want[2][APPM__SH_PARTS] = {
+        {0xf5af553141b6f6ebull, 0x93b0885205f9a440ull, 0xe7f8a0594b5ba4e1ull, 0x3bdccbfde664aebcull,
+         0xebd6a7b3ae61853dull},
+        {0xf5af553141b6f6ebull, 0x93b0885205f9a440ull, 0xe7f8a0594b5ba4e1ull, 0x1932ef62bd6b0895ull,
+         0xa61d1a3c8796c2c1ull}};
+    static const char *const names[2] = {"smooth.scene", "framed.scene"};
+    int k, j;
+    CHECK(check_write_file(check_path("portable", "smooth.mtl"),
+                           "newmtl gloss\nKd 0.7 0.5 0.3\nKs 0.6 0.3 0.1\nNs 37.5\nnewmtl floor\nKd 0.3 0.6 0.9\n"));
+    CHECK(check_write_file(check_path("portable", "smooth.obj"),
+                           "mtllib portable-smooth.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0.3 1\nv -1 0.1 1\nv 0 1.7 0.2\n"
+                           "vn 0.3 1 -0.1\nvn -0.2 0.9 0.35\nvn 0.11 0.7 0.71\nusemtl floor\nf 1//1 2//2 3//3 4//1\n"
+                           "usemtl gloss\nf 1//3 3//2 5//1\nf 2 5 4\n"));
+    CHECK(check_write_file(check_path("portable", "smooth.scene"),
+                           "mesh portable-smooth.obj\ncamera eye 0.3 2.1 3.7 target 0.1 0.4 -0.2 up 0.1 1 0 fov 37.3\n"
+                           "lens aperture 0.05 focus 3.3\nimage 40 30\n"
+                           "light spot position 0.7 3 1.1 target 0 0 0.2 intensity 9 8 7 cone 33.3 falloff 7.7\n"));
+    CHECK(check_write_file(check_path("portable", "framed.scene"),
+                           "mesh portable-smooth.obj\nlight point position 0.3 2.9 0.7 intensity 3 4 5\n"));
+    for (k = 0; k < 2; ++k) {
+        appm_scene *s = NULL;
+        appm_diag d;
+        uint64_t h[APPM__SH_PARTS];
+        CHECK_MSG(appm_scene_load(check_path("portable", names[k]), NULL, &s, &d) == APPM_OK, "%s:%u: %s", d.file,
+                  d.line, d.message);
+        if (!s) continue;
+        appm__scene_hash(s, h);
+        for (j = 0; j < APPM__SH_PARTS; ++j)
+            CHECK_MSG(h[j] == want[k][j], "%s: the scene hash's part %d is 0x%016llx, x86-64's 0x%016llxull",
+                      names[k], j, (unsigned long long)h[j], (unsigned long long)want[k][j]);
+        appm_scene_destroy(s);
+    }
+}
+
 /* ---- A tiny render ---------------------------------------------------------- */
 
 /* The cube [-1,1]^3, every face counter-clockwise seen from inside. */
@@ -451,6 +499,7 @@ int main(void)
     test_file_bytes();
     test_rng();
     test_numbers();
+    test_scene_hash();
     test_render();
     return check_finish();
 }

@@ -17,6 +17,8 @@ number of passes (appm with the qmc sampler, ppm with the random one).  Then it 
   * the statistics (passes, photons) and that the estimated error was plotted;
   * the maps: appm's radius, variance and Laplacian maps drawn, ppm's Laplacian
     absent (it keeps none);
+  * with camera=scene, the page's render of cornell-sphere.scene (the .scene with
+    the OBJ and MTL it names, from memory) against `appm render` of that .scene;
   * no exception and no console error in the page or its workers;
 and saves screenshots: build/web/classroom.png and .jpg (the README's picture), and
 build/web/default.png (the page as it opens).
@@ -232,9 +234,9 @@ def read_pfm(path):
     return w, h, out
 
 
-def native(method, passes, threads=None, size=SIZE, seed=SEED, sampler="qmc"):
-    path = os.path.join(OUT, "native-%s-%s-seed%d.pfm" % (method, sampler, seed))
-    cmd = [os.path.join(ROOT, "appm"), "render", os.path.join(ROOT, "scenes", SCENE + ".obj"),
+def native(method, passes, threads=None, size=SIZE, seed=SEED, sampler="qmc", scene=SCENE + ".obj"):
+    path = os.path.join(OUT, "native-%s-%s-%s-seed%d.pfm" % (scene, method, sampler, seed))
+    cmd = [os.path.join(ROOT, "appm"), "render", os.path.join(ROOT, "scenes", scene),
            "--size", "%dx%d" % (size, size), "--seed", str(seed), "--passes", str(passes),
            "--method", method, "--sampler", sampler, "-q", "-o", path]
     if threads:
@@ -330,6 +332,34 @@ def run_test(browser, base):
             f.write(base64.b64decode(shot["data"]))
         check(os.path.getsize(path) > 10000, "screenshot %s (%d bytes)"
               % (os.path.relpath(path, ROOT), os.path.getsize(path)))
+
+
+def run_scene_camera(browser, base, size=64, passes=8):
+    """camera=scene: the page loads cornell-sphere.scene with the OBJ and MTL it names
+    (appm_scene_load_memory), so its image is `appm render scenes/cornell-sphere.scene`,
+    not the render of the bare OBJ with its framed camera."""
+    ref = native("appm", passes, size=size, scene="cornell-sphere.scene")[0]
+    noise = rms_difference(read_pfm(ref)[2], read_pfm(native("appm", passes, size=size, seed=SEED + 1,
+                                                             scene="cornell-sphere.scene")[0])[2])
+    framed = read_pfm(native("appm", passes, size=size)[0])[2]
+    url = "%s/index.html?test=1&scene=%s&size=%d&passes=%d&seed=%d&methods=appm:qmc&camera=scene" % (
+        base, SCENE, size, passes, SEED)
+    sid = open_page(browser, url)
+    result = wait_result(browser, sid, 60)
+    if not check(result is not None and "error" not in result,
+                 "camera=scene: the page rendered cornell-sphere.scene (%s)" % (result or {}).get("error", "")):
+        return
+    side = result["sides"][0]
+    w, h, same, n, rms, rel = compare(side, ref)
+    got = struct.unpack("<%df" % (3 * w * h), base64.b64decode(side["linear"]))
+    check(rms <= NOISE_FRACTION * noise,
+          "camera=scene: against `appm render scenes/cornell-sphere.scene`, RMS difference %.3g <= 1/200 "
+          "of the seed-to-seed noise %.3g (%d of %d values bit-identical)" % (rms, noise, same, n))
+    far = rms_difference(got, framed)
+    check(far > 3 * noise, "camera=scene: not the framed camera of the bare OBJ (RMS difference %.3g > "
+          "3 x the noise, %.3g)" % (far, 3 * noise))
+    browser.send("Target.closeTarget", {"targetId": browser.send("Target.getTargetInfo", session=sid)
+                                        ["targetInfo"]["targetId"]})
 
 
 def state(browser, sid):
@@ -430,6 +460,7 @@ def main():
             run_bench(browser, base, *n)
         else:
             run_test(browser, base)
+            run_scene_camera(browser, base)
             run_default_page(browser, base)
             errors = page_errors(browser.events)
             check(not errors, "no exception or console error in the pages and their workers%s"

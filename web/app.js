@@ -8,7 +8,8 @@
  * waits, and the difference never exceeds one pass.
  *
  * A URL such as index.html?test=1&scene=CornellBox-Sphere&size=64&passes=16&seed=7
- * &methods=appm,ppm runs those settings to that pass count and leaves the result
+ * &methods=appm,ppm[&camera=scene] runs those settings to that pass count (with
+ * the camera of the scene's .scene file) and leaves the result
  * in window.appmTest (tests/web.py reads it in headless Chromium).
  */
 'use strict';
@@ -111,7 +112,7 @@ function readSettings() {
   }
   var stop = Math.max(0, +$('stop').value || 0);
   return {
-    scene: $('scene').value, width: size, height: size,
+    scene: $('scene').value, sceneCamera: $('scenecam').checked, width: size, height: size,
     seed: Math.max(0, Math.floor(+$('seed').value || 0)),
     equal: $('equal').value,
     stopPasses: $('stopunit').value === 'passes' ? stop : 0,
@@ -138,10 +139,17 @@ function fetchText(url) {
   });
 }
 
+// CornellBox-Empty-RG -> cornell-empty-rg.scene: the .scene file of scenes/ that frames
+// the box with its own camera (the OBJ alone gets one framing its bounding sphere).
+function sceneFile(name) { return 'cornell-' + name.replace(/^CornellBox-/, '').toLowerCase() + '.scene'; }
+
 function loadScene(name) {
   if (sceneCache[name]) return Promise.resolve(sceneCache[name]);
-  return Promise.all([fetchText('scenes/' + name + '.obj'), fetchText('scenes/' + name + '.mtl')])
-    .then(function (t) { return (sceneCache[name] = { obj: t[0], mtl: t[1], name: name + '.obj' }); });
+  return Promise.all([fetchText('scenes/' + name + '.obj'), fetchText('scenes/' + name + '.mtl'),
+                      fetchText('scenes/' + sceneFile(name))])
+    .then(function (t) {
+      return (sceneCache[name] = { obj: t[0], mtl: t[1], name: name + '.obj', scene: t[2] });
+    });
 }
 
 /* ---- A run: workers and their schedule ------------------------------------------ */
@@ -184,7 +192,11 @@ function makeSide(r, i, s, scene) {
                stats: null, lastPass: 0, lastPictures: 0, history: [], view: r.views[i] };
   w.onmessage = function (e) { if (run === r) onWorkerMessage(r, side, e.data); };
   w.onerror = function (e) { if (run === r) reportError('worker ' + 'ABC'[i], e.message || 'failed'); };
-  w.postMessage({ type: 'load', obj: scene.obj, mtl: scene.mtl, name: scene.name });
+  if (r.settings.sceneCamera)
+    w.postMessage({ type: 'load', scene: scene.scene, sceneName: sceneFile(r.settings.scene), obj: scene.obj,
+                    objName: scene.name, mtl: scene.mtl, mtlName: r.settings.scene + '.mtl' });
+  else
+    w.postMessage({ type: 'load', obj: scene.obj, mtl: scene.mtl, name: scene.name });
   w.postMessage({ type: 'start', opts: { method: s.method, sampler: s.sampler, width: r.settings.width,
     height: r.settings.height, photons: s.photons, radiusFactor: s.radiusFactor, alpha: s.alpha,
     seed: r.settings.seed } });
@@ -516,6 +528,7 @@ function applyTestParams() {
   if (params.get('size')) { option($('size'), params.get('size'), params.get('size'), true); }
   if (params.get('seed')) $('seed').value = params.get('seed');
   if (params.get('equal')) $('equal').value = params.get('equal');
+  $('scenecam').checked = params.get('camera') === 'scene';
   $('stop').value = params.get('passes') || '16';
   $('stopunit').value = 'passes';
   // methods=appm,ppm:random  (a method per setting, optionally :sampler)

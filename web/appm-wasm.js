@@ -2,7 +2,7 @@
  *
  * Used by worker.js (one instance per Web Worker).  Plain script, no modules, so
  * that a classic worker can importScripts() it.  The library does no file I/O
- * here: the scene comes in as OBJ and MTL text.  The few WASI functions that the
+ * here: the scene comes in as OBJ and MTL text, with or without a .scene text.  The few WASI functions that the
  * C library links still need an import each; all but the clock answer ENOSYS.
  */
 'use strict';
@@ -70,6 +70,15 @@ var AppmWasm = (function () {
     var o = this.put(obj), m = this.put(mtl), n = this.put(name || 'scene.obj');
     var s = this.x.web_load(o[0], o[1], m[0], m[1], n[0]);
     this.x.web_free(o[0]); this.x.web_free(m[0]); this.x.web_free(n[0]);
+    if (s !== 0) throw new Error(this.error());
+  };
+
+  // Loads a .scene text with the OBJ and MTL it names (objName, mtlName: the names its mesh
+  // and mtllib lines give), so that the .scene's camera and lights are used.
+  AppmWasm.prototype.loadScene = function (scene, name, obj, objName, mtl, mtlName) {
+    var t = [this.put(scene), this.put(name), this.put(obj), this.put(objName), this.put(mtl), this.put(mtlName)];
+    var s = this.x.web_load_scene(t[0][0], t[0][1], t[1][0], t[2][0], t[2][1], t[3][0], t[4][0], t[4][1], t[5][0]);
+    for (var k = 0; k < t.length; ++k) this.x.web_free(t[k][0]);
     if (s !== 0) throw new Error(this.error());
   };
 

@@ -1,8 +1,10 @@
 /* web/shim.c - the few entry points the browser page needs, over appm's public API.
  *
  * Built with appm.c for wasm32-wasi by `make web` (no threads, no file I/O: the
- * scene arrives as OBJ and MTL text from JavaScript, through
- * appm_scene_load_obj_memory, which frames the camera as for a bare .obj).
+ * scene arrives as text from JavaScript - OBJ and MTL through
+ * appm_scene_load_obj_memory, which frames the camera as for a bare .obj, or a
+ * .scene with the OBJ and MTL it names through appm_scene_load_memory, which
+ * takes the .scene's camera and lights).
  * `make test-web` checks its pixels against `appm render` of the same .obj.
  *
  * One instance holds one scene and one renderer: the page runs one Web Worker,
@@ -67,18 +69,44 @@ static void web_drop_renderer(void)
     W.npix = 0;
 }
 
+static void web_drop_scene(void)
+{
+    web_drop_renderer();
+    appm_scene_destroy(W.scene);
+    W.scene = NULL;
+    W.error[0] = '\0';
+}
+
 /* Replaces the scene (and drops the renderer) by the OBJ/MTL texts given;
  * returns the appm_status (0: ok; otherwise web_error() says why). */
 WEB_EXPORT(web_load)
 int web_load(const char *obj, unsigned obj_len, const char *mtl, unsigned mtl_len, const char *name)
 {
     appm_status s;
-    web_drop_renderer();
-    appm_scene_destroy(W.scene);
-    W.scene = NULL;
-    W.error[0] = '\0';
+    web_drop_scene();
     s = appm_scene_load_obj_memory(obj, obj_len, mtl_len ? mtl : NULL, mtl_len, name, NULL,
                                    &W.scene, &W.diag);
+    if (s != APPM_OK) web_set_error(s, &W.diag);
+    return (int)s;
+}
+
+/* The same from a .scene text (named `name`) and the OBJ and MTL texts that
+ * its `mesh` line and the OBJ's `mtllib` line name (obj_name, mtl_name, as
+ * written there): the scene gets the .scene's camera and lights. */
+WEB_EXPORT(web_load_scene)
+int web_load_scene(const char *scene, unsigned scene_len, const char *name, const char *obj, unsigned obj_len,
+                   const char *obj_name, const char *mtl, unsigned mtl_len, const char *mtl_name)
+{
+    appm_memory_file files[2];
+    appm_status s;
+    web_drop_scene();
+    files[0].name = obj_name;
+    files[0].text = obj;
+    files[0].len = obj_len;
+    files[1].name = mtl_name;
+    files[1].text = mtl;
+    files[1].len = mtl_len;
+    s = appm_scene_load_memory(scene, scene_len, name, files, 2, NULL, &W.scene, &W.diag);
     if (s != APPM_OK) web_set_error(s, &W.diag);
     return (int)s;
 }

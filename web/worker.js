@@ -1,7 +1,9 @@
 /* worker.js - one appm renderer in a Web Worker, so that passes never block the page.
  *
  * Messages in (from the page):
- *   {type: 'load', obj, mtl, name}       the scene, as OBJ and MTL text
+ *   {type: 'load', obj, mtl, name}       the scene, as OBJ and MTL text (camera framed)
+ *   {type: 'load', scene, sceneName, obj, objName, mtl, mtlName}
+ *                                        the same with the .scene naming them (its camera)
  *   {type: 'start', opts}                a new renderer (opts: method, sampler, width,
  *                                        height, photons, radiusFactor, alpha, seed)
  *   {type: 'pass', pictures, exposure}   one pass; pictures: send the image and maps too
@@ -52,7 +54,8 @@ function handle(msg) {
   var t = [];
   switch (msg.type) {
   case 'load':
-    appm.load(msg.obj, msg.mtl, msg.name);
+    if (msg.scene) appm.loadScene(msg.scene, msg.sceneName, msg.obj, msg.objName, msg.mtl, msg.mtlName);
+    else appm.load(msg.obj, msg.mtl, msg.name);
     self.postMessage({ type: 'loaded' });
     break;
   case 'start':

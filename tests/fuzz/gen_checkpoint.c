@@ -68,10 +68,10 @@ int main(int argc, char **argv)
                 forge(buf, n, 32, 0xFFFFFFFFu, 4); /* width */
                 bad |= put(argv[1], "err-appm-width-2e32.ckpt", buf, n);
                 forge(buf, n, 32, 4, 4);
-                forge(buf, n, 132, 0x7FF8000000000000ull, 8); /* r1 = NaN */
+                forge(buf, n, 164, 0x7FF8000000000000ull, 8); /* r1 = NaN */
                 bad |= put(argv[1], "err-appm-nan-radius.ckpt", buf, n);
-                forge(buf, n, 132, 0, 8);
-                forge(buf, n, 204, 0xFFFFFFFFu, 4); /* pixel field count */
+                forge(buf, n, 164, 0, 8);
+                forge(buf, n, 236, 0xFFFFFFFFu, 4); /* pixel field count */
                 bad |= put(argv[1], "err-appm-field-count.ckpt", buf, n);
             }
             free(buf);

@@ -554,7 +554,7 @@ static appm_status fuzz__scene_from_buffer(const char *buf, size_t len, const ch
                                            fuzz_env *e, appm_scene **out)
 {
     appm__diag_clear(&e->diag);
-    return appm__scene_load(path, APPM__TEXT_SCENE, buf, len, NULL, 0, &e->cfg, out, &e->diag);
+    return appm__scene_load(path, APPM__TEXT_SCENE, buf, len, NULL, 0, NULL, 0, &e->cfg, out, &e->diag);
 }
 
 /* Absolute `mesh` paths become relative (to a folder that does not exist). */
