@@ -917,9 +917,12 @@ static void appm__sampler_photon(appm__sampler *s, const appm__sobol_tab *tab, u
  * still spread over its surface and directions, a subset of one net rather
  * than an independent pairing), and the pixel with the point on the light
  * that shades what it sees (a soft shadow is a 4-D integral over both).  Their
- * extra dimensions are Joe-Kuo's 5 and 6, whose 2-D projections with 1-4 are
- * not (0,2)-nets, so nothing that was stratified before loses: the pixel, the
- * position and the direction keep dims 1-4.  One index shuffle per group.
+ * extra dimensions are Joe-Kuo's 5 and 6: each is 1-D stratified, and their
+ * 2-D projections, with each other and with 1-4, have t <= 3 up to 2^12 points
+ * (t_sampler), not 0.  The pixel, the position and the direction keep dims
+ * 1-4; the point on the light at vertex 0 trades its (0,2)-net in a group of
+ * its own for the coupling with the pixel (t = 1-3 between the two, not
+ * independent), and one index shuffle less per eye path.
  * The masks say which coordinates the caller will read (the others are 0).  In
  * random mode each call draws all its numbers from the stream, in the order of
  * the output array (the order of every earlier version), whatever the mask. */

@@ -213,8 +213,10 @@ typedef enum appm_direct {
 } appm_direct;
 
 /* Where the numbers of every path come from (appm.c, section 2.3).
- *   QMC: a randomized low-discrepancy sequence (Owen-scrambled Sobol', padded)
- *     in every dimension: pixel, lens, light choice, point on the light, BSDF
+ *   QMC: a randomized low-discrepancy sequence (Owen-scrambled Sobol' in
+ *     padded groups of 4 or 6 dimensions; the photon's light choice joins its
+ *     emission, the first light point its pixel) in every dimension: pixel,
+ *     lens, light choice, point on the light, BSDF
  *     direction, Fresnel choice, Russian roulette, photon emission and every
  *     photon bounce (the first 8 vertices of a path; PCG beyond).  The photons
  *     of all passes form one low-discrepancy set.  Stateless: a sample is a

@@ -3,7 +3,7 @@
  *
  *   1. Sobol' itself: the direction numbers recomputed from Joe and Kuo's
  *      primitive polynomials and initial m_k; the first points (in Gray-code
- *      order, as published) of dimensions 1-4; dimension 1 is the radical
+ *      order, as published) of dimensions 1-6; dimension 1 is the radical
  *      inverse in base 2.
  *   2. The fast path (tables, folded bit reversals) equals the definition
  *      owen(sobol(owen(index, s0), d), s_d), for random indices and keys.
