@@ -29,6 +29,8 @@
 # cannot render (a spot light seen through glass): there a long ppm render
 # (alpha 2/3, 32768 passes, two seeds), whose own bias is not subtracted.
 # SAMPLER_SCENES="name ..." restricts the run to some of the scenes below.
+# SAMPLER_COST_ONLY=1 measures the cost again and rewrites the tables from the
+# renders already in SAMPLER_OUT (which are deterministic; the cost is not).
 # Results: bench/out/sampler/{results.csv,sampler.md} (or SAMPLER_OUT).
 set -u
 APPM=${APPM:-./appm}
@@ -97,6 +99,7 @@ cost() {
 scene() { # NAME SCENE SIZE
     echo "scene $1"
     cost "$1" "$2" "$3"
+    [ -n "$costonly" ] && return 0
     for seed in $seeds; do
         one "$1" "$2" "$3" qmc "$seed" "$APPM" --sampler qmc
         one "$1" "$2" "$3" random "$seed" "$APPM" --sampler random
@@ -104,15 +107,22 @@ scene() { # NAME SCENE SIZE
     done
 }
 
-echo "scene,sampler,seed,passes,seconds,relmse,est_relerr,ref_mse,log,cpu_s" > "$out/results.csv"
+costonly=${SAMPLER_COST_ONLY:-}
+if [ -z "$costonly" ]; then
+    echo "scene,sampler,seed,passes,seconds,relmse,est_relerr,ref_mse,log,cpu_s" > "$out/results.csv"
+    rm -f "$out/regions.csv"
+fi
 echo "scene,sampler,round,passes,cpu_s" > "$out/cost.csv"
-rm -f "$out/regions.csv"
-{
-    echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
-    echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
-    echo "machine: $(uname -sm), $(nproc 2>/dev/null) cores; threads: $threads"
-    echo "passes: $passes; seeds: $seeds; cost: $cpasses passes, 1 thread, $crounds rounds"
-} > "$out/meta.txt"
+if [ -n "$costonly" ] && [ -f "$out/meta.txt" ]; then
+    echo "cost measured again: $(date -u '+%Y-%m-%d %H:%M UTC'), commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $cpasses passes, 1 thread, $crounds rounds" >> "$out/meta.txt"
+else
+    {
+        echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+        echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+        echo "machine: $(uname -sm), $(nproc 2>/dev/null) cores; threads: $threads"
+        echo "passes: $passes; seeds: $seeds; cost: $cpasses passes, 1 thread, $crounds rounds"
+    } > "$out/meta.txt"
+fi
 cat "$out/meta.txt"
 
 # name, scene file, size, reference passes, reference method, extra reference options
