@@ -24,7 +24,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler fuzz web \
+.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-bounds fuzz web \
         test-web clean
 
 all: appm
@@ -84,6 +84,9 @@ bench-bvh:
 
 bench-sampler: appm
 	sh bench/sampler.sh
+
+bench-bounds: appm
+	sh bench/bounds.sh
 
 fuzz:
 	sh tests/fuzz/run.sh

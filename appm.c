@@ -5864,6 +5864,15 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      RHI 4, kappa 2: 0.00795 (378 passes); RHI 2: 0.00736 (417); RHI 1.5:
  *      0.00723 (428); RHI 2, kappa 1.5: 0.00708 (435).  A wide radius in flat
  *      regions buys little once other noise dominates, and costs gather time.
+ *      Re-measured with the low-discrepancy sampler (algorithm.md 4.13; 64x64,
+ *      3 CPU-s, medians of 3 seeds, four scenes): RHI 2 is still the best of
+ *      1, 1.5, 2, 4, 8, 32 on three scenes, 5 % behind RHI 1.5 on the sphere
+ *      box, and at equal passes RHI 8 is no better than 2: the bias
+ *      mu2 r^2 dI / 2 with dI measured at h does not see what a wide kernel
+ *      reaches, so where dI_h ~ 0 the formula's radius lies beyond the bound
+ *      and the bound decides (clamped= 0.64 - 0.96 after 64 passes).  The bias
+ *      at the radius used, (4/3) (I_r - I_{r/2}) from the same gather, was
+ *      tried in place of dI_h and lost 4 - 58 %: its noise reads as bias.
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */

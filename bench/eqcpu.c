@@ -1,14 +1,15 @@
 /* bench/eqcpu.c - one equal-CPU-time run, for comparisons on a shared machine.
  *
  *   cc -std=c99 -O2 bench/eqcpu.c appm.c -o bench/eqcpu -lm -pthread
- *   bench/eqcpu SCENE METHOD SEED BUDGET RADIUS ALPHA REF_A.pfm REF_B.pfm MASK [REF_MSE]
+ *   bench/eqcpu SCENE METHOD SEED BUDGET RADIUS ALPHA REF_A.pfm REF_B.pfm MASK [REF_MSE [SIZE]]
  *
- * Renders 64x64 with 2 threads, pass after pass, until the process has used
+ * Renders SIZE x SIZE (default 64x64) with 2 threads, pass after pass, until the process has used
  * BUDGET seconds of CPU time (both threads counted): wall time is meaningless
- * when other jobs share the cores.  RADIUS and ALPHA 0 mean the defaults.  The
+ * when other jobs share the cores.  A negative BUDGET renders -BUDGET passes
+ * (equal passes instead of equal time: what a radius costs apart from time).  RADIUS and ALPHA 0 mean the defaults.  The
  * reference is the mean of two independent renders A and B, and its own noise
  * E[(A - B)^2] / 4 is subtracted from the measured MSE (or, with A and B the same
- * file, REF_MSE from its .mse file).  "rmse_masked" counts only the pixels whose
+ * file, REF_MSE from its .mse file; REF_MSE 0: from A and B).  "rmse_masked" counts only the pixels whose
  * reference luminance is below MASK (a light seen directly excluded). */
 #include "../appm.h"
 #include <stdio.h>
@@ -28,11 +29,14 @@ int main(int argc, char **argv)
     appm_method_parse(argv[2], &cfg.method);
     cfg.seed = (uint64_t)atoll(argv[3]); budget = atof(argv[4]); cfg.radius = atof(argv[5]); cfg.alpha = atof(argv[6]);
     mask = atof(argv[9]);
-    cfg.width = cfg.height = 64; cfg.threads = 2;
+    cfg.width = cfg.height = argc > 11 ? (uint32_t)atoi(argv[11]) : 64; cfg.threads = 2;
     if (appm_image_read_pfm(argv[7], NULL, &A, &d) != APPM_OK || appm_image_read_pfm(argv[8], NULL, &B, &d) != APPM_OK) { printf("%s\n", d.message); return 1; }
     if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) { printf("%s\n", d.message); return 1; }
     c0 = clock();
-    while ((double)(clock() - c0) / CLOCKS_PER_SEC < budget) appm_renderer_pass(r);
+    if (budget < 0) /* -BUDGET passes instead: the same comparison at equal passes */
+        while (appm_renderer_stats(r, &st), (double)st.passes < -budget) appm_renderer_pass(r);
+    else
+        while ((double)(clock() - c0) / CLOCKS_PER_SEC < budget) appm_renderer_pass(r);
     appm_renderer_image(r, &img); appm_renderer_stats(r, &st);
     n = (size_t)img.width * img.height;
     for (i = 0; i < n; ++i) {
@@ -41,7 +45,7 @@ int main(int argc, char **argv)
         rl = lum(ref);
         for (c = 0; c < 3; ++c) {
             double e = img.rgb[3 * i + c] - ref[c], q = A.rgb[3 * i + c] - B.rgb[3 * i + c];
-            double q2 = argc > 10 ? atof(argv[10]) : q * q / 4; /* the reference's noise */
+            double q2 = argc > 10 && atof(argv[10]) > 0 ? atof(argv[10]) : q * q / 4; /* the reference's noise */
             se += e * e; nse += q2; na++;
             if (rl < mask) { sm += e * e; nsm += q2; nm++; }
         }
