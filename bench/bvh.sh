@@ -1,8 +1,8 @@
 #!/bin/sh
 # bench/bvh.sh [OUTDIR] - the BVH benchmark (bench/bvh_bench.c) in three builds:
-# the default one (SSE2 on x86-64, NEON on aarch64: the 4-wide tree), one with
-# -march=native (AVX2 where the CPU has it: the 8-wide tree) and the scalar one
-# (-DAPPM_SIMD=0).  Each run compares the binary tree, the wide tree with the
+# the default one (SSE2 on x86-64, NEON on aarch64: each 8-wide node in two
+# 4-wide halves), one with -march=native (AVX2 where the CPU has it: a node in
+# one 8-wide vector) and the scalar one (-DAPPM_SIMD=0).  Each run compares the binary tree, the wide tree with the
 # scalar box test and the wide tree with the build's SIMD test, interleaved, as
 # medians of 3 (see bench/bvh_bench.c).  Writes OUTDIR/bvh.md (default bench/out).
 # BVH_RAYS (default 1000000) and BVH_SIZE (photon pass image side, default 512)

@@ -9,9 +9,11 @@
 #   equal passes  the RMSE after the last pass, and the error estimate
 #                 est_relerr against the true relative error sqrt(relmse)
 #   cost          processor seconds per pass (cpu_s of the summary), 1 thread,
-#                 SAMPLER_COST_PASSES passes (default 48), 3 rounds of qmc and
-#                 random interleaved: on a shared machine wall time measures
-#                 the other users too
+#                 SAMPLER_COST_PASSES passes (default 48), SAMPLER_COST_ROUNDS
+#                 rounds (default 3) of qmc and random interleaved: on a shared
+#                 machine wall time measures the other users too, and even
+#                 processor time moves by several per cent from run to run
+#                 (instruction counts, which it does not measure, are steadier)
 #   equal time    equal processor time: the sampler that costs more per pass is
 #                 read from its log at the pass where it has spent what the
 #                 other spent on all of its passes
@@ -27,6 +29,8 @@
 # cannot render (a spot light seen through glass): there a long ppm render
 # (alpha 2/3, 32768 passes, two seeds), whose own bias is not subtracted.
 # SAMPLER_SCENES="name ..." restricts the run to some of the scenes below.
+# SAMPLER_COST_ONLY=1 measures the cost again and rewrites the tables from the
+# renders already in SAMPLER_OUT (which are deterministic; the cost is not).
 # Results: bench/out/sampler/{results.csv,sampler.md} (or SAMPLER_OUT).
 set -u
 APPM=${APPM:-./appm}
@@ -34,6 +38,7 @@ CC=${CC:-cc}
 threads=${BENCH_THREADS:-2}
 passes=${SAMPLER_PASSES:-256}
 cpasses=${SAMPLER_COST_PASSES:-48}
+crounds=${SAMPLER_COST_ROUNDS:-3}
 seeds=${SAMPLER_SEEDS:-"1 2 3"}
 out=${SAMPLER_OUT:-bench/out/sampler}
 mkdir -p "$out" bench/ref
@@ -77,9 +82,11 @@ one() {
     fi
 }
 
-# cost NAME SCENE SIZE: processor seconds per pass on 1 thread, 3 interleaved rounds
+# cost NAME SCENE SIZE: processor seconds per pass on 1 thread, interleaved rounds
 cost() {
-    for round in 1 2 3; do
+    round=0
+    while [ "$round" -lt "$crounds" ]; do
+        round=$((round + 1))
         for smp in qmc random; do
             line=$($APPM render "$2" --size "$3" --threads 1 --passes "$cpasses" --sampler "$smp" -q \
                 -o "$out/cost.pfm" | tail -n 1)
@@ -92,6 +99,7 @@ cost() {
 scene() { # NAME SCENE SIZE
     echo "scene $1"
     cost "$1" "$2" "$3"
+    [ -n "$costonly" ] && return 0
     for seed in $seeds; do
         one "$1" "$2" "$3" qmc "$seed" "$APPM" --sampler qmc
         one "$1" "$2" "$3" random "$seed" "$APPM" --sampler random
@@ -99,15 +107,22 @@ scene() { # NAME SCENE SIZE
     done
 }
 
-echo "scene,sampler,seed,passes,seconds,relmse,est_relerr,ref_mse,log,cpu_s" > "$out/results.csv"
+costonly=${SAMPLER_COST_ONLY:-}
+if [ -z "$costonly" ]; then
+    echo "scene,sampler,seed,passes,seconds,relmse,est_relerr,ref_mse,log,cpu_s" > "$out/results.csv"
+    rm -f "$out/regions.csv"
+fi
 echo "scene,sampler,round,passes,cpu_s" > "$out/cost.csv"
-rm -f "$out/regions.csv"
-{
-    echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
-    echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
-    echo "machine: $(uname -sm), $(nproc 2>/dev/null) cores; threads: $threads"
-    echo "passes: $passes; seeds: $seeds; cost: $cpasses passes, 1 thread, 3 rounds"
-} > "$out/meta.txt"
+if [ -n "$costonly" ] && [ -f "$out/meta.txt" ]; then
+    echo "cost measured again: $(date -u '+%Y-%m-%d %H:%M UTC'), commit $(git rev-parse --short HEAD 2>/dev/null || echo unknown), $cpasses passes, 1 thread, $crounds rounds" >> "$out/meta.txt"
+else
+    {
+        echo "date: $(date -u '+%Y-%m-%d %H:%M UTC')"
+        echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+        echo "machine: $(uname -sm), $(nproc 2>/dev/null) cores; threads: $threads"
+        echo "passes: $passes; seeds: $seeds; cost: $cpasses passes, 1 thread, $crounds rounds"
+    } > "$out/meta.txt"
+fi
 cat "$out/meta.txt"
 
 # name, scene file, size, reference passes, reference method, extra reference options

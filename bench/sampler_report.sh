@@ -58,7 +58,8 @@ END {
             add(sc SUBSEP "random" SUBSEP "trmse", at_pass(r, pr)); add(sc SUBSEP "random" SUBSEP "tpass", pr)
         }
     }
-    print "**Cost and equal time.** Processor milliseconds per pass (1 thread, median of 3 rounds), and"
+    print "**Cost and equal time.** Processor milliseconds per pass (1 thread, median of the rounds in"
+    print "the header), and"
     print "the RMSE at equal processor time: the dearer sampler read at the pass where it has spent what"
     printf "the other spent on all its passes (RMS over the %d passes up to there; medians over the\n", W
     print "seeds; ratio < 1: qmc better):"

@@ -3,15 +3,16 @@
  *
  *   1. Sobol' itself: the direction numbers recomputed from Joe and Kuo's
  *      primitive polynomials and initial m_k; the first points (in Gray-code
- *      order, as published) of dimensions 1-4; dimension 1 is the radical
+ *      order, as published) of dimensions 1-6; dimension 1 is the radical
  *      inverse in base 2.
  *   2. The fast path (tables, folded bit reversals) equals the definition
  *      owen(sobol(owen(index, s0), d), s_d), for random indices and keys.
  *   3. Stratification, which holds for every seed by construction: every
  *      aligned block of 2^k points of coordinates (0, 1) of a group puts exactly
  *      one point in each elementary interval [a/2^p, (a+1)/2^p) x [b/2^q,
- *      (b+1)/2^q), p + q = k (a (0,k,2)-net); coordinates 2 and 3 are 1-D
- *      stratified.  Through the path samplers: the photons of one pass (M a
+ *      (b+1)/2^q), p + q = k (a (0,k,2)-net); coordinates 2 to 5 are 1-D
+ *      stratified, and the pairs with the joint dimensions 4, 5 keep the t of
+ *      the unscrambled sequence.  Through the path samplers: the photons of one pass (M a
  *      power of two) are such a net in their emission position, and so are the
  *      2M photons of two passes of one chain (Keller et al. 2011); a pixel's
  *      first 2^k passes of one chain are a net in the pixel - with one chain
@@ -33,7 +34,7 @@
 #define CHECK_GAMMA_Q
 #include "check.h"
 
-static uint32_t g_tab[APPM__SOBOL_TAB_SIZE];
+static appm__sobol_tab g_tab;
 
 /* ---- Chi-square (gamma_q from check.h, as t_sampling.c) --------------------- */
 
@@ -50,7 +51,7 @@ static double chi2_uniform(const long *obs, int cells, long n)
 /* ---- 1. Sobol' ------------------------------------------------------------------ */
 
 /* Direction numbers from (s, a, m_1..m_s) by the Bratley-Fox recurrence, for
- * dimensions 2-4 of new-joe-kuo-6.21201 (written out again here, from the
+ * dimensions 2-6 of new-joe-kuo-6.21201 (written out again here, from the
  * published file, not from appm.c). */
 static void joe_kuo_dirs(unsigned s, unsigned a, const unsigned *m0, uint32_t *v)
 {
@@ -76,17 +77,25 @@ static uint32_t radical_inverse2(uint32_t i)
 
 static void test_sobol(void)
 {
-    static const unsigned m2[] = {1}, m3[] = {1, 3}, m4[] = {1, 3, 1};
-    /* the first points of dimensions 1-4 in Gray-code order, as the Joe-Kuo
+    static const unsigned m2[] = {1}, m3[] = {1, 3}, m4[] = {1, 3, 1}, m5[] = {1, 1, 1}, m6[] = {1, 1, 3, 3};
+    /* the first points of dimensions 1-6 in Gray-code order, as the Joe-Kuo
      * generator prints them (point 0 is the origin) */
-    static const double first[8][4] = {{0, 0, 0, 0},
-                                       {0.5, 0.5, 0.5, 0.5},
-                                       {0.75, 0.25, 0.25, 0.25},
-                                       {0.25, 0.75, 0.75, 0.75},
-                                       {0.375, 0.375, 0.625, 0.875},
-                                       {0.875, 0.875, 0.125, 0.375},
-                                       {0.625, 0.125, 0.875, 0.625},
-                                       {0.125, 0.625, 0.375, 0.125}};
+    static const double first[16][6] = {{0, 0, 0, 0, 0, 0},
+                                        {0.5, 0.5, 0.5, 0.5, 0.5, 0.5},
+                                        {0.75, 0.25, 0.25, 0.25, 0.75, 0.75},
+                                        {0.25, 0.75, 0.75, 0.75, 0.25, 0.25},
+                                        {0.375, 0.375, 0.625, 0.875, 0.375, 0.125},
+                                        {0.875, 0.875, 0.125, 0.375, 0.875, 0.625},
+                                        {0.625, 0.125, 0.875, 0.625, 0.625, 0.875},
+                                        {0.125, 0.625, 0.375, 0.125, 0.125, 0.375},
+                                        {0.1875, 0.3125, 0.9375, 0.4375, 0.5625, 0.3125},
+                                        {0.6875, 0.8125, 0.4375, 0.9375, 0.0625, 0.8125},
+                                        {0.9375, 0.0625, 0.6875, 0.1875, 0.3125, 0.5625},
+                                        {0.4375, 0.5625, 0.1875, 0.6875, 0.8125, 0.0625},
+                                        {0.3125, 0.1875, 0.3125, 0.5625, 0.9375, 0.4375},
+                                        {0.8125, 0.6875, 0.8125, 0.0625, 0.4375, 0.9375},
+                                        {0.5625, 0.4375, 0.0625, 0.8125, 0.1875, 0.6875},
+                                        {0.0625, 0.9375, 0.5625, 0.3125, 0.6875, 0.1875}};
     uint32_t v[32], i;
     unsigned d, k, bad = 0;
     for (k = 0; k < 32; ++k) bad += appm__sobol_v[0][k] != (1u << (31 - k));
@@ -96,9 +105,13 @@ static void test_sobol(void)
     for (k = 0; k < 32; ++k) bad += appm__sobol_v[2][k] != v[k];
     joe_kuo_dirs(3, 1, m4, v);
     for (k = 0; k < 32; ++k) bad += appm__sobol_v[3][k] != v[k];
+    joe_kuo_dirs(3, 2, m5, v);
+    for (k = 0; k < 32; ++k) bad += appm__sobol_v[4][k] != v[k];
+    joe_kuo_dirs(4, 1, m6, v);
+    for (k = 0; k < 32; ++k) bad += appm__sobol_v[5][k] != v[k];
     CHECK_MSG(bad == 0, "%u direction numbers differ from the Joe-Kuo recurrence", bad);
-    for (i = 0; i < 8; ++i)
-        for (d = 0; d < 4; ++d) {
+    for (i = 0; i < 16; ++i)
+        for (d = 0; d < 6; ++d) {
             double x = appm__sobol(i ^ (i >> 1), d) / 4294967296.0;
             CHECK_MSG(x == first[i][d], "Sobol' point %u (Gray code) dim %u: %.9g, published %.9g", i, d + 1,
                       x, first[i][d]);
@@ -126,9 +139,9 @@ static void test_fast_path(void)
         uint32_t index = n < 1000 ? n : appm__rng_u32(&rng);
         unsigned group = appm__rng_u32(&rng) % 40;
         uint64_t g = appm__mix64(key ^ ((uint64_t)(group + 1) * 0xD1B54A32D192ED03ull));
-        float u[4];
-        appm__ld(g_tab, key, appm__reverse32(index), group, 15u, u);
-        for (d = 0; d < 4; ++d) {
+        float u[6];
+        appm__ld(&g_tab, key, appm__reverse32(index), group, 63u, u);
+        for (d = 0; d < 6; ++d) {
             uint32_t i = owen_ref(index, (uint32_t)g);
             uint32_t x = owen_ref(appm__sobol(i, d), (uint32_t)(g >> 32) + d * 0x9E3779B9u);
             bad += u[d] != (float)(x >> 8) * (1.0f / 16777216.0f);
@@ -139,10 +152,11 @@ static void test_fast_path(void)
     CHECK_MSG(bad_range == 0, "%u coordinates outside [0, 1)", bad_range);
     /* the mask computes exactly the coordinates asked for */
     {
-        float a[4] = {-1, -1, -1, -1}, b[4];
-        appm__ld(g_tab, 77, appm__reverse32(5), 2, 5u, a);
-        appm__ld(g_tab, 77, appm__reverse32(5), 2, 15u, b);
-        CHECK(a[0] == b[0] && a[1] == -1.0f && a[2] == b[2] && a[3] == -1.0f);
+        float a[6] = {-1, -1, -1, -1, -1, -1}, b[6];
+        appm__ld(&g_tab, 77, appm__reverse32(5), 2, 37u, a);
+        appm__ld(&g_tab, 77, appm__reverse32(5), 2, 63u, b);
+        CHECK(a[0] == b[0] && a[1] == -1.0f && a[2] == b[2] && a[3] == -1.0f && a[4] == -1.0f &&
+              a[5] == b[5]);
     }
 }
 
@@ -175,7 +189,33 @@ static int is_strat1(const float *x, unsigned k)
     return 1;
 }
 
-static float g_x[4][1u << 13];
+/* The quality parameter t of the n = 2^k points (x[i], y[i]): the least t for
+ * which every elementary interval of area 2^(t-k) holds exactly 2^t points
+ * (t = 0: a (0,k,2)-net).  x, y as 32-bit fractions (unscrambled Sobol') when
+ * xi, yi are given, else from the floats. */
+static unsigned net_t(const float *x, const float *y, const uint32_t *xi, const uint32_t *yi, unsigned k)
+{
+    static unsigned short seen[1u << 13];
+    unsigned t, p, i, n = 1u << k;
+    for (t = 0; t < k; ++t) {
+        unsigned m = k - t, ok = 1;
+        for (p = 0; p <= m && ok; ++p) {
+            memset(seen, 0, sizeof seen[0] << m);
+            for (i = 0; i < n && ok; ++i) {
+                unsigned a = xi ? (p ? xi[i] >> (32 - p) : 0) : (unsigned)(x[i] * (float)(1u << p));
+                unsigned b = yi ? (m - p ? yi[i] >> (32 - (m - p)) : 0)
+                                : (unsigned)(y[i] * (float)(1u << (m - p)));
+                ok = ++seen[(a << (m - p)) | b] <= (1u << t);
+            }
+        }
+        if (ok) return t;
+    }
+    return k;
+}
+
+static float g_x[6][1u << 13];
+static uint32_t g_xi[2][1u << 13];
+
 
 static void test_stratification(void)
 {
@@ -186,19 +226,60 @@ static void test_stratification(void)
             for (s = 0; s < 4; ++s) {
                 unsigned group = key * 3 + 1, n = 1u << k;
                 for (i = 0; i < n; ++i) {
-                    float u[4];
-                    appm__ld(g_tab, appm__mix64(key), appm__reverse32(starts[s] + i), group, 15u, u);
-                    for (d = 0; d < 4; ++d) g_x[d][i] = u[d];
+                    float u[6];
+                    appm__ld(&g_tab, appm__mix64(key), appm__reverse32(starts[s] + i), group, 63u, u);
+                    for (d = 0; d < 6; ++d) g_x[d][i] = u[d];
                 }
                 nets++;
-                if (!is_net(g_x[0], g_x[1], k) || !is_strat1(g_x[2], k) || !is_strat1(g_x[3], k)) {
+                if (!is_net(g_x[0], g_x[1], k) || !is_strat1(g_x[2], k) || !is_strat1(g_x[3], k) ||
+                    !is_strat1(g_x[4], k) || !is_strat1(g_x[5], k)) {
                     if (bad++ < 5)
                         fprintf(stderr, "  key %u, block of 2^%u at %u: not stratified\n", key, k, starts[s]);
                 }
             }
     CHECK_MSG(bad == 0, "%u of %u aligned blocks not stratified", bad, nets);
-    printf("  %u aligned blocks of 2^0 .. 2^13 points: (0,k,2)-nets in (0, 1), stratified in 2 and 3\n",
+    printf("  %u aligned blocks of 2^0 .. 2^13 points: (0,k,2)-nets in (0, 1), stratified in 2 .. 5\n",
            nets);
+}
+
+/* The joint dimensions of the six-dimensional groups (the photon's light choice
+ * with its emission): the 2-D projections that pair
+ * dimension 4 or 5 with another are no (0,k,2)-nets, but an aligned block of
+ * 2^k points of a shuffled, scrambled group is a digital shift of Sobol's first
+ * 2^k, scrambled, and neither changes t: every projection of every block has
+ * the t of the unscrambled sequence, computed here by brute force.  (With
+ * padded groups these pairs would be independent, and t would be random.) */
+static void test_joint_dims(void)
+{
+    static const unsigned pairs[][2] = {{0, 4}, {1, 4}, {2, 4}, {3, 4}, {0, 5}, {1, 5}, {4, 5}};
+    unsigned k, pr, i, key, tmax = 0, bad = 0, blocks = 0;
+    for (k = 1; k <= 12; ++k)
+        for (pr = 0; pr < sizeof pairs / sizeof pairs[0]; ++pr) {
+            unsigned a = pairs[pr][0], b = pairs[pr][1], n = 1u << k, t0;
+            for (i = 0; i < n; ++i) {
+                g_xi[0][i] = appm__sobol(i, a);
+                g_xi[1][i] = appm__sobol(i, b);
+            }
+            t0 = net_t(NULL, NULL, g_xi[0], g_xi[1], k);
+            if (t0 > tmax) tmax = t0;
+            for (key = 0; key < 3; ++key) {
+                uint32_t start = (key * 0x9E3779B9u) & ~(n - 1u);
+                for (i = 0; i < n; ++i) {
+                    float u[6];
+                    appm__ld(&g_tab, appm__mix64(key + 100), appm__reverse32(start + i), key, 63u, u);
+                    g_x[0][i] = u[a];
+                    g_x[1][i] = u[b];
+                }
+                blocks++;
+                if (net_t(g_x[0], g_x[1], NULL, NULL, k) != t0 && bad++ < 5)
+                    fprintf(stderr, "  dims %u, %u, 2^%u points: t = %u, unscrambled %u\n", a + 1, b + 1, k,
+                            net_t(g_x[0], g_x[1], NULL, NULL, k), t0);
+            }
+        }
+    CHECK_MSG(bad == 0, "%u of %u blocks changed their t under scrambling", bad, blocks);
+    /* the pairs are not independent: some t stays well below that of random points */
+    CHECK_MSG(tmax <= 3, "Joe-Kuo dims 5, 6 with 1-4: t up to %u (at most 3 expected up to 2^12)", tmax);
+    printf("  joint dimensions: %u blocks keep the unscrambled t (at most %u)\n", blocks, tmax);
 }
 
 /* Photon emission through the path sampler: pass j's M = 2^k photons, and the
@@ -216,12 +297,21 @@ static void photon_nets(unsigned K)
             for (i = 0; i < M; ++i) {
                 appm__sampler smp;
                 float u[5];
-                appm__sampler_photon(&smp, g_tab, K, 42, j + pass2 * K, M, i);
+                appm__sampler_photon(&smp, &g_tab, K, 42, j + pass2 * K, M, i);
                 appm__smp_emit(&smp, 7u, u);
                 g_x[0][pass2 * M + i] = u[1];
                 g_x[1][pass2 * M + i] = u[2];
                 g_x[2][pass2 * M + i] = u[3];
+                g_x[3][pass2 * M + i] = u[0];
             }
+        /* the light choice is stratified: a light of power share P gets
+         * floor(M P) or ceil(M P) of a pass's photons, whatever the scramble */
+        {
+            unsigned below = 0;
+            for (i = 0; i < M; ++i) below += g_x[3][i] < 0.3f;
+            CHECK_MSG(below == (unsigned)(0.3 * M) || below == (unsigned)(0.3 * M) + 1,
+                      "K = %u, pass %u: %u of %u photons picked the light of share 0.3", K, j, below, M);
+        }
         CHECK_MSG(is_net(g_x[0], g_x[1], k), "K = %u, pass %u: its %u photons are not a net", K, j, M);
         CHECK_MSG(is_net(g_x[0], g_x[1], k + 1), "K = %u, passes %u and %u: their photons are not a net", K,
                   j, j + K);
@@ -231,12 +321,18 @@ static void photon_nets(unsigned K)
     for (i = 0; i < 256; ++i) {
         appm__sampler smp;
         float u[4];
-        appm__sampler_eye(&smp, g_tab, K, 3, 1 + (uint64_t)i * K, 1234);
+        float v[3];
+        appm__sampler_eye(&smp, &g_tab, K, 3, 1 + (uint64_t)i * K, 1234);
         appm__smp_camera(&smp, 1, u);
         g_x[0][i] = u[0];
         g_x[1][i] = u[1];
         g_x[2][i] = u[2];
+        appm__smp_light(&smp, 0, 2u, v);
+        g_x[3][i] = v[1];
+        g_x[4][i] = v[2];
     }
+    CHECK_MSG(is_net(g_x[3], g_x[4], 8),
+              "K = %u: a pixel's 256 passes of one chain are not a net on the light at vertex 0", K);
     CHECK_MSG(is_net(g_x[0], g_x[1], 8),
               "K = %u: a pixel's 256 passes of one chain are not a net in the pixel", K);
     CHECK_MSG(is_strat1(g_x[2], 8),
@@ -265,12 +361,12 @@ static void test_randomization(void)
         float a[4], b[4];
         uint64_t kk = appm__mix64(key * 7919u + 1);
         /* point 0 of each sequence (the least random index) */
-        appm__ld(g_tab, kk, appm__reverse32(0), 0, 1u, a);
+        appm__ld(&g_tab, kk, appm__reverse32(0), 0, 1u, a);
         h1[(int)(a[0] * NB)]++;
         /* groups 2 and 3 of one point: light and BSDF numbers of one vertex */
         for (i = 0; i < 4; ++i) {
-            appm__ld(g_tab, kk, appm__reverse32(i), 2, 3u, a);
-            appm__ld(g_tab, kk, appm__reverse32(i), 3, 3u, b);
+            appm__ld(&g_tab, kk, appm__reverse32(i), 2, 3u, a);
+            appm__ld(&g_tab, kk, appm__reverse32(i), 3, 3u, b);
             h2[(int)(a[0] * NB) * NB + (int)(b[0] * NB)]++;
             h3[(int)(a[1] * NB) * NB + (int)(b[1] * NB)]++;
         }
@@ -288,8 +384,8 @@ static void test_randomization(void)
     for (i = 0; i < 1000; ++i) {
         appm__sampler s1, s2;
         float u1[2], u2[2];
-        appm__sampler_eye(&s1, g_tab, 4, 9, 1, i);
-        appm__sampler_eye(&s2, g_tab, 4, 9, 2, i);
+        appm__sampler_eye(&s1, &g_tab, 4, 9, 1, i);
+        appm__sampler_eye(&s2, &g_tab, 4, 9, 2, i);
         appm__smp_camera(&s1, 0, u1);
         appm__smp_camera(&s2, 0, u2);
         same += u1[0] == u2[0] && u1[1] == u2[1];
@@ -320,7 +416,7 @@ static void test_streams(void)
     CHECK_MSG(bad == 0, "random mode: %u numbers differ from the PCG stream", bad);
     /* qmc past the layout: the same stream */
     bad = 0;
-    appm__sampler_eye(&smp, g_tab, 1, 17, 5, 99);
+    appm__sampler_eye(&smp, &g_tab, 1, 17, 5, 99);
     appm__rng_seed(&ref, 17, 5, APPM__DOMAIN_EYE, 99);
     appm__smp_bsdf(&smp, APPM__LD_VERTICES, 15u, u);
     for (k = 0; k < 3; ++k) bad += u[k] != appm__rng_float(&ref);
@@ -467,9 +563,10 @@ static void test_renders(void)
 
 int main(void)
 {
-    appm__sobol_table(g_tab);
+    appm__sobol_table(&g_tab);
     test_sobol();
     test_fast_path();
+    test_joint_dims();
     test_stratification();
     test_photon_nets();
     test_randomization();

@@ -42,14 +42,14 @@ static appm__rng g_rng;
  * calls a point - every sampler tested with it takes two numbers. */
 static int g_qmc;
 static uint64_t g_qmc_calls;
-static uint32_t g_tab[APPM__SOBOL_TAB_SIZE];
+static appm__sobol_tab g_tab;
 
 static float uf(void)
 {
     float u[4];
     uint64_t c = g_qmc_calls++;
     if (!g_qmc) return appm__rng_float(&g_rng);
-    appm__ld(g_tab, 0x5EED5EEDull, appm__reverse32((uint32_t)(c / 2)), 3, 3u, u);
+    appm__ld(&g_tab, 0x5EED5EEDull, appm__reverse32((uint32_t)(c / 2)), 3, 3u, u);
     return u[c % 2];
 }
 
@@ -951,7 +951,7 @@ int main(void)
     test_sphere(N);
     test_triangle(N);
     g_qmc = 1;
-    appm__sobol_table(g_tab);
+    appm__sobol_table(&g_tab);
     printf("the same, fed with the low-discrepancy sampler:\n");
     test_cosine(appm__v(0, 0, 1), N, "qmc: cosine around +z");
     test_cosine(appm__normalize(appm__v(0.3f, -0.8f, -0.52f)), N, "qmc: cosine around a tilted n");
