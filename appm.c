@@ -6293,6 +6293,16 @@ static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, 
     }
 }
 
+/* The per-pixel constants of the visit: 1/h and the luminance weights of
+ * lum(Psi), whose first factor is (0.2126 W f_x) gamma_x, as before. */
+static void appm__gather_consts(appm__gather *g)
+{
+    g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
+    g->qw[0] = 0.2126 * g->wf.x;
+    g->qw[1] = 0.7152 * g->wf.y;
+    g->qw[2] = 0.0722 * g->wf.z;
+}
+
 /* Photon p into g's sums if it lies within Rg2 = (reach)^2 of g->x (R2 = R^2):
  * the entry for callers that hold a photon but no query (the tests' toys). */
 APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
@@ -6301,10 +6311,8 @@ APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon
     float d2 = dx * dx + dy * dy + dz * dz, side[4];
     if (!(d2 < Rg2)) return;
     appm__photon_side(p, side);
-    g->qw[0] = 0.2126 * g->wf.x;
-    g->qw[1] = 0.7152 * g->wf.y;
-    g->qw[2] = 0.0722 * g->wf.z;
-    appm__gather_near(g, p, d2, R2, g->h > 0.0f ? 1.0 / g->h : 0.0, side);
+    appm__gather_consts(g);
+    appm__gather_near(g, p, d2, R2, g->ih, side);
 }
 
 static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
@@ -6322,10 +6330,7 @@ static void appm__gather_query(const appm__pmap *m, appm__gather *g)
     g->Rc2 = g->Rc * g->Rc;
     g->R2 = g->R * g->R;
     g->Rg2 = Rg * Rg;
-    g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
-    g->qw[0] = 0.2126 * g->wf.x; /* the product's first factor: (0.2126 W f_x) gamma_x, as before */
-    g->qw[1] = 0.7152 * g->wf.y;
-    g->qw[2] = 0.0722 * g->wf.z;
+    appm__gather_consts(g);
     g->map = m;
     appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
 }
