@@ -3269,7 +3269,7 @@ typedef struct appm__node { /* 32 bytes */
 
 typedef struct appm__wnode {
     float lo[3][APPM__BVH_W], hi[3][APPM__BVH_W];
-    uint32_t first[APPM__BVH_W]; /* interior child: its node; leaf: its first triangle */
+    uint32_t first[APPM__BVH_W]; /* interior child: its node; leaf: its first pack (scalar build: triangle) */
     uint32_t count[APPM__BVH_W]; /* leaf: its triangles; APPM__W_INNER; 0: no child */
 } appm__wnode;
 
@@ -3278,7 +3278,11 @@ typedef struct appm__wnode {
  * leaf child of a wide node names its first pack (first) and its triangles
  * (count, up to APPM__LEAF_MAX unless the binary build made a larger leaf);
  * its packs are consecutive, the last one padded with copies of its first
- * lane whose index is APPM__NO_TRI, so they are never reported. */
+ * lane whose index is APPM__NO_TRI, so they are never reported.  The scalar
+ * path of a SIMD build tests the leaf's triangles in appm_scene.tri, where
+ * they are consecutive too, from ptri[first]: a 4-byte entry per pack, 16 to a
+ * cache line, where reading the pack's index lane would cost a cache miss
+ * the scalar test has no other use for. */
 #ifndef APPM__LEAF_MAX
 #define APPM__LEAF_MAX 4
 #endif
