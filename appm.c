@@ -3264,7 +3264,12 @@ typedef struct appm__node { /* 32 bytes */
  * (lo[axis][child]), so one vector load fetches one bound of all children.
  * 128 bytes for W = 4 (two cache lines), 256 for W = 8.  A slot without a
  * child holds the inverted box lo = +inf, hi = -inf, which every ray misses
- * (its near distance is +inf on every axis), so no mask of used slots is kept. */
+ * (its near distance is +inf on every axis), so no mask of used slots is kept.
+ * Quantised child boxes (Ylitie, Karras and Laine 2017: per node an origin
+ * and a power-of-two step per axis, one byte per plane, rounded outward) would
+ * halve the node to 128 bytes, but on this project's benchmark the byte-to-float
+ * conversion cost more than the memory saved: closest hits 13 % slower with
+ * SSE2, no faster with AVX2, any-hit slower with both. */
 #define APPM__W_INNER UINT32_MAX /* count of an interior child */
 
 typedef struct appm__wnode {
