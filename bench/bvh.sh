@@ -6,7 +6,8 @@
 # scalar box test and the wide tree with the build's SIMD test, interleaved, as
 # medians of 3 (see bench/bvh_bench.c).  Writes OUTDIR/bvh.md (default bench/out).
 # BVH_RAYS (default 1000000) and BVH_SIZE (photon pass image side, default 512)
-# make it shorter.
+# make it shorter; BVH_ROUNDS (default 3) sets the rounds each median is taken
+# over (the wall-clock photon figures want 5 or more on a shared machine).
 set -u
 out=${1:-bench/out}
 CC=${CC:-cc}

@@ -8,7 +8,8 @@
  *   (add -mavx2 or -march=native for the 8-wide AVX2 tree, -DAPPM_SIMD=0 for
  *   the scalar build)
  *
- * Every figure is the median of 3 rounds; within a round the three traversals
+ * Every figure is the median of 3 rounds (BVH_ROUNDS=N in the environment:
+ * N rounds, 1 to 15; the wall-clock photon figures want 5 or more); within a round the three traversals
  * take turns every 10000 rays (photon passes: pass by pass), so a change in
  * the machine's load hits all of them alike, each on rays no other one has
  * just traced and after an untimed warm-up of its own (see trace()).
@@ -39,7 +40,7 @@
 #include <stdio.h>
 
 #define BUILDS 5
-#define ROUNDS 3
+#define ROUNDS_MAX 15
 #define NPATH 3
 
 static const int path_id[NPATH] = {APPM__BVH_BINARY, APPM__BVH_SCALAR, APPM__BVH_SIMD};
@@ -240,14 +241,19 @@ int main(int argc, char **argv)
     long nrays = argc > 2 ? atol(argv[2]) : 1000000L, i;
     const char *pscene = argc > 3 ? argv[3] : "scenes/cornell-sphere.scene";
     uint32_t size = argc > 4 ? (uint32_t)atol(argv[4]) : 512;
-    double closest[NPATH][ROUNDS], anyhit[NPATH][ROUNDS], ph1[NPATH][ROUNDS], ph2[NPATH][ROUNDS];
+    double closest[NPATH][ROUNDS_MAX], anyhit[NPATH][ROUNDS_MAX], ph1[NPATH][ROUNDS_MAX], ph2[NPATH][ROUNDS_MAX];
     double med[4][NPATH], checksum[NPATH], cs[NPATH], sec[NPATH], rate[NPATH], full_ms, bin_ms;
     long hits[NPATH], ahits[NPATH];
     appm_scene *s = load_mesh(mesh), *ps[NPATH];
     appm__v3 *orig, *dir;
     appm_diag d;
     appm__rng rng;
-    int k, round;
+    const char *env = getenv("BVH_ROUNDS");
+    int k, round, rounds = env ? atoi(env) : 3;
+    if (rounds < 1 || rounds > ROUNDS_MAX) {
+        fprintf(stderr, "bvh_bench: BVH_ROUNDS must be 1 to %d\n", ROUNDS_MAX);
+        return 1;
+    }
     if (!s) return 1;
     if (!time_builds(s, &full_ms, &bin_ms)) {
         fprintf(stderr, "bvh_bench: build failed\n");
@@ -275,7 +281,7 @@ int main(int argc, char **argv)
                           s->bmin.z + u3 * (s->bmax.z - s->bmin.z));
         dir[i] = appm__uniform_sphere(u4, u5);
     }
-    for (round = 0; round < ROUNDS; ++round) {
+    for (round = 0; round < rounds; ++round) {
         trace(s, orig, dir, nrays, 0, sec, hits, checksum);
         for (k = 0; k < NPATH; ++k) closest[k][round] = (double)nrays / sec[k];
         trace(s, orig, dir, nrays, 1, sec, ahits, cs);
@@ -286,19 +292,19 @@ int main(int argc, char **argv)
         for (k = 0; k < NPATH; ++k) ph2[k][round] = rate[k];
     }
     for (k = 0; k < NPATH; ++k) {
-        med[0][k] = median(closest[k], ROUNDS);
-        med[1][k] = median(anyhit[k], ROUNDS);
-        med[2][k] = median(ph1[k], ROUNDS);
-        med[3][k] = median(ph2[k], ROUNDS);
+        med[0][k] = median(closest[k], rounds);
+        med[1][k] = median(anyhit[k], rounds);
+        med[2][k] = median(ph1[k], rounds);
+        med[3][k] = median(ph2[k], rounds);
         printf("path=%s closest_per_s=%.0f anyhit_per_s=%.0f photon_per_s_1t=%.0f photon_per_s_2t=%.0f "
                "checksum=%.9g\n",
                path_name[k], med[0][k], med[1][k], med[2][k], med[3][k], checksum[k]);
     }
-    printf("simd=%s width=%d bvh_build_ms=%.2f binary_build_ms=%.2f build_ratio=%.3f closest_ratio=%.3f "
+    printf("rounds=%d simd=%s width=%d bvh_build_ms=%.2f binary_build_ms=%.2f build_ratio=%.3f closest_ratio=%.3f "
            "anyhit_ratio=%.3f photon_ratio_1t=%.3f photon_ratio_2t=%.3f scalar_closest_ratio=%.3f "
            "scalar_anyhit_ratio=%.3f triangles=%u nodes=%u wide_nodes=%u depth=%u hit_fraction=%.4f "
            "anyhit_fraction=%.4f sah_cost=%.2f\n",
-           APPM__SIMD_NAME, APPM__BVH_W, full_ms, bin_ms, full_ms / bin_ms, med[0][2] / med[0][0],
+           rounds, APPM__SIMD_NAME, APPM__BVH_W, full_ms, bin_ms, full_ms / bin_ms, med[0][2] / med[0][0],
            med[1][2] / med[1][0], med[2][2] / med[2][0], med[3][2] / med[3][0], med[0][1] / med[0][0],
            med[1][1] / med[1][0], s->ntri, s->nnode, s->nwnode, s->depth, (double)hits[0] / (double)nrays,
            (double)ahits[0] / (double)nrays, sah_cost(s));

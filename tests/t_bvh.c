@@ -464,6 +464,7 @@ static void wide_walk(const appm_scene *s, uint32_t ni, uint32_t depth, unsigned
         for (k = 0; k < (c + 3) / 4 * 4; ++k) {
             uint32_t t = s->pack[first + k / 4].tri[k % 4];
             if (k >= c ? t != APPM__NO_TRI : t != s->pack[first].tri[0] + k) ++*bad;
+            if (k % 4 == 0 && s->ptri[first + k / 4] != s->pack[first + k / 4].tri[0]) ++*bad;
         }
         first = s->pack[first].tri[0];
 #endif
