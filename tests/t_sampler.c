@@ -297,7 +297,7 @@ static void photon_nets(unsigned K)
             for (i = 0; i < M; ++i) {
                 appm__sampler smp;
                 float u[5];
-                appm__sampler_photon(&smp, &g_tab, K, 42, j + pass2 * K, M, i);
+                appm__sampler_photon(&smp, &g_tab, NULL, K, 42, j + pass2 * K, M, i);
                 appm__smp_emit(&smp, 7u, u);
                 g_x[0][pass2 * M + i] = u[1];
                 g_x[1][pass2 * M + i] = u[2];
@@ -409,7 +409,7 @@ static void test_streams(void)
     appm__smp_bsdf(&smp, 1, 15u, u);
     for (k = 0; k < 3; ++k) bad += u[k] != appm__rng_float(&ref);
     bad += appm__smp_rr(&smp, 1, 15u, u) != appm__rng_float(&ref);
-    appm__sampler_photon(&smp, NULL, 1, 17, 5, 1000, 321);
+    appm__sampler_photon(&smp, NULL, NULL, 1, 17, 5, 1000, 321);
     appm__rng_seed(&ref, 17, 5, APPM__DOMAIN_PHOTON, 321);
     appm__smp_emit(&smp, 0u, w);
     for (k = 0; k < 5; ++k) bad += w[k] != appm__rng_float(&ref);
