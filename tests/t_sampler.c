@@ -6,7 +6,8 @@
  *      order, as published) of dimensions 1-6; dimension 1 is the radical
  *      inverse in base 2.
  *   2. The fast path (tables, folded bit reversals) equals the definition
- *      owen(sobol(owen(index, s0), d), s_d), for random indices and keys.
+ *      owen(sobol(owen(index, s0), d), s_d), for random indices and keys; the
+ *      photon paths' shared cache of hashes and lookups changes no number.
  *   3. Stratification, which holds for every seed by construction: every
  *      aligned block of 2^k points of coordinates (0, 1) of a group puts exactly
  *      one point in each elementary interval [a/2^p, (a+1)/2^p) x [b/2^q,
@@ -339,6 +340,56 @@ static void photon_nets(unsigned K)
               "K = %u: a pixel's 256 passes of one chain are not stratified on the lens", K);
 }
 
+/* The cache the photon paths of one worker share (appm__ld_cache) changes no
+ * number: photon paths traced in turn through one cache, as a worker traces
+ * them, against the same paths without it, every coordinate of the emission and
+ * of every vertex's groups, across runs of 256 points (the cached lookups),
+ * across passes and chains (a new key), and across n = 2^32 (a new key in the
+ * middle of a pass: M = 2^31 - 1000 photons, point 2000 of pass 3 is n = 2^32). */
+static void test_photon_cache(void)
+{
+    static const struct {
+        unsigned chains;
+        uint64_t pass, M, i0;
+        unsigned n;
+    } runs[] = {{1, 1, 4096, 0, 1500}, {1, 2, 5000, 4000, 700}, {3, 7, 1000, 100, 900},
+                {1, 3, (1ull << 31) - 1000, 0, 5200}, {2, 5, 1024, 1000, 10}};
+    appm__ld_cache cache;
+    uint64_t key0 = 0, key1 = 0;
+    unsigned r, k, b, bad = 0, total = 0, masks[] = {63u, 3u, 12u, 15u, 7u, 16u, 8u, 48u};
+    cache.set = 0;
+    for (r = 0; r < sizeof runs / sizeof runs[0]; ++r)
+        for (k = 0; k < runs[r].n; ++k) {
+            appm__sampler a, c;
+            uint64_t i = runs[r].i0 + k;
+            float ua[6], uc[6];
+            int d;
+            appm__sampler_photon(&a, &g_tab, NULL, runs[r].chains, 9, runs[r].pass, runs[r].M, i);
+            appm__sampler_photon(&c, &g_tab, &cache, runs[r].chains, 9, runs[r].pass, runs[r].M, i);
+            bad += a.key != c.key || a.rindex != c.rindex;
+            if (r == 3 && k == 0) key0 = c.key;
+            if (r == 3 && k == runs[r].n - 1) key1 = c.key;
+            appm__smp_emit(&a, 7u, ua);
+            appm__smp_emit(&c, 7u, uc);
+            for (d = 0; d < 5; ++d) bad += ua[d] != uc[d];
+            total += 5;
+            for (b = 0; b < APPM__LD_VERTICES; ++b) {
+                /* a mask that varies from path to path, as the materials do */
+                unsigned m = masks[(k + b) % 8];
+                for (d = 0; d < 6; ++d) ua[d] = uc[d] = -1.0f;
+                appm__ld(&g_tab, a.key, a.rindex, APPM__G_BSDF(b), m, ua);
+                appm__smp_ld(&c, APPM__G_BSDF(b), m, uc);
+                for (d = 0; d < 6; ++d) bad += ua[d] != uc[d];
+                appm__ld(&g_tab, a.key, a.rindex, APPM__G_LIGHT(b), m, ua);
+                appm__smp_ld(&c, APPM__G_LIGHT(b), m, uc);
+                for (d = 0; d < 6; ++d) bad += ua[d] != uc[d];
+                total += 12;
+            }
+        }
+    CHECK_MSG(bad == 0, "%u of %u numbers differ with the photon cache", bad, total);
+    CHECK_MSG(key0 != key1, "the key did not change at n = 2^32");
+}
+
 static void test_photon_nets(void)
 {
     photon_nets(1);
@@ -569,6 +620,7 @@ int main(void)
     test_joint_dims();
     test_stratification();
     test_photon_nets();
+    test_photon_cache();
     test_randomization();
     test_streams();
     test_mean_var();
