@@ -17,7 +17,8 @@
  *      power of two) are such a net in their emission position, and so are the
  *      2M photons of two passes of one chain (Keller et al. 2011); a pixel's
  *      first 2^k passes of one chain are a net in the pixel - with one chain
- *      (the default) and with four.
+ *      (the default) and with four - and the choice at its first vertex is
+ *      stratified, jointly with the pixel at the t of unscrambled Sobol'.
  *   4. Randomization: over many keys one coordinate of one point is uniform, and
  *      coordinates of different groups (padding) are independent (chi-square
  *      tests, p > 0.001 each); chains differ.
@@ -290,7 +291,7 @@ static void photon_nets(unsigned K)
 {
     static const unsigned js[] = {1, 2, 3, 4, 9, 12, 17};
     const unsigned k = 10, M = 1u << k;
-    unsigned jj, i, pass2;
+    unsigned jj, i, pass2, other = 0;
     for (jj = 0; jj < sizeof js / sizeof js[0]; ++jj) {
         unsigned j = js[jj];
         if ((j - 1) / K % 2) continue; /* place 2q + 1: its pair is the pass before */
@@ -318,11 +319,12 @@ static void photon_nets(unsigned K)
                   j, j + K);
         CHECK_MSG(is_strat1(g_x[2], k + 1), "K = %u, passes %u and %u: u3 is not stratified", K, j, j + K);
     }
-    /* and a pixel's passes 1, 1 + K, 1 + 2K, ... (chain 0) in the pixel */
+    /* and a pixel's passes 1, 1 + K, 1 + 2K, ... (chain 0) in the pixel, and the
+     * choice at its first vertex (group 0, dim 4) jointly with the pixel */
     for (i = 0; i < 256; ++i) {
         appm__sampler smp;
         float u[4];
-        float v[3];
+        float v[3], w[4], x[6];
         appm__sampler_eye(&smp, &g_tab, K, 3, 1 + (uint64_t)i * K, 1234);
         appm__smp_camera(&smp, 1, u);
         g_x[0][i] = u[0];
@@ -331,13 +333,33 @@ static void photon_nets(unsigned K)
         appm__smp_light(&smp, 0, 2u, v);
         g_x[3][i] = v[1];
         g_x[4][i] = v[2];
+        appm__smp_bsdf(&smp, 0, 4u, w);
+        g_x[5][i] = w[2];
+        appm__ld(&g_tab, smp.key, smp.rindex, 0, 16u, x);
+        other += w[2] != x[4];
     }
+    CHECK_MSG(other == 0, "K = %u: %u first choices are not dim 4 of group 0", K, other);
     CHECK_MSG(is_net(g_x[3], g_x[4], 8),
               "K = %u: a pixel's 256 passes of one chain are not a net on the light at vertex 0", K);
     CHECK_MSG(is_net(g_x[0], g_x[1], 8),
               "K = %u: a pixel's 256 passes of one chain are not a net in the pixel", K);
     CHECK_MSG(is_strat1(g_x[2], 8),
               "K = %u: a pixel's 256 passes of one chain are not stratified on the lens", K);
+    CHECK_MSG(is_strat1(g_x[5], 8),
+              "K = %u: a pixel's 256 passes of one chain are not stratified in the first choice", K);
+    {
+        unsigned d, t, t0;
+        for (d = 0; d < 2; ++d) {
+            for (i = 0; i < 256; ++i) {
+                g_xi[0][i] = appm__sobol(i, d);
+                g_xi[1][i] = appm__sobol(i, 4);
+            }
+            t0 = net_t(NULL, NULL, g_xi[0], g_xi[1], 8);
+            t = net_t(g_x[d], g_x[5], NULL, NULL, 8);
+            CHECK_MSG(t == t0 && t <= 3, "K = %u: pixel %c and the first choice: t = %u, unscrambled %u", K,
+                      d ? 'y' : 'x', t, t0);
+        }
+    }
 }
 
 /* The cache the photon paths of one worker share (appm__ld_cache) changes no
