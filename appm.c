@@ -5733,6 +5733,19 @@ static int appm__stores_photons(const appm__material *m)
     return m->ns <= APPM__GATHER_NS || m->color.x > 0.0f || m->color.y > 0.0f || m->color.z > 0.0f;
 }
 
+/* Bit 3 of the photon sampler's mask after a bounce off m (appm__smp_bsdf): the
+ * roulette is asked for when the bounce's weight lowers the path's largest
+ * channel.  The weight of a diffuse or mirror bounce is the colour itself, so
+ * with every channel >= 1 (the white box) it never is, and glass has weight 1.
+ * A hint only: the roulette's number is the same either way. */
+static unsigned appm__photon_rr_dim(const appm__material *m)
+{
+    if (m->kind == APPM__MAT_DIELECTRIC) return 0u;
+    if (m->kind != APPM__MAT_GLOSSY && m->color.x >= 1.0f && m->color.y >= 1.0f && m->color.z >= 1.0f)
+        return 0u;
+    return 8u;
+}
+
 /* Traces photon path `index` (cache: shared by the paths the worker traces in
  * turn, appm__sampler_photon); returns 0 if the task's region is full. */
 static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
@@ -5777,9 +5790,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
             if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp)) return 0;
         }
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
-        /* the roulette: nearly always after a diffuse or mirror bounce (albedo < 1),
-         * rarely after glass (weight 1) */
-        dims = appm__bsdf_dims(m) | (m->kind != APPM__MAT_DIELECTRIC ? 8u : 0u);
+        dims = appm__bsdf_dims(m) | appm__photon_rr_dim(m);
         appm__smp_bsdf(&smp, segs - 1, dims, u3);
         if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs))
             break;
