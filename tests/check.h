@@ -95,6 +95,65 @@ static inline int check_write_file(const char *path, const char *text)
     return ok;
 }
 
+/* The whole of a file in a malloc'd buffer with a NUL after its *len bytes (so
+ * a text file is also a C string); NULL, *len = 0 when it cannot be read. */
+static inline unsigned char *check_read_file(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char *buf = NULL;
+    long n;
+    *len = 0;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0) {
+        buf = (unsigned char *)malloc((size_t)n + 1);
+        if (buf && fread(buf, 1, (size_t)n, f) == (size_t)n) {
+            buf[n] = 0;
+            *len = (size_t)n;
+        } else {
+            free(buf);
+            buf = NULL;
+        }
+    }
+    fclose(f);
+    return buf;
+}
+
+#define CHECK_PI 3.14159265358979323846
+
+/* The glossy lobe's albedo A(theta) of appm.c section 6.1,
+ * int (Ns+2)/(2 pi) cos^Ns(a) max(0, n.wi) dw at incidence theta (st = sin
+ * theta, ct = cos theta), integrated in the lobe's own frame: with
+ * t = cos^(Ns+1) a the lobe measure is uniform, (Ns+1)/(2 pi) cos^Ns a dw =
+ * dt dphi / (2 pi), so the albedo is (Ns+2)/(Ns+1) times the mean of
+ * max(0, n.wi) over (t, phi).  At fixed t, n.wi = A - B cos phi
+ * (A = cos a cos theta, B = sin a sin theta), whose positive part has the mean
+ * (A (pi - p0) + B sin p0) / pi, p0 = acos(A / B), with p0 / pi of the circle
+ * below the horizon; the t integral is a midpoint rule of n points on each side
+ * of t* = sin^(Ns+1) theta, where the horizon starts to cut.  *below (unless
+ * NULL): the share of lobe samples below the horizon. */
+static inline double check_lobe_quad(double ns, double st, double ct, int n, double *below)
+{
+    double ts = pow(st, ns + 1.0), sum = 0.0, out = 0.0;
+    int i, part;
+    for (part = 0; part < 2; ++part) {
+        double lo = part ? ts : 0.0, hi = part ? 1.0 : ts, h = (hi - lo) / n;
+        for (i = 0; i < n && h > 0.0; ++i) {
+            double t = lo + (i + 0.5) * h, ca = pow(t, 1.0 / (ns + 1.0)), sa = sqrt(fmax(0.0, 1.0 - ca * ca));
+            double A = ca * ct, B = sa * st, p0;
+            if (B <= fabs(A)) {
+                sum += (A > 0.0 ? A : 0.0) * h;
+                out += (A > 0.0 ? 0.0 : 1.0) * h;
+                continue;
+            }
+            p0 = acos(A / B);
+            sum += (A * (CHECK_PI - p0) + B * sin(p0)) / CHECK_PI * h;
+            out += p0 / CHECK_PI * h;
+        }
+    }
+    if (below) *below = out;
+    return (ns + 2.0) / (ns + 1.0) * sum;
+}
+
 /* An allocator that counts live bytes and fails allocation number `fail_at`
  * (1-based; 0 = never), the SQLite memdebug_fail idea. */
 typedef struct check_alloc {

@@ -133,26 +133,6 @@ static void test_wrapper(void)
 
 /* ---- scene loading ---------------------------------------------------------- */
 
-static char *slurp(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    char *buf;
-    long n;
-    *len = 0;
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    buf = (char *)malloc((size_t)n + 1);
-    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
-        free(buf);
-        buf = NULL;
-    }
-    fclose(f);
-    if (buf) *len = (size_t)n;
-    return buf;
-}
-
 /* Loads either a file (obj == NULL) or OBJ/MTL text, or (files != NULL) a
  * .scene text in obj with its two files, failing allocation 1, 2, ... until a
  * load succeeds. */
@@ -205,10 +185,10 @@ static void fail_each_load(const char *what, const char *path, const char *obj, 
 static void test_scene_loads(void)
 {
     size_t olen, mlen;
-    char *obj = slurp("scenes/CornellBox-Original.obj", &olen);
-    char *mtl = slurp("scenes/CornellBox-Original.mtl", &mlen);
+    char *obj = (char *)check_read_file("scenes/CornellBox-Original.obj", &olen);
+    char *mtl = (char *)check_read_file("scenes/CornellBox-Original.mtl", &mlen);
     size_t slen;
-    char *scene = slurp("scenes/cornell-original.scene", &slen);
+    char *scene = (char *)check_read_file("scenes/cornell-original.scene", &slen);
     fail_each_load("cornell-sphere.scene", "scenes/cornell-sphere.scene", NULL, 0, NULL, 0, NULL);
     fail_each_load("CornellBox-Glossy.obj", "scenes/CornellBox-Glossy.obj", NULL, 0, NULL, 0, NULL);
     CHECK(obj && mtl && scene);

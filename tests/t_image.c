@@ -30,26 +30,6 @@
 
 /* ---- helpers ------------------------------------------------------------- */
 
-static unsigned char *read_all(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    unsigned char *buf;
-    long n;
-    *len = 0;
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    buf = (unsigned char *)malloc((size_t)n + 1);
-    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
-        free(buf);
-        buf = NULL;
-    }
-    fclose(f);
-    if (buf) *len = (size_t)n;
-    return buf;
-}
-
 static int write_bytes(const char *path, const void *p, size_t n)
 {
     FILE *f = fopen(path, "wb");
@@ -165,7 +145,7 @@ static void test_pfm_round_trip(void)
     appm_image_free(NULL, &back);
     CHECK(back.rgb == NULL);
     /* The file itself: header, then the BOTTOM row first, in host order. */
-    raw = read_all(path, &len);
+    raw = check_read_file(path, &len);
     CHECK(raw != NULL);
     if (!raw) return;
     sprintf(head, "PF\n%d %d\n%s\n", W, H, host_little() ? "-1.0" : "1.0");
@@ -400,7 +380,7 @@ static void test_png(void)
     img.height = 2;
     img.rgb = px;
     CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
-    raw = read_all(path, &len);
+    raw = check_read_file(path, &len);
     CHECK(raw != NULL);
     if (raw) {
         png_info r = png_decode(raw, len);
@@ -436,7 +416,7 @@ static void test_png(void)
         img.rgb = big;
         path = check_path("image", "wide.png");
         CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
-        raw = read_all(path, &len);
+        raw = check_read_file(path, &len);
         CHECK(raw != NULL);
         if (raw) {
             png_info r = png_decode(raw, len);
@@ -479,7 +459,7 @@ static void test_ppm(void)
     img.height = 1;
     img.rgb = px;
     CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
-    raw = read_all(path, &len);
+    raw = check_read_file(path, &len);
     CHECK(raw && len == strlen("P6\n7 1\n255\n") + 21);
     if (raw && len == strlen("P6\n7 1\n255\n") + 21) {
         const unsigned char *p = raw + strlen("P6\n7 1\n255\n");
@@ -503,15 +483,15 @@ static void test_ppm(void)
         img.height = 2;
         img.rgb = q;
         CHECK(appm_image_write(path, &img, 2.0, &d) == APPM_OK);
-        raw = read_all(path, &len);
+        raw = check_read_file(path, &len);
         CHECK(raw && len == strlen(hd) + 12 && memcmp(raw + strlen(hd), want2, 12) == 0);
         free(raw);
         CHECK(appm_image_write(path, &img, 4.0, &d) == APPM_OK);
-        raw = read_all(path, &len);
+        raw = check_read_file(path, &len);
         CHECK(raw && len == strlen(hd) + 12 && memcmp(raw + strlen(hd), want4, 12) == 0);
         free(raw);
         CHECK(appm_image_write(path, &img, 0.0, &d) == APPM_OK);
-        raw = read_all(path, &len);
+        raw = check_read_file(path, &len);
         CHECK(raw && len == strlen(hd) + 12 && memcmp(raw + strlen(hd), want1, 12) == 0);
         free(raw);
         /* exposure must be a non-negative number */
@@ -561,14 +541,14 @@ static void test_write_failures(void)
     snprintf(tmp, sizeof tmp, "%s.tmp", keep);
     remove(tmp);
     CHECK(appm_image_write(keep, &img, 1.0, &d) == APPM_OK);
-    before = read_all(keep, &n1);
+    before = check_read_file(keep, &n1);
     {
         struct stat st;
         if (stat("/dev/full", &st) == 0 && S_ISCHR(st.st_mode) && symlink("/dev/full", tmp) == 0) {
             appm_status s = appm_image_write(keep, &other, 1.0, &d);
             CHECK_MSG(s == APPM_ERR_IO, "write to a full disk returned %d", (int)s);
             CHECK(lstat(tmp, &st) != 0); /* no "<name>.tmp" left behind */
-            after = read_all(keep, &n2);
+            after = check_read_file(keep, &n2);
             CHECK(before && after && n1 == n2 && memcmp(before, after, n1) == 0);
             free(after);
             remove(tmp);
@@ -594,13 +574,13 @@ static void test_write_failures(void)
     snprintf(tmp, sizeof tmp, "%s.tmp", keep);
     mkdir(tmp, 0755);
     CHECK(appm_image_write(keep, &other, 1.0, &d) == APPM_ERR_IO);
-    after = read_all(keep, &n2);
+    after = check_read_file(keep, &n2);
     CHECK(before && after && n1 == n2 && memcmp(before, after, n1) == 0);
     free(after);
     rmdir(tmp);
     /* and with the way clear, a write replaces the file */
     CHECK(appm_image_write(keep, &other, 1.0, &d) == APPM_OK);
-    after = read_all(keep, &n2);
+    after = check_read_file(keep, &n2);
     CHECK(after && n2 < n1);
     free(after);
     free(before);
@@ -669,8 +649,8 @@ static size_t png_matches_ppm(const appm_image *img, const char *name)
     snprintf(ppm, sizeof ppm, "%s.ppm", check_path("image", name));
     CHECK_MSG(appm_image_write(png, img, 1.0, &d) == APPM_OK, "%s: %s", png, d.message);
     CHECK(appm_image_write(ppm, img, 1.0, &d) == APPM_OK);
-    a = read_all(png, &la);
-    b = read_all(ppm, &lb);
+    a = check_read_file(png, &la);
+    b = check_read_file(ppm, &lb);
     CHECK(a && b);
     if (a && b) {
         png_info r = png_decode(a, la);
@@ -938,7 +918,7 @@ static void test_exr(void)
             opt.exr_half = halfs[a];
             opt.exr_uncompressed = comps[b];
             CHECK(appm_image_write_ex(path, &img, &opt, NULL, &d) == APPM_OK);
-            p = read_all(path, &len);
+            p = check_read_file(path, &len);
             CHECK(p != NULL);
             if (!p) continue;
             memset(back, 0, sizeof(float) * n);
@@ -964,7 +944,7 @@ static void test_exr(void)
         size_t len;
         int half, zip, bad = 0;
         CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
-        p = read_all(path, &len);
+        p = check_read_file(path, &len);
         CHECK(p && exr_read(p, len, W, H, back, &half, &zip) && !half && zip);
         for (i = 0; p && i < n; ++i) bad += fbits(back[i]) != fbits(img.rgb[i]);
         CHECK(bad == 0);

@@ -31,26 +31,6 @@
 
 /* ---- helpers ------------------------------------------------------------- */
 
-static unsigned char *slurp(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    unsigned char *buf = NULL;
-    long n;
-    *len = 0;
-    if (!f) return NULL;
-    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0) {
-        buf = (unsigned char *)malloc((size_t)n + 1);
-        if (buf && fread(buf, 1, (size_t)n, f) == (size_t)n)
-            *len = (size_t)n;
-        else {
-            free(buf);
-            buf = NULL;
-        }
-    }
-    fclose(f);
-    return buf;
-}
-
 static uint32_t bits_of(float v)
 {
     uint32_t b;
@@ -90,7 +70,7 @@ static void test_pfm_write(void)
     img.height = 2;
     img.rgb = px;
     CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
-    raw = slurp(path, &len);
+    raw = check_read_file(path, &len);
     CHECK(raw != NULL);
     if (!raw) return;
     CHECK(len == strlen(head) + 18 * 4);
@@ -180,7 +160,7 @@ static void test_png(void)
     img.width = img.height = 2;
     img.rgb = px;
     CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
-    raw = slurp(path, &len);
+    raw = check_read_file(path, &len);
     CHECK(raw && len > 8 && memcmp(raw, sig, 8) == 0);
     if (!raw) return;
     while (pos + 12 <= len) {
@@ -248,7 +228,7 @@ static void test_file_bytes(void)
         opt.exr_uncompressed = k == 3;
         img.rgb = k == 0 ? ps : px;
         CHECK(appm_image_write_ex(path, &img, &opt, NULL, &d) == APPM_OK);
-        raw = slurp(path, &len);
+        raw = check_read_file(path, &len);
         CHECK(raw != NULL);
         if (!raw) continue;
         if (want[k] == 0) printf("%s: %lu bytes, crc32 0x%08lXu\n", names[k], (unsigned long)len,

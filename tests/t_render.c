@@ -264,28 +264,6 @@ static void test_furnace(void)
 
 static const char GLOSSY_FURNACE_MTL[] = "newmtl glow\nKd 0.2 0.2 0.2\nKs 0.3 0.3 0.3\nNs %g\nKe 0.5 0.5 0.5\n";
 
-/* A(theta) of section 6.1 by the lobe-frame quadrature of t_sampling (n points
- * on each side of the t where the horizon starts to cut). */
-static double gf_lobe_albedo(double ns, double ct)
-{
-    double st = sqrt(fmax(0.0, 1.0 - ct * ct)), ts = pow(st, ns + 1.0), sum = 0.0;
-    int i, part, n = 4000;
-    for (part = 0; part < 2; ++part) {
-        double lo = part ? ts : 0.0, hi = part ? 1.0 : ts, h = (hi - lo) / n;
-        for (i = 0; i < n && h > 0.0; ++i) {
-            double t = lo + (i + 0.5) * h, ca = pow(t, 1.0 / (ns + 1.0)), sa = sqrt(fmax(0.0, 1.0 - ca * ca));
-            double A = ca * ct, B = sa * st, p0;
-            if (B <= fabs(A)) {
-                sum += (A > 0.0 ? A : 0.0) * h;
-                continue;
-            }
-            p0 = acos(A / B);
-            sum += (A * (APPM__PI - p0) + B * sin(p0)) / APPM__PI * h;
-        }
-    }
-    return (ns + 2.0) / (ns + 1.0) * sum;
-}
-
 /* The D = 2 image mean: Le (1 + Kd + Ks A(theta_o)) over the 32 x 32 pixels of
  * FURNACE_SCENE (fov 40, looking along -z at the wall z = -1). */
 static double gf_expect2(double ns)
@@ -300,8 +278,8 @@ static double gf_expect2(double ns)
                 for (i = 0; i < sub; ++i) {
                     double sx = (2.0 * (px + (i + 0.5) / sub) / w - 1.0) * th;
                     double sy = (1.0 - 2.0 * (py + (j + 0.5) / sub) / w) * th;
-                    double ct = 1.0 / sqrt(1.0 + sx * sx + sy * sy);
-                    sum += GF_LE * (1.0 + GF_KD + GF_KS * gf_lobe_albedo(ns, ct));
+                    double ct = 1.0 / sqrt(1.0 + sx * sx + sy * sy), st = sqrt(fmax(0.0, 1.0 - ct * ct));
+                    sum += GF_LE * (1.0 + GF_KD + GF_KS * check_lobe_quad(ns, st, ct, 4000, NULL));
                 }
     return sum / ((double)w * w * sub * sub);
 }
@@ -903,26 +881,6 @@ static int det_render(const appm_scene *s, appm_method m, unsigned threads, uint
     return ok;
 }
 
-/* Reads a whole file into a malloc'd buffer. */
-static unsigned char *slurp(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    unsigned char *buf = NULL;
-    long n;
-    *len = 0;
-    if (!f) return NULL;
-    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) > 0 && fseek(f, 0, SEEK_SET) == 0) {
-        buf = (unsigned char *)malloc((size_t)n);
-        if (buf && fread(buf, 1, (size_t)n, f) == (size_t)n) *len = (size_t)n;
-        else {
-            free(buf);
-            buf = NULL;
-        }
-    }
-    fclose(f);
-    return buf;
-}
-
 static void test_determinism(void)
 {
     static const appm_method methods[4] = {APPM_METHOD_PPM, APPM_METHOD_SPPM, APPM_METHOD_APPM,
@@ -963,7 +921,7 @@ static void test_determinism(void)
         CHECK_MSG(ok && memcmp(img[0], img[3], n * sizeof(float)) == 0,
                   "%s: the SIMD (%s) and the scalar box test give different images", method_name(methods[mi]),
                   APPM__SIMD_NAME);
-        for (t = 0; t < 3; ++t) file[t] = slurp(name[t], &len[t]);
+        for (t = 0; t < 3; ++t) file[t] = check_read_file(name[t], &len[t]);
         CHECK_MSG(file[0] && len[0] > n * sizeof(float), "%s: %s missing or short", method_name(methods[mi]),
                   name[0]);
         for (t = 1; t < 3; ++t)

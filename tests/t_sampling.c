@@ -713,39 +713,10 @@ static double ref_pdf(double kd, double ks, double ns, const double wo[3], const
     return pd * wi[2] / APPM__PI + (c > 0 ? (1.0 - pd) * (ns + 1.0) / (2.0 * APPM__PI) * pow(c, ns) : 0.0);
 }
 
-/* The lobe's albedo int (Ns+2)/(2 pi) cos^Ns(a) max(0, n.wi) dw at incidence
- * theta, integrated in the lobe's own frame: with t = cos^(Ns+1) a the lobe
- * measure is uniform, (Ns+1)/(2 pi) cos^Ns a dw = dt dphi / (2 pi), so the
- * albedo is (Ns+2)/(Ns+1) times the mean of max(0, n.wi) over (t, phi).  At
- * fixed t, n.wi = A - B cos phi (A = cos a cos theta, B = sin a sin theta), whose
- * positive part has the mean (A (pi - p0) + B sin p0) / pi, p0 = acos(A / B),
- * with p0 / pi of the circle below the horizon; the t integral is a midpoint
- * rule of n points on each side of t* = sin^(Ns+1) theta, where the horizon
- * starts to cut.  *below: the share of lobe samples below the horizon. */
-static double lobe_quad(double ns, double theta, int n, double *below)
+static double lobe_albedo(double ns, double theta, int n)
 {
-    double st = sin(theta * DEG), ct = cos(theta * DEG), ts = pow(st, ns + 1.0), sum = 0.0, out = 0.0;
-    int i, part;
-    for (part = 0; part < 2; ++part) {
-        double lo = part ? ts : 0.0, hi = part ? 1.0 : ts, h = (hi - lo) / n;
-        for (i = 0; i < n && h > 0.0; ++i) {
-            double t = lo + (i + 0.5) * h, ca = pow(t, 1.0 / (ns + 1.0)), sa = sqrt(fmax(0.0, 1.0 - ca * ca));
-            double A = ca * ct, B = sa * st, p0;
-            if (B <= fabs(A)) {
-                sum += (A > 0.0 ? A : 0.0) * h;
-                out += (A > 0.0 ? 0.0 : 1.0) * h;
-                continue;
-            }
-            p0 = acos(A / B);
-            sum += (A * (APPM__PI - p0) + B * sin(p0)) / APPM__PI * h;
-            out += p0 / APPM__PI * h;
-        }
-    }
-    if (below) *below = out;
-    return (ns + 2.0) / (ns + 1.0) * sum;
+    return check_lobe_quad(ns, sin(theta * DEG), cos(theta * DEG), n, NULL);
 }
-
-static double lobe_albedo(double ns, double theta, int n) { return lobe_quad(ns, theta, n, NULL); }
 
 /* The lobe alone: cos(a) to the axis must follow (Ns+1) cos^Ns a on [0, 1], so
  * v = cos^(Ns+1) a is uniform; binned in v and in the azimuth about the axis. */
@@ -812,7 +783,7 @@ static void test_glossy_chi2(double kd, double ks, double ns, double theta, long
             ex[c * NP + a] = (double)N * sum;
             up += sum;
         }
-    lobe_quad(ns, theta, 20000, &below);
+    check_lobe_quad(ns, sin(theta * DEG), cos(theta * DEG), 20000, &below);
     ex[NT * NP] = (double)N * (1.0 - pd) * below;
     for (c = 0; c < NT * NP; ++c) ex[c] *= (1.0 - (1.0 - pd) * below) / up;
     snprintf(name, sizeof name, "glossy Ns %g at %g deg", ns, theta);
