@@ -777,16 +777,33 @@ static inline float appm__ld_out(const appm__sobol_tab *tab, uint32_t y, uint32_
     return tab->rev[0][z & 255] + tab->rev[1][(z >> 8) & 255] + tab->rev[2][(z >> 16) & 255];
 }
 
-/* Coordinates 2p, 2p + 1 (bits 0, 1 of mask) of the point whose shuffled,
- * reversed index is ir, scrambled with seeds s and s + 0x9E3779B9, into u[0],
- * u[1]. */
-static inline void appm__ld_pair(const appm__sobol_tab *tab, unsigned p, uint32_t ir, uint32_t s,
-                                 unsigned mask, float *u)
+/* Bytes 0-2 of the table sum of pair p (the XOR of T_2p, T_2p+1 over the low
+ * three bytes of ir); with the entry of byte 3 it is the whole sum y. */
+static inline uint64_t appm__ld_low(const appm__sobol_tab *tab, unsigned p, uint32_t ir)
 {
     const uint64_t(*t)[256] = tab->pair[p];
-    uint64_t y = t[0][ir & 255] ^ t[1][(ir >> 8) & 255] ^ t[2][(ir >> 16) & 255] ^ t[3][ir >> 24];
+    return t[0][ir & 255] ^ t[1][(ir >> 8) & 255] ^ t[2][(ir >> 16) & 255];
+}
+
+/* The table sum y of pair p for the shuffled, reversed index ir. */
+static inline uint64_t appm__ld_y(const appm__sobol_tab *tab, unsigned p, uint32_t ir)
+{
+    return appm__ld_low(tab, p, ir) ^ tab->pair[p][3][ir >> 24];
+}
+
+/* Coordinates 2p, 2p + 1 (bits 0, 1 of mask) from the pair's table sum y,
+ * scrambled with seeds s and s + 0x9E3779B9, into u[0], u[1]. */
+static inline void appm__ld_pair(const appm__sobol_tab *tab, uint64_t y, uint32_t s, unsigned mask, float *u)
+{
     if (mask & 1u) u[0] = appm__ld_out(tab, (uint32_t)y, s);
     if (mask & 2u) u[1] = appm__ld_out(tab, (uint32_t)(y >> 32), s + 0x9E3779B9u);
+}
+
+/* The hash g of group `group` of the sequence `key`: its low half seeds the
+ * index shuffle, its high half s the scrambles of its coordinates. */
+static inline uint64_t appm__ld_group(uint64_t key, unsigned group)
+{
+    return appm__mix64(key ^ ((uint64_t)(group + 1) * 0xD1B54A32D192ED03ull));
 }
 
 /* The coordinates in `mask` (bit d: dimension d, 0..5) of group `group` of
@@ -799,11 +816,11 @@ static inline void appm__ld_pair(const appm__sobol_tab *tab, unsigned p, uint32_
 static void appm__ld(const appm__sobol_tab *tab, uint64_t key, uint32_t rindex, unsigned group,
                      unsigned mask, float *u)
 {
-    uint64_t g = appm__mix64(key ^ ((uint64_t)(group + 1) * 0xD1B54A32D192ED03ull));
+    uint64_t g = appm__ld_group(key, group);
     uint32_t ir = appm__lk_permute(rindex, (uint32_t)g), s = (uint32_t)(g >> 32);
-    if (mask & 3u) appm__ld_pair(tab, 0, ir, s, mask, u);
-    if (mask & 12u) appm__ld_pair(tab, 1, ir, s + 2u * 0x9E3779B9u, mask >> 2, u + 2);
-    if (mask & 48u) appm__ld_pair(tab, 2, ir, s + 4u * 0x9E3779B9u, mask >> 4, u + 4);
+    if (mask & 3u) appm__ld_pair(tab, appm__ld_y(tab, 0, ir), s, mask, u);
+    if (mask & 12u) appm__ld_pair(tab, appm__ld_y(tab, 1, ir), s + 2u * 0x9E3779B9u, mask >> 2, u + 2);
+    if (mask & 48u) appm__ld_pair(tab, appm__ld_y(tab, 2, ir), s + 4u * 0x9E3779B9u, mask >> 4, u + 4);
 }
 
 /* Independently scrambled chains of passes (cfg.chains = K): pass j (1-based)
@@ -821,6 +838,71 @@ static void appm__ld(const appm__sobol_tab *tab, uint64_t key, uint32_t rindex, 
 
 enum { APPM__DOMAIN_LD_EYE = 5, APPM__DOMAIN_LD_PHOTON = 6 };
 
+/* What the photon paths of one pass share, kept by the worker that traces a
+ * run of them.  All of a pass's paths are points of one sequence (one key, as
+ * long as the point number n = q M + i stays below the next multiple of 2^32),
+ * so the group hashes g are the same for all and are computed once.  And the
+ * shuffle is an Owen scramble: the low 24 bits of ir depend only on the low 24
+ * bits of rindex, the bit-reversed high 24 bits of n, which 256 consecutive
+ * points share; so for such a run the lookups of bytes 0-2 (appm__ld_low) are
+ * made once a pair and group, and a point costs one lookup a pair.  Same
+ * numbers as appm__ld (t_sampler checks). */
+#define APPM__LD_GROUPS (2u * APPM__LD_VERTICES + 2u) /* groups 0 .. APPM__G_BSDF(LD_VERTICES - 1) */
+typedef struct appm__ld_cache {
+    uint64_t kin, key;                             /* key = mix64(kin), of g; valid only if `set` */
+    int set;
+    uint64_t g[APPM__LD_GROUPS];                   /* appm__ld_group(key, group) */
+    uint32_t tag[APPM__LD_GROUPS][APPM__LD_PAIRS]; /* rindex & 0xFFFFFF of `low`; 2^32 - 1: none */
+    uint64_t low[APPM__LD_GROUPS][APPM__LD_PAIRS];
+} appm__ld_cache;
+
+/* appm__ld for the sequence of the cache's key. */
+static void appm__ld_cached(const appm__sobol_tab *tab, appm__ld_cache *c, uint32_t rindex, unsigned group,
+                            unsigned mask, float *u)
+{
+    uint64_t g = c->g[group];
+    uint32_t ir = appm__lk_permute(rindex, (uint32_t)g), s = (uint32_t)(g >> 32), t = rindex & 0xFFFFFFu;
+    uint32_t *tag = c->tag[group];
+    uint64_t *low = c->low[group];
+    if (mask & 3u) {
+        if (tag[0] != t) {
+            tag[0] = t;
+            low[0] = appm__ld_low(tab, 0, ir);
+        }
+        appm__ld_pair(tab, low[0] ^ tab->pair[0][3][ir >> 24], s, mask, u);
+    }
+    if (mask & 12u) {
+        if (tag[1] != t) {
+            tag[1] = t;
+            low[1] = appm__ld_low(tab, 1, ir);
+        }
+        appm__ld_pair(tab, low[1] ^ tab->pair[1][3][ir >> 24], s + 2u * 0x9E3779B9u, mask >> 2, u + 2);
+    }
+    if (mask & 48u) {
+        if (tag[2] != t) {
+            tag[2] = t;
+            low[2] = appm__ld_low(tab, 2, ir);
+        }
+        appm__ld_pair(tab, low[2] ^ tab->pair[2][3][ir >> 24], s + 4u * 0x9E3779B9u, mask >> 4, u + 4);
+    }
+}
+
+/* The key mix64(kin), with c made to hold its hashes (nothing to do when it
+ * does). */
+static uint64_t appm__ld_cache_key(appm__ld_cache *c, uint64_t kin)
+{
+    unsigned k, p;
+    if (c->set && c->kin == kin) return c->key;
+    c->kin = kin;
+    c->key = appm__mix64(kin);
+    c->set = 1;
+    for (k = 0; k < APPM__LD_GROUPS; ++k) {
+        c->g[k] = appm__ld_group(c->key, k);
+        for (p = 0; p < APPM__LD_PAIRS; ++p) c->tag[k][p] = 0xFFFFFFFFu;
+    }
+    return c->key;
+}
+
 /* The numbers of one path: a sequence key and index (qmc), and the path's PCG
  * stream (random mode, and beyond the layout).  In qmc mode the stream is
  * seeded when first asked for (appm__smp_stream): most paths never get past the
@@ -828,8 +910,10 @@ enum { APPM__DOMAIN_LD_EYE = 5, APPM__DOMAIN_LD_PHOTON = 6 };
 typedef struct appm__sampler {
     appm__rng rng;
     const appm__sobol_tab *tab;
+    appm__ld_cache *cache; /* NULL, or the hashes of key (photon paths) */
     uint64_t key;
-    uint32_t rindex; /* the point of the sequence, bit-reversed (appm__ld) */
+    uint32_t rindex;  /* the point of the sequence, bit-reversed (appm__ld) */
+    uint32_t ir0, s0; /* eye paths: group 0's shuffled index and seed (appm__ld) */
     int qmc;
     int seeded;                      /* rng is seeded from (seed, pass, domain, stream) */
     uint64_t seed, pass, stream;
@@ -840,6 +924,7 @@ static void appm__smp_init(appm__sampler *s, const appm__sobol_tab *tab, uint64_
                            unsigned domain, uint64_t stream)
 {
     s->tab = tab;
+    s->cache = NULL;
     s->qmc = tab != NULL;
     s->seed = seed;
     s->pass = pass;
@@ -880,16 +965,24 @@ static void appm__sampler_eye(appm__sampler *s, const appm__sobol_tab *tab, unsi
     s->key = appm__mix64(seed ^ (chain * 8 + APPM__DOMAIN_LD_EYE) * 0x9E3779B97F4A7C15ull ^
                          appm__mix64(~pixel));
     s->rindex = appm__reverse32((uint32_t)p0);
+    /* group 0 serves the camera and the first vertex's choice (appm__smp_bsdf) */
+    {
+        uint64_t g = appm__ld_group(s->key, 0);
+        s->ir0 = appm__lk_permute(s->rindex, (uint32_t)g);
+        s->s0 = (uint32_t)(g >> 32);
+    }
 }
 
 /* Photon path i of pass `pass`, M paths a pass: point q M + i of its chain's
  * sequence, q the pass's place in the chain, so the photons of all passes
  * together fill the light's sample space as one low-discrepancy set (Keller et
- * al. 2011).  Past 2^32 points the sequence continues with a fresh key. */
-static void appm__sampler_photon(appm__sampler *s, const appm__sobol_tab *tab, unsigned chains,
-                                 uint64_t seed, uint64_t pass, uint64_t M, uint64_t i)
+ * al. 2011).  Past 2^32 points the sequence continues with a fresh key.  cache:
+ * NULL, or one that the paths a worker traces in turn share (appm__ld_cache;
+ * the numbers are the same either way). */
+static void appm__sampler_photon(appm__sampler *s, const appm__sobol_tab *tab, appm__ld_cache *cache,
+                                 unsigned chains, uint64_t seed, uint64_t pass, uint64_t M, uint64_t i)
 {
-    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = 0, n;
+    uint64_t p0 = pass > 0 ? pass - 1 : 0, chain = 0, n, kin;
     appm__smp_init(s, tab, seed, pass, APPM__DOMAIN_PHOTON, i);
     if (!s->qmc) return;
     if (chains > 1) {
@@ -897,14 +990,16 @@ static void appm__sampler_photon(appm__sampler *s, const appm__sobol_tab *tab, u
         p0 /= chains;
     }
     n = p0 * M + i;
-    s->key = appm__mix64(seed ^ (chain * 8 + APPM__DOMAIN_LD_PHOTON) * 0x9E3779B97F4A7C15ull ^
-                         (n >> 32) * 0xC2B2AE3D27D4EB4Full);
+    kin = seed ^ (chain * 8 + APPM__DOMAIN_LD_PHOTON) * 0x9E3779B97F4A7C15ull ^ (n >> 32) * 0xC2B2AE3D27D4EB4Full;
+    s->cache = cache;
+    s->key = cache ? appm__ld_cache_key(cache, kin) : appm__mix64(kin);
     s->rindex = appm__reverse32((uint32_t)n);
 }
 
 /* The dimension layout (groups of four or six; b = the path's vertex, 0 at its
  * first hit; vertices from APPM__LD_VERTICES on draw from the PCG stream):
- *   eye path     group 0: pixel (dims 0, 1), lens (2, 3)
+ *   eye path     group 0: pixel (dims 0, 1), lens (2, 3), the component or
+ *                Fresnel choice at vertex 0 (4; in place of dim 2 of group 3)
  *   photon path  group 0: emission position and direction (dims 0-3, see
  *                appm__emit), the light (dim 4)
  *   vertex b     group 2 + 2b: point on the light (dims 0, 1), light choice (2)
@@ -920,11 +1015,26 @@ static void appm__sampler_photon(appm__sampler *s, const appm__sobol_tab *tab, u
  * dropped: the point loses the (0,2)-net of a group of its own, and with it
  * 12 % more RMSE on the bunny under the sky at 256 passes (6 seeds; no gain
  * on the boxes or the teapot), for one index shuffle less per eye path.
+ * The choice at an eye path's first vertex is different: it is 1-D, so in
+ * group 0 it stays stratified by itself (dim 4 is Joe-Kuo's 5), and it is what
+ * the pixel's position decides jointly with it at the edge of a highlight in
+ * glass (the light's reflection, its image through the sphere).  There it took
+ * 11 % of the sphere box's RMSE and 6 % of the defocused one's (6 seeds, 256
+ * passes).
  * The masks say which coordinates the caller will read (the others are 0).  In
  * random mode each call draws all its numbers from the stream, in the order of
  * the output array (the order of every earlier version), whatever the mask. */
 #define APPM__G_LIGHT(b) (2u + 2u * (b))
 #define APPM__G_BSDF(b) (3u + 2u * (b))
+
+/* Group `group` of the path's point (appm__ld). */
+static void appm__smp_ld(const appm__sampler *s, unsigned group, unsigned mask, float *u)
+{
+    if (s->cache)
+        appm__ld_cached(s->tab, s->cache, s->rindex, group, mask, u);
+    else
+        appm__ld(s->tab, s->key, s->rindex, group, mask, u);
+}
 
 /* Next-event estimation at vertex b: u[0] picks the light, u[1], u[2] the
  * point on it.  mask: bit 0 for u[0], bit 1 for u[1] and u[2]. */
@@ -935,7 +1045,7 @@ static void appm__smp_light(appm__sampler *s, unsigned b, unsigned mask, float *
         appm__rng_float3(appm__smp_stream(s), u);
         return;
     }
-    appm__ld(s->tab, s->key, s->rindex, APPM__G_LIGHT(b), (mask & 1u ? 4u : 0u) | (mask & 2u ? 3u : 0u),
+    appm__smp_ld(s, APPM__G_LIGHT(b), (mask & 1u ? 4u : 0u) | (mask & 2u ? 3u : 0u),
              v);
     u[0] = v[2];
     u[1] = v[0];
@@ -953,7 +1063,12 @@ static void appm__smp_bsdf(appm__sampler *s, unsigned b, unsigned mask, float *u
         return;
     }
     u[0] = u[1] = u[2] = u[3] = 0.0f;
-    appm__ld(s->tab, s->key, s->rindex, APPM__G_BSDF(b), mask, u);
+    if (b == 0 && s->domain == APPM__DOMAIN_EYE && (mask & 4u)) {
+        appm__ld_pair(s->tab, appm__ld_y(s->tab, 2, s->ir0), s->s0 + 4u * 0x9E3779B9u, 1u, u + 2);
+        mask &= ~4u;
+        if (!mask) return; /* glass: nothing more */
+    }
+    appm__smp_ld(s, APPM__G_BSDF(b), mask, u);
 }
 
 /* Russian roulette after vertex b; u and mask: as given to appm__smp_bsdf. */
@@ -962,7 +1077,7 @@ static float appm__smp_rr(appm__sampler *s, unsigned b, unsigned mask, const flo
     float v[4];
     if (!s->qmc || b >= APPM__LD_VERTICES) return appm__rng_float(appm__smp_stream(s));
     if (mask & 8u) return u[3];
-    appm__ld(s->tab, s->key, s->rindex, APPM__G_BSDF(b), 8u, v);
+    appm__smp_ld(s, APPM__G_BSDF(b), 8u, v);
     return v[3];
 }
 
@@ -976,7 +1091,7 @@ static void appm__smp_emit(appm__sampler *s, unsigned mask, float *u)
         for (k = 0; k < 5; ++k) u[k] = appm__rng_float(&s->rng);
         return;
     }
-    appm__ld(s->tab, s->key, s->rindex, 0,
+    appm__smp_ld(s, 0,
              (mask & 1u ? 16u : 0u) | (mask & 2u ? 3u : 0u) | (mask & 4u ? 12u : 0u), v);
     u[0] = v[4];
     for (k = 0; k < 4; ++k) u[k + 1] = v[k];
@@ -985,7 +1100,8 @@ static void appm__smp_emit(appm__sampler *s, unsigned mask, float *u)
 /* Camera (qmc only; random mode keeps its rotated R2 sequence, section 7.2). */
 static void appm__smp_camera(const appm__sampler *s, int lens, float *u)
 {
-    appm__ld(s->tab, s->key, s->rindex, 0, lens ? 15u : 3u, u);
+    appm__ld_pair(s->tab, appm__ld_y(s->tab, 0, s->ir0), s->s0, 3u, u);
+    if (lens) appm__ld_pair(s->tab, appm__ld_y(s->tab, 1, s->ir0), s->s0 + 2u * 0x9E3779B9u, 3u, u + 2);
 }
 
 /* ==== 3. IMAGE I/O =======================================================
@@ -5631,8 +5747,23 @@ static int appm__stores_photons(const appm__material *m)
     return m->ns <= APPM__GATHER_NS || m->color.x > 0.0f || m->color.y > 0.0f || m->color.z > 0.0f;
 }
 
-/* Traces photon path `index`; returns 0 if the task's region is full. */
-static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker)
+/* Bit 3 of the photon sampler's mask after a bounce off m (appm__smp_bsdf): the
+ * roulette is asked for when the bounce's weight lowers the path's largest
+ * channel.  The weight of a diffuse or mirror bounce is the colour itself, so
+ * with every channel >= 1 (the white box) it never is, and glass has weight 1.
+ * A hint only: the roulette's number is the same either way. */
+static unsigned appm__photon_rr_dim(const appm__material *m)
+{
+    if (m->kind == APPM__MAT_DIELECTRIC) return 0u;
+    if (m->kind != APPM__MAT_GLOSSY && m->color.x >= 1.0f && m->color.y >= 1.0f && m->color.z >= 1.0f)
+        return 0u;
+    return 8u;
+}
+
+/* Traces photon path `index` (cache: shared by the paths the worker traces in
+ * turn, appm__sampler_photon); returns 0 if the task's region is full. */
+static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
+                             appm__ld_cache *cache)
 {
     const appm_scene *s = r->scene;
     appm__sampler smp;
@@ -5643,7 +5774,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     unsigned segs = 0, comp = APPM__COMP_DIFFUSE; /* the component of a photon stored next */
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
     float ue[5];
-    appm__sampler_photon(&smp, r->sobol, r->chains, r->seed, r->pass, r->M, index);
+    appm__sampler_photon(&smp, r->sobol, cache, r->chains, r->seed, r->pass, r->M, index);
     appm__smp_emit(&smp, r->emit_dims, ue);
     if (!appm__emit(s, ue, &ps)) {
         if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
@@ -5673,9 +5804,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
             if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp)) return 0;
         }
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
-        /* the roulette: nearly always after a diffuse or mirror bounce (albedo < 1),
-         * rarely after glass (weight 1) */
-        dims = appm__bsdf_dims(m) | (m->kind != APPM__MAT_DIELECTRIC ? 8u : 0u);
+        dims = appm__bsdf_dims(m) | appm__photon_rr_dim(m);
         appm__smp_bsdf(&smp, segs - 1, dims, u3);
         if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs))
             break;
@@ -5696,7 +5825,9 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
 static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
+    appm__ld_cache cache;
     uint32_t c;
+    cache.set = 0;
     r->task_used[task] = 0;
     r->task_failed[task] = 0;
     for (c = task; c < r->nchunks; c += r->tasks) {
@@ -5704,7 +5835,7 @@ static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
         if (i1 > r->M) i1 = r->M;
         r->chunk[c].start = r->task_used[task];
         for (i = i0; i < i1; ++i) {
-            if (!appm__photon_path(r, task, i, worker)) {
+            if (!appm__photon_path(r, task, i, worker, &cache)) {
                 r->task_failed[task] = 1;
                 return;
             }

@@ -215,7 +215,8 @@ typedef enum appm_direct {
 /* Where the numbers of every path come from (appm.c, section 2.3).
  *   QMC: a randomized low-discrepancy sequence (Owen-scrambled Sobol' in
  *     padded groups of 4 dimensions, 6 for the photon's emission with its
- *     light choice) in every dimension: pixel, lens, light choice, point on
+ *     light choice, 5 for the camera with the eye path's component or Fresnel
+ *     choice at its first vertex) in every dimension: pixel, lens, light choice, point on
  *     the light, BSDF direction, Fresnel choice, Russian roulette, photon
  *     emission and every photon bounce (the first 8 vertices of a path; PCG
  *     beyond).  The photons of all passes form one low-discrepancy set.  Stateless: a sample is a

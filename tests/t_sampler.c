@@ -6,7 +6,8 @@
  *      order, as published) of dimensions 1-6; dimension 1 is the radical
  *      inverse in base 2.
  *   2. The fast path (tables, folded bit reversals) equals the definition
- *      owen(sobol(owen(index, s0), d), s_d), for random indices and keys.
+ *      owen(sobol(owen(index, s0), d), s_d), for random indices and keys; the
+ *      photon paths' shared cache of hashes and lookups changes no number.
  *   3. Stratification, which holds for every seed by construction: every
  *      aligned block of 2^k points of coordinates (0, 1) of a group puts exactly
  *      one point in each elementary interval [a/2^p, (a+1)/2^p) x [b/2^q,
@@ -16,7 +17,8 @@
  *      power of two) are such a net in their emission position, and so are the
  *      2M photons of two passes of one chain (Keller et al. 2011); a pixel's
  *      first 2^k passes of one chain are a net in the pixel - with one chain
- *      (the default) and with four.
+ *      (the default) and with four - and the choice at its first vertex is
+ *      stratified, jointly with the pixel at the t of unscrambled Sobol'.
  *   4. Randomization: over many keys one coordinate of one point is uniform, and
  *      coordinates of different groups (padding) are independent (chi-square
  *      tests, p > 0.001 each); chains differ.
@@ -289,7 +291,7 @@ static void photon_nets(unsigned K)
 {
     static const unsigned js[] = {1, 2, 3, 4, 9, 12, 17};
     const unsigned k = 10, M = 1u << k;
-    unsigned jj, i, pass2;
+    unsigned jj, i, pass2, other = 0;
     for (jj = 0; jj < sizeof js / sizeof js[0]; ++jj) {
         unsigned j = js[jj];
         if ((j - 1) / K % 2) continue; /* place 2q + 1: its pair is the pass before */
@@ -297,7 +299,7 @@ static void photon_nets(unsigned K)
             for (i = 0; i < M; ++i) {
                 appm__sampler smp;
                 float u[5];
-                appm__sampler_photon(&smp, &g_tab, K, 42, j + pass2 * K, M, i);
+                appm__sampler_photon(&smp, &g_tab, NULL, K, 42, j + pass2 * K, M, i);
                 appm__smp_emit(&smp, 7u, u);
                 g_x[0][pass2 * M + i] = u[1];
                 g_x[1][pass2 * M + i] = u[2];
@@ -317,11 +319,12 @@ static void photon_nets(unsigned K)
                   j, j + K);
         CHECK_MSG(is_strat1(g_x[2], k + 1), "K = %u, passes %u and %u: u3 is not stratified", K, j, j + K);
     }
-    /* and a pixel's passes 1, 1 + K, 1 + 2K, ... (chain 0) in the pixel */
+    /* and a pixel's passes 1, 1 + K, 1 + 2K, ... (chain 0) in the pixel, and the
+     * choice at its first vertex (group 0, dim 4) jointly with the pixel */
     for (i = 0; i < 256; ++i) {
         appm__sampler smp;
         float u[4];
-        float v[3];
+        float v[3], w[4], x[6];
         appm__sampler_eye(&smp, &g_tab, K, 3, 1 + (uint64_t)i * K, 1234);
         appm__smp_camera(&smp, 1, u);
         g_x[0][i] = u[0];
@@ -330,13 +333,83 @@ static void photon_nets(unsigned K)
         appm__smp_light(&smp, 0, 2u, v);
         g_x[3][i] = v[1];
         g_x[4][i] = v[2];
+        appm__smp_bsdf(&smp, 0, 4u, w);
+        g_x[5][i] = w[2];
+        appm__ld(&g_tab, smp.key, smp.rindex, 0, 16u, x);
+        other += w[2] != x[4];
     }
+    CHECK_MSG(other == 0, "K = %u: %u first choices are not dim 4 of group 0", K, other);
     CHECK_MSG(is_net(g_x[3], g_x[4], 8),
               "K = %u: a pixel's 256 passes of one chain are not a net on the light at vertex 0", K);
     CHECK_MSG(is_net(g_x[0], g_x[1], 8),
               "K = %u: a pixel's 256 passes of one chain are not a net in the pixel", K);
     CHECK_MSG(is_strat1(g_x[2], 8),
               "K = %u: a pixel's 256 passes of one chain are not stratified on the lens", K);
+    CHECK_MSG(is_strat1(g_x[5], 8),
+              "K = %u: a pixel's 256 passes of one chain are not stratified in the first choice", K);
+    {
+        unsigned d, t, t0;
+        for (d = 0; d < 2; ++d) {
+            for (i = 0; i < 256; ++i) {
+                g_xi[0][i] = appm__sobol(i, d);
+                g_xi[1][i] = appm__sobol(i, 4);
+            }
+            t0 = net_t(NULL, NULL, g_xi[0], g_xi[1], 8);
+            t = net_t(g_x[d], g_x[5], NULL, NULL, 8);
+            CHECK_MSG(t == t0 && t <= 3, "K = %u: pixel %c and the first choice: t = %u, unscrambled %u", K,
+                      d ? 'y' : 'x', t, t0);
+        }
+    }
+}
+
+/* The cache the photon paths of one worker share (appm__ld_cache) changes no
+ * number: photon paths traced in turn through one cache, as a worker traces
+ * them, against the same paths without it, every coordinate of the emission and
+ * of every vertex's groups, across runs of 256 points (the cached lookups),
+ * across passes and chains (a new key), and across n = 2^32 (a new key in the
+ * middle of a pass: M = 2^31 - 1000 photons, point 2000 of pass 3 is n = 2^32). */
+static void test_photon_cache(void)
+{
+    static const struct {
+        unsigned chains;
+        uint64_t pass, M, i0;
+        unsigned n;
+    } runs[] = {{1, 1, 4096, 0, 1500}, {1, 2, 5000, 4000, 700}, {3, 7, 1000, 100, 900},
+                {1, 3, (1ull << 31) - 1000, 0, 5200}, {2, 5, 1024, 1000, 10}};
+    appm__ld_cache cache;
+    uint64_t key0 = 0, key1 = 0;
+    unsigned r, k, b, bad = 0, total = 0, masks[] = {63u, 3u, 12u, 15u, 7u, 16u, 8u, 48u};
+    cache.set = 0;
+    for (r = 0; r < sizeof runs / sizeof runs[0]; ++r)
+        for (k = 0; k < runs[r].n; ++k) {
+            appm__sampler a, c;
+            uint64_t i = runs[r].i0 + k;
+            float ua[6], uc[6];
+            int d;
+            appm__sampler_photon(&a, &g_tab, NULL, runs[r].chains, 9, runs[r].pass, runs[r].M, i);
+            appm__sampler_photon(&c, &g_tab, &cache, runs[r].chains, 9, runs[r].pass, runs[r].M, i);
+            bad += a.key != c.key || a.rindex != c.rindex;
+            if (r == 3 && k == 0) key0 = c.key;
+            if (r == 3 && k == runs[r].n - 1) key1 = c.key;
+            appm__smp_emit(&a, 7u, ua);
+            appm__smp_emit(&c, 7u, uc);
+            for (d = 0; d < 5; ++d) bad += ua[d] != uc[d];
+            total += 5;
+            for (b = 0; b < APPM__LD_VERTICES; ++b) {
+                /* a mask that varies from path to path, as the materials do */
+                unsigned m = masks[(k + b) % 8];
+                for (d = 0; d < 6; ++d) ua[d] = uc[d] = -1.0f;
+                appm__ld(&g_tab, a.key, a.rindex, APPM__G_BSDF(b), m, ua);
+                appm__smp_ld(&c, APPM__G_BSDF(b), m, uc);
+                for (d = 0; d < 6; ++d) bad += ua[d] != uc[d];
+                appm__ld(&g_tab, a.key, a.rindex, APPM__G_LIGHT(b), m, ua);
+                appm__smp_ld(&c, APPM__G_LIGHT(b), m, uc);
+                for (d = 0; d < 6; ++d) bad += ua[d] != uc[d];
+                total += 12;
+            }
+        }
+    CHECK_MSG(bad == 0, "%u of %u numbers differ with the photon cache", bad, total);
+    CHECK_MSG(key0 != key1, "the key did not change at n = 2^32");
 }
 
 static void test_photon_nets(void)
@@ -409,7 +482,7 @@ static void test_streams(void)
     appm__smp_bsdf(&smp, 1, 15u, u);
     for (k = 0; k < 3; ++k) bad += u[k] != appm__rng_float(&ref);
     bad += appm__smp_rr(&smp, 1, 15u, u) != appm__rng_float(&ref);
-    appm__sampler_photon(&smp, NULL, 1, 17, 5, 1000, 321);
+    appm__sampler_photon(&smp, NULL, NULL, 1, 17, 5, 1000, 321);
     appm__rng_seed(&ref, 17, 5, APPM__DOMAIN_PHOTON, 321);
     appm__smp_emit(&smp, 0u, w);
     for (k = 0; k < 5; ++k) bad += w[k] != appm__rng_float(&ref);
@@ -569,6 +642,7 @@ int main(void)
     test_joint_dims();
     test_stratification();
     test_photon_nets();
+    test_photon_cache();
     test_randomization();
     test_streams();
     test_mean_var();
