@@ -1045,8 +1045,7 @@ static void appm__smp_light(appm__sampler *s, unsigned b, unsigned mask, float *
         appm__rng_float3(appm__smp_stream(s), u);
         return;
     }
-    appm__smp_ld(s, APPM__G_LIGHT(b), (mask & 1u ? 4u : 0u) | (mask & 2u ? 3u : 0u),
-             v);
+    appm__smp_ld(s, APPM__G_LIGHT(b), (mask & 1u ? 4u : 0u) | (mask & 2u ? 3u : 0u), v);
     u[0] = v[2];
     u[1] = v[0];
     u[2] = v[1];
@@ -1091,8 +1090,7 @@ static void appm__smp_emit(appm__sampler *s, unsigned mask, float *u)
         for (k = 0; k < 5; ++k) u[k] = appm__rng_float(&s->rng);
         return;
     }
-    appm__smp_ld(s, 0,
-             (mask & 1u ? 16u : 0u) | (mask & 2u ? 3u : 0u) | (mask & 4u ? 12u : 0u), v);
+    appm__smp_ld(s, 0, (mask & 1u ? 16u : 0u) | (mask & 2u ? 3u : 0u) | (mask & 4u ? 12u : 0u), v);
     u[0] = v[4];
     for (k = 0; k < 4; ++k) u[k + 1] = v[k];
 }
@@ -4690,7 +4688,8 @@ static appm_status appm__bvh_collapse(appm_scene *s)
         /* in 64 bits: the sum can exceed a 32-bit size_t (wasm32) */
         uint64_t bytes;
         s->npack = appm__collapse_count(s, &c);
-        bytes = ((uint64_t)cap + 1) * sizeof *s->wnode + (uint64_t)s->npack * (sizeof *s->pack + sizeof *s->ptri);
+        bytes = ((uint64_t)cap + 1) * sizeof *s->wnode +
+                (uint64_t)s->npack * (sizeof *s->pack + sizeof *s->ptri);
         if (bytes == (uint64_t)(size_t)bytes) s->wnode_mem = appm__alloc(m, (size_t)bytes, 1);
     }
     if (s->wnode_mem) {
