@@ -5,7 +5,8 @@
  *
  * IMG_f_s: ppm with the fixed radius F_f x R_AUTO (alpha 1) after PASSES passes,
  * seed s (f-major order).  APPM_s: the --aux prefix of appm's render of seed s
- * at the same passes (PREFIX-radius{,-caustic,-diffuse}.pfm are read).
+ * at the same passes (PREFIX-radius{,-caustic,-diffuse}.pfm are read, and the
+ * image PREFIX.pfm of the last seed).
  *
  * Per pixel, e_f = the squared error against REF summed over the channels, the
  * 3x3 neighbours and the NS seeds (the reference's own noise adds the same to
@@ -27,7 +28,8 @@
  * "edges" are the pixels whose reference luminance over the 3x3 neighbours
  * varies by more than half its mean (shadow and geometric edges, the rims of
  * a caustic), reported beside the rectangles of REGIONS.txt ("name x0 y0 x1
- * y1", first match wins) and "smooth" (the other pixels). */
+ * y1", first match wins) and "smooth" (the other pixels); "@bound": those of
+ * them at appm's upper bound on every seed. */
 #include "../appm.h"
 #include <stdio.h>
 #include <stdlib.h>
@@ -81,7 +83,7 @@ typedef struct set {
     double e_or, e_u, e_b, e_f[MAXF];
     double *dlog;                         /* |log2 f*(first seeds) / f*(last seed)| */
     size_t nd;
-    double t_or, t_u, tr_f[MAXF], te_f[MAXF]; /* the last seed's squared error, unsmoothed */
+    double t_or, t_u, t_appm, tr_f[MAXF], te_f[MAXF]; /* the last seed's squared error, unsmoothed */
 } set;
 
 static void report(const char *name, set *s, int nf, const double *F, double tot_u)
@@ -100,8 +102,9 @@ static void report(const char *name, set *s, int nf, const double *F, double tot
            s->e_or / s->e_f[kb], s->e_u / s->e_f[kb], s->e_b / s->e_f[kb]);
     if (s->nd)
         printf("%-13s   held-out seed: share of appm_u's error %.3f; |log2 f*(first)/f*(last)| median %.2f; "
-               "mse/(best global f %.3g of the first seeds): oracle %.3f appm_u %.3f\n",
-               name, s->t_u / tot_u, quant(s->dlog, s->nd, 0.5), F[kt], s->t_or / s->te_f[kt], s->t_u / s->te_f[kt]);
+               "mse/(best global f %.3g of the first seeds): oracle %.3f appm_u %.3f appm's image %.3f\n",
+               name, s->t_u / tot_u, quant(s->dlog, s->nd, 0.5), F[kt], s->t_or / s->te_f[kt], s->t_u / s->te_f[kt],
+               s->t_appm / s->te_f[kt]);
 }
 
 /* The grid point of least error and its refinement (a parabola in log f). */
@@ -135,14 +138,14 @@ static int nearest(const double *F, int nf, double v)
 
 int main(int argc, char **argv)
 {
-    appm_image ref, img[MAXF][MAXS], ar[MAXS][3];
+    appm_image ref, img[MAXF][MAXS], ar[MAXS][3], ai;
     double F[MAXF], rauto, bound_u, *e, *es, *er;
     unsigned long passes;
     int nf, ns, a = 1, k, s, c, r, nreg = 0, kbnd;
     unsigned w, h, x, y, i, rx0[MAXR], ry0[MAXR], rx1[MAXR], ry1[MAXR];
     char rname[MAXR][64];
     static const char *const comp[3] = {"radius", "radius-caustic", "radius-diffuse"};
-    set sets[MAXR + 3];
+    set sets[MAXR + 5];
     FILE *fr;
     if (argc < 8) {
         fprintf(stderr, "usage: oracle REF.pfm R_AUTO PASSES REGIONS.txt NF F.. NS IMG.. APPM..\n");
@@ -176,13 +179,18 @@ int main(int argc, char **argv)
             snprintf(p, sizeof p, "%s-%s.pfm", argv[a], comp[c]);
             if (!readimg(p, &ar[s][c], w, h)) return 2;
         }
+    { /* appm's own image of the last seed, PREFIX.pfm */
+        char p[4096];
+        snprintf(p, sizeof p, "%s.pfm", argv[a - 1]);
+        if (!readimg(p, &ai, w, h)) return 2;
+    }
     bound_u = KAPPA * 2.0 * pow((double)passes, -1.0 / 6.0);
     kbnd = nearest(F, nf, bound_u);
     e = (double *)calloc((size_t)w * h * nf, sizeof *e);
     es = (double *)calloc((size_t)w * h * nf * ns, sizeof *es);
     er = (double *)calloc((size_t)w * h * nf * ns, sizeof *er);
     memset(sets, 0, sizeof sets);
-    for (i = 0; i < (unsigned)(nreg + 3); ++i) {
+    for (i = 0; i < (unsigned)(nreg + 5); ++i) {
         sets[i].fs = (double *)malloc(sizeof(double) * w * h);
         sets[i].u = (double *)malloc(sizeof(double) * w * h);
         sets[i].uc = (double *)malloc(sizeof(double) * w * h);
@@ -214,7 +222,7 @@ int main(int argc, char **argv)
             size_t p = (size_t)y * w + x;
             const double *ep = e + p * nf;
             double u[3], lo = 1e30, hi = 0.0, mean = 0.0, fs, ra, ftr = 0.0, fte = 0.0;
-            int kb = 0, ktr = 0, dx, dy, nn = 0, inset[3], m;
+            int kb = 0, ktr = 0, dx, dy, nn = 0, inset[4], m;
             if (lum(ref.rgb + 3 * p) >= 1.0) continue;
             for (c = 0; c < 3; ++c) {
                 double v[MAXS];
@@ -256,7 +264,11 @@ int main(int argc, char **argv)
                 }
             inset[1] = (hi - lo) > 0.5 * mean ? nreg : nreg + 1;
             inset[2] = nreg + 2;
-            for (m = 0; m < 3; ++m) {
+            ra = 0.0;
+            for (s = 0; s < ns; ++s) ra += ar[s][0].rgb[3 * p];
+            /* at the bound on every seed: the edges and smooth pixels appm holds there */
+            inset[3] = ra / ns >= 0.999 * 2.0 * pow((double)passes, -1.0 / 6.0) * rauto ? inset[1] + 3 : -1;
+            for (m = 0; m < 4; ++m) {
                 set *st;
                 if (inset[m] < 0) continue;
                 st = &sets[inset[m]];
@@ -267,8 +279,6 @@ int main(int argc, char **argv)
                 st->n++;
                 if (fs > bound_u) st->above_bound++;
                 if (fs > u[0]) st->above_u++;
-                ra = 0.0;
-                for (s = 0; s < ns; ++s) ra += ar[s][0].rgb[3 * p];
                 if (ra / ns >= 0.999 * 2.0 * pow((double)passes, -1.0 / 6.0) * rauto) st->at_bound++;
                 st->e_or += ep[kb];
                 st->e_u += ep[nearest(F, nf, u[0])];
@@ -279,6 +289,10 @@ int main(int argc, char **argv)
                     st->dlog[st->nd++] = fabs(log(ftr / fte) / log(2.0));
                     st->t_or += tp[ktr * ns];
                     st->t_u += tp[nearest(F, nf, u[0]) * ns];
+                    for (c = 0; c < 3; ++c) {
+                        double d = (double)ai.rgb[3 * p + c] - ref.rgb[3 * p + c];
+                        st->t_appm += d * d;
+                    }
                     for (k = 0; k < nf; ++k) {
                         double tr = 0.0;
                         for (s = 0; s < ns - 1; ++s) tr += er[(p * nf + k) * ns + s];
@@ -294,5 +308,7 @@ int main(int argc, char **argv)
     report("edges", &sets[nreg], nf, F, sets[nreg + 2].t_u);
     report("smooth", &sets[nreg + 1], nf, F, sets[nreg + 2].t_u);
     report("all", &sets[nreg + 2], nf, F, sets[nreg + 2].t_u);
+    report("edges@bound", &sets[nreg + 3], nf, F, sets[nreg + 2].t_u);
+    report("smooth@bound", &sets[nreg + 4], nf, F, sets[nreg + 2].t_u);
     return 0;
 }

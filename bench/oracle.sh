@@ -9,6 +9,7 @@
 # pixel's error-minimising f and compares it, per region, with appm's radius.
 # References as bench/bounds.sh builds them (the committed sphere box
 # reference; two path-traced halves for CornellBox-Original, the first used).
+# ORACLE_REUSE=1 keeps the images already there (no clamped= lines then).
 # Results: bench/out/oracle/SCENE.txt (or ORACLE_OUT).
 set -u
 CC=${CC:-cc}
@@ -36,12 +37,13 @@ for sc in cornell-sphere cornell-original; do
         r0=$(awk "BEGIN { print $ra * $f }")
         for s in $seeds; do
             o=$out/$sc-f$f-s$s.pfm
-            ./appm render scenes/$sc.scene --method ppm --alpha 1 --radius $r0 --size 64x64 --passes $N \
+            [ "${ORACLE_REUSE:-0}" = 1 ] && [ -f "$o" ] || ./appm render scenes/$sc.scene --method ppm --alpha 1 --radius $r0 --size 64x64 --passes $N \
                 --threads 1 -q --seed $s -o "$o" > /dev/null || exit 1
             imgs="$imgs $o"
         done
     done
     for s in $seeds; do
+        [ "${ORACLE_REUSE:-0}" = 1 ] && [ -f "$out/$sc-appm-s$s.pfm" ] ||
         echo "$sc appm seed=$s $(./appm render scenes/$sc.scene --size 64x64 --passes $N --threads 1 -q --seed $s \
             -o "$out/$sc-appm-s$s.pfm" --aux "$out/$sc-appm-s$s" | sed 's/.*\(clamped=[^ ]*\).*/\1/')"
         pre="$pre $out/$sc-appm-s$s"
