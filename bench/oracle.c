@@ -139,7 +139,7 @@ static int nearest(const double *F, int nf, double v)
 int main(int argc, char **argv)
 {
     appm_image ref, img[MAXF][MAXS], ar[MAXS][3], ai;
-    double F[MAXF], rauto, bound_u, *e, *es, *er;
+    double F[MAXF], rauto, r_hi, bound_u, *e, *es, *er;
     unsigned long passes;
     int nf, ns, a = 1, k, s, c, r, nreg = 0, kbnd;
     unsigned w, h, x, y, i, rx0[MAXR], ry0[MAXR], rx1[MAXR], ry1[MAXR];
@@ -184,7 +184,8 @@ int main(int argc, char **argv)
         snprintf(p, sizeof p, "%s.pfm", argv[a - 1]);
         if (!readimg(p, &ai, w, h)) return 2;
     }
-    bound_u = KAPPA * 2.0 * pow((double)passes, -1.0 / 6.0);
+    r_hi = 2.0 * rauto * pow((double)passes, -1.0 / 6.0); /* appm's upper bound of the last pass */
+    bound_u = KAPPA * r_hi / rauto;
     kbnd = nearest(F, nf, bound_u);
     e = (double *)calloc((size_t)w * h * nf, sizeof *e);
     es = (double *)calloc((size_t)w * h * nf * ns, sizeof *es);
@@ -267,7 +268,7 @@ int main(int argc, char **argv)
             ra = 0.0;
             for (s = 0; s < ns; ++s) ra += ar[s][0].rgb[3 * p];
             /* at the bound on every seed: the edges and smooth pixels appm holds there */
-            inset[3] = ra / ns >= 0.999 * 2.0 * pow((double)passes, -1.0 / 6.0) * rauto ? inset[1] + 3 : -1;
+            inset[3] = ra / ns >= 0.999 * r_hi ? inset[1] + 3 : -1;
             for (m = 0; m < 4; ++m) {
                 set *st;
                 if (inset[m] < 0) continue;
@@ -279,7 +280,7 @@ int main(int argc, char **argv)
                 st->n++;
                 if (fs > bound_u) st->above_bound++;
                 if (fs > u[0]) st->above_u++;
-                if (ra / ns >= 0.999 * 2.0 * pow((double)passes, -1.0 / 6.0) * rauto) st->at_bound++;
+                if (inset[3] >= 0) st->at_bound++;
                 st->e_or += ep[kb];
                 st->e_u += ep[nearest(F, nf, u[0])];
                 st->e_b += ep[kbnd];
