@@ -11,8 +11,8 @@
 # reference; two path-traced halves for CornellBox-Original, the first used).
 # ORACLE_RHI=H renders appm built with its upper bound APPM__RHI at H (as
 # bench/bounds.sh does) and writes its files to ORACLE_OUT (default
-# bench/out/oracle-rhiH), reusing the ppm images of bench/out/oracle; the
-# tables' "bound" stays today's 2x.
+# bench/out/oracle-rhiH), reusing the ppm images of ORACLE_PPM (default
+# bench/out/oracle); the tables' "bound" stays today's 2x.
 # ORACLE_REUSE=1 keeps the images already there (no clamped= lines then).
 # Results: bench/out/oracle/SCENE.txt (or ORACLE_OUT).
 set -u
@@ -23,7 +23,8 @@ fs=${ORACLE_F:-"0.125 0.177 0.25 0.354 0.5 0.707 1 1.41 2 2.83 4 8"}
 rhi=${ORACLE_RHI:-2.0}
 out=${ORACLE_OUT:-bench/out/oracle}
 [ "$rhi" = 2.0 ] || out=${ORACLE_OUT:-bench/out/oracle-rhi$rhi}
-ppmout=bench/out/oracle
+ppmout=$out
+[ "$rhi" = 2.0 ] || ppmout=${ORACLE_PPM:-bench/out/oracle}
 R=bench/ref
 mkdir -p "$out" "$ppmout"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
