@@ -862,28 +862,14 @@ static void appm__ld_cached(const appm__sobol_tab *tab, appm__ld_cache *c, uint3
 {
     uint64_t g = c->g[group];
     uint32_t ir = appm__lk_permute(rindex, (uint32_t)g), s = (uint32_t)(g >> 32), t = rindex & 0xFFFFFFu;
-    uint32_t *tag = c->tag[group];
-    uint64_t *low = c->low[group];
-    if (mask & 3u) {
-        if (tag[0] != t) {
-            tag[0] = t;
-            low[0] = appm__ld_low(tab, 0, ir);
+    unsigned p;
+    for (p = 0; p < APPM__LD_PAIRS; ++p, mask >>= 2, u += 2, s += 2u * 0x9E3779B9u) {
+        if (!(mask & 3u)) continue;
+        if (c->tag[group][p] != t) {
+            c->tag[group][p] = t;
+            c->low[group][p] = appm__ld_low(tab, p, ir);
         }
-        appm__ld_pair(tab, low[0] ^ tab->pair[0][3][ir >> 24], s, mask, u);
-    }
-    if (mask & 12u) {
-        if (tag[1] != t) {
-            tag[1] = t;
-            low[1] = appm__ld_low(tab, 1, ir);
-        }
-        appm__ld_pair(tab, low[1] ^ tab->pair[1][3][ir >> 24], s + 2u * 0x9E3779B9u, mask >> 2, u + 2);
-    }
-    if (mask & 48u) {
-        if (tag[2] != t) {
-            tag[2] = t;
-            low[2] = appm__ld_low(tab, 2, ir);
-        }
-        appm__ld_pair(tab, low[2] ^ tab->pair[2][3][ir >> 24], s + 4u * 0x9E3779B9u, mask >> 4, u + 4);
+        appm__ld_pair(tab, c->low[group][p] ^ tab->pair[p][3][ir >> 24], s, mask, u);
     }
 }
 
