@@ -35,15 +35,26 @@ C99="-std=c99 -pedantic -Wall -Wextra -Wshadow -Wvla -Werror"
 pass=0
 fail=0
 log="$OUT/step.log"
+lap_t=$(date +%s)
+
+# lap: sets took to "[N s]", the seconds since the last ok, FAIL or skip, i.e.
+# what this step took (its build included), so a slow step shows in CI's log.
+lap() {
+    now=$(date +%s)
+    took="[$((now - lap_t)) s]"
+    lap_t=$now
+}
 
 ok() {
-    echo "ok   $1"
+    lap
+    echo "ok   $1 $took"
     pass=$((pass + 1))
 }
 
 bad() {
+    lap
     [ -s "$log" ] && tail -n 25 "$log" | sed 's/^/     | /'
-    echo "FAIL $1"
+    echo "FAIL $1 $took"
     fail=$((fail + 1))
 }
 
@@ -54,7 +65,8 @@ have() {
     if [ "$STRICT" = 1 ]; then
         bad "$2 ($1 is not installed; PORTABILITY_STRICT=1)"
     else
-        echo "skip $2: $1 is not installed"
+        lap
+        echo "skip $2: $1 is not installed $took"
     fi
     return 1
 }
@@ -236,7 +248,8 @@ if have gcc "SIMD paths"; then
         same_render "gcc -mavx2" -mavx2
         same_as_default "gcc -mavx2" gcc__mavx2
     else
-        echo "skip -mavx2: this CPU has no AVX2"
+        lap
+        echo "skip -mavx2: this CPU has no AVX2 $took"
     fi
 fi
 if have clang "clang SIMD paths" && cpu_has avx2 && cpu_has fma; then
@@ -307,7 +320,8 @@ if have clang "wasm32-wasi"; then
         if [ "$STRICT" = 1 ]; then
             bad "wasm32-wasi (no wasi-libc under $WASI_SYSROOT; PORTABILITY_STRICT=1)"
         else
-            echo "skip wasm32-wasi: no wasi-libc under $WASI_SYSROOT (set WASI_SYSROOT)"
+            lap
+            echo "skip wasm32-wasi: no wasi-libc under $WASI_SYSROOT (set WASI_SYSROOT) $took"
         fi
     fi
 fi
@@ -332,7 +346,8 @@ if [ "${WINE:-0}" = 1 ]; then
         fi
     fi
 else
-    echo "skip wine: set WINE=1 to run a mingw-w64 build under wine"
+    lap
+    echo "skip wine: set WINE=1 to run a mingw-w64 build under wine $took"
 fi
 
 # ---- optional: qemu-user -----------------------------------------------------------------------
@@ -382,7 +397,8 @@ if [ "${QEMU:-0}" = 1 ]; then
         fi
     done
 else
-    echo "skip qemu: set QEMU=1 to run aarch64 and big-endian s390x builds under qemu-user"
+    lap
+    echo "skip qemu: set QEMU=1 to run aarch64 and big-endian s390x builds under qemu-user $took"
 fi
 
 echo "$pass passed, $fail failed"
