@@ -15,30 +15,18 @@
 # interleaved; EDGE_PASSES="SCENE=N ..." renders N passes of that scene
 # instead (equal passes: deterministic, so the error without the noise of
 # the machine's load; the cost then comes from `cpu=` or callgrind).
-# References and masks as bench/bounds.sh (run it once, or
-# let this script build them the same way).  Results: bench/out/edgecap/log.txt
-# (or EDGE_OUT), one line per run; then medians per scene and variant.
+# References and masks as bench/bounds.sh (bench/refs.sh builds them once).
+# Results: bench/out/edgecap/log.txt (or EDGE_OUT), one line per run; then
+# per scene and variant the run with the median masked RMSE over the seeds.
 set -u
 CC=${CC:-cc}
 seeds=${EDGE_SEEDS:-"1 2 3"}
 vars=${EDGE_VARIANTS:-"old new"}
 budget=${EDGE_BUDGET:-3}
 out=${EDGE_OUT:-bench/out/edgecap}
-R=bench/ref
 mkdir -p "$out"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
-ref() { # name scene method passes extra... (as bench/bounds.sh)
-    n=$1 sc=$2 m=$3 p=$4
-    shift 4
-    for s in a b; do
-        seed=1000003; [ $s = b ] && seed=1000004
-        [ -f $R/$n-$s.pfm ] || ./appm render scenes/$sc.scene --method $m --size 64x64 --passes $p --threads 2 -q \
-            --sampler random --seed $seed "$@" -o $R/$n-$s.pfm > /dev/null || exit 1
-    done
-}
-ref cornell-original-64 cornell-original pt 4096
-ref caustic-glass-64 caustic-glass ppm 3000 --photons 16384
-ref water-caustic-64 water-caustic ppm 600 --photons 16384
+. bench/refs.sh
 cp appm.h "$out/"
 rm -rf "$out/src" && mkdir -p "$out/src/tests" && cp appm.c appm.h "$out/src/" && cp tests/t_appm.c tests/check.h "$out/src/tests/"
 patch -s -p1 -d "$out/src" < bench/edgecap.patch || { echo "bench: bench/edgecap.patch does not apply"; exit 1; }
@@ -53,13 +41,6 @@ for v in $vars; do
     done
     $CC -std=c99 -O2 bench/eqcpu.c "$out/appm-$name.c" -o "$out/eqcpu-$name" -lm -pthread || exit 1
 done
-args() { # scene: REF_A REF_B MASK REF_MSE (as bench/bounds.sh)
-    case $1 in
-    cornell-sphere) echo "$R/cornell-sphere-64.pfm $R/cornell-sphere-64.pfm 1.0 $(sed 's/ref_mse=//' $R/cornell-sphere-64.mse)" ;;
-    water-caustic) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 10.0 0" ;;
-    *) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 1.0 0" ;;
-    esac
-}
 scenes=${EDGE_SCENES:-"cornell-sphere cornell-original caustic-glass water-caustic"}
 log=$out/log.txt
 : > "$log"
