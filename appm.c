@@ -6275,6 +6275,17 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      loses 5 - 53 % at RHI 2 (water-caustic most); made conservative enough
  *      to tie at RHI 2 it loses at RHI 4.  A bandwidth tied to the radius,
  *      h = max(h_j, c R), ties at RHI 2 and loses at 4.  Neither is used.
+ *      The Laplacian of the running image (algorithm.md 4.18: a least-squares
+ *      quadratic fitted to the 5x5 neighbours' photon terms on the same
+ *      surface, dI^2 = max(pooled dI_h^2, dI_img^2 - k Var); bench/imglap.patch)
+ *      was measured and is not used either.  At the pixel scale the
+ *      reference's Laplacian at the edges is 2.2 - 2.6x the dI the radius uses
+ *      (median; S is not too large), far from the 14x that the oracle of 4.16
+ *      implies: what the edges lack is mostly no curvature.  Used, it narrowed
+ *      the sphere box's caustic, where appm already beat the oracle (held-out
+ *      error 1.26 against 0.95 of the best fixed radius), lost 0.4 - 3 % at
+ *      equal passes there, gained 1 - 2.5 % on water-caustic, cost 6 % more
+ *      instructions, tied at equal time at RHI 2 and lost 2 - 30 % at RHI 4.
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */

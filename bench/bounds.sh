@@ -28,31 +28,14 @@ out=${BOUNDS_OUT:-bench/out/bounds}
 R=bench/ref
 mkdir -p "$out"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
-ref() { # name scene method passes extra...
-    n=$1 sc=$2 m=$3 p=$4
-    shift 4
-    for s in a b; do
-        seed=1000003; [ $s = b ] && seed=1000004
-        [ -f $R/$n-$s.pfm ] || ./appm render scenes/$sc.scene --method $m --size 64x64 --passes $p --threads 2 -q \
-            --sampler random --seed $seed "$@" -o $R/$n-$s.pfm > /dev/null || exit 1
-    done
-}
-ref cornell-original-64 cornell-original pt 4096
-ref caustic-glass-64 caustic-glass ppm 3000 --photons 16384
-ref water-caustic-64 water-caustic ppm 600 --photons 16384
+. bench/refs.sh
+refs
 for h in $rhis; do
     sed "s/^#define APPM__RHI 2.0 /#define APPM__RHI $h /" appm.c > "$out/appm-rhi$h.c"
     grep -q "^#define APPM__RHI $h " "$out/appm-rhi$h.c" || { echo "bench: APPM__RHI not found"; exit 1; }
     cp appm.h "$out/"
     $CC -std=c99 -O2 bench/eqcpu.c "$out/appm-rhi$h.c" -o "$out/eqcpu-rhi$h" -lm -pthread || exit 1
 done
-args() { # scene: REF_A REF_B MASK REF_MSE
-    case $1 in
-    cornell-sphere) echo "$R/cornell-sphere-64.pfm $R/cornell-sphere-64.pfm 1.0 $(sed 's/ref_mse=//' $R/cornell-sphere-64.mse)" ;;
-    water-caustic) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 10.0 0" ;;
-    *) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 1.0 0" ;;
-    esac
-}
 scenes=${BOUNDS_SCENES:-"cornell-sphere cornell-original caustic-glass water-caustic"}
 log=$out/log.txt
 : > "$log"
