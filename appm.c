@@ -6288,6 +6288,17 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      three scenes (and -2 % on CornellBox-Original) with gamma 1.5 and no
  *      widening; at equal time the wide bound loses 4 - 9 % on the caustic
  *      scenes, and the test costs 6 - 10 % of processor time.  Not used.
+ *      The Laplacian of the running image (algorithm.md 4.18: a least-squares
+ *      quadratic fitted to the 5x5 neighbours' photon terms on the same
+ *      surface, dI^2 = max(pooled dI_h^2, dI_img^2 - k Var); bench/imglap.patch)
+ *      was measured and is not used either.  At the pixel scale the
+ *      reference's Laplacian at the edges is 2.2 - 2.6x the dI the radius uses
+ *      (median; S is not too large), far from the 14x that the oracle of 4.16
+ *      implies: what the edges lack is mostly no curvature.  Used, it narrowed
+ *      the sphere box's caustic, where appm already beat the oracle (held-out
+ *      error 1.26 against 0.95 of the best fixed radius), lost 0.4 - 3 % at
+ *      equal passes there, gained 1 - 2.5 % on water-caustic, cost 6 % more
+ *      instructions, tied at equal time at RHI 2 and lost 2 - 30 % at RHI 4.
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */

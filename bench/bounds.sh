@@ -25,9 +25,11 @@ CC=${CC:-cc}
 seeds=${BOUNDS_SEEDS:-"1 2 3"}
 rhis=${BOUNDS_RHI:-"1 1.5 2 4 8"}
 out=${BOUNDS_OUT:-bench/out/bounds}
+R=bench/ref
 mkdir -p "$out"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
 . bench/refs.sh
+refs
 for h in $rhis; do
     sed "s/^#define APPM__RHI 2.0 /#define APPM__RHI $h /" appm.c > "$out/appm-rhi$h.c"
     grep -q "^#define APPM__RHI $h " "$out/appm-rhi$h.c" || { echo "bench: APPM__RHI not found"; exit 1; }

@@ -26,7 +26,9 @@ budget=${EDGE_BUDGET:-3}
 out=${EDGE_OUT:-bench/out/edgecap}
 mkdir -p "$out"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
+R=bench/ref
 . bench/refs.sh
+refs
 cp appm.h "$out/"
 rm -rf "$out/src" && mkdir -p "$out/src/tests" && cp appm.c appm.h "$out/src/" && cp tests/t_appm.c tests/check.h "$out/src/tests/"
 patch -s -p1 -d "$out/src" < bench/edgecap.patch || { echo "bench: bench/edgecap.patch does not apply"; exit 1; }

@@ -18,6 +18,9 @@
 # ORACLE_DEFS="MACRO=VALUE,..." with those macros of section 10 set by sed
 # (after the patch), into ORACLE_OUT (default bench/out/oracle-defs), with
 # the ppm images of ORACLE_PPM as above.
+# ORACLE_APPM=BINARY renders appm with that build instead (for example one of
+# bench/imglap.sh's variants); give it its own ORACLE_OUT, and ORACLE_PPM for
+# ppm images already rendered.
 # ORACLE_REUSE=1 keeps the images already there (no clamped= lines then).
 # Results: bench/out/oracle/SCENE.txt (or ORACLE_OUT).
 set -u
@@ -33,6 +36,7 @@ out=${ORACLE_OUT:-bench/out/oracle}
 [ -z "$defs$pat" ] || out=${ORACLE_OUT:-bench/out/oracle-defs}
 ppmout=$out
 [ "$rhi" = 2.0 ] && [ -z "$defs$pat" ] || ppmout=${ORACLE_PPM:-bench/out/oracle}
+[ -n "${ORACLE_PPM:-}" ] && ppmout=$ORACLE_PPM
 R=bench/ref
 mkdir -p "$out" "$ppmout"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
@@ -54,6 +58,7 @@ if [ "$rhi" != 2.0 ] || [ -n "$defs$pat" ]; then
     $CC -std=c99 -O2 -I"$out" "$out/main.c" "$out/appm.c" -o "$out/appm" -lm -pthread || exit 1
     APPM=$out/appm
 fi
+[ -n "${ORACLE_APPM:-}" ] && APPM=$ORACLE_APPM
 $CC -std=c99 -O2 -Wall -Wextra -pedantic bench/oracle.c appm.c -o "$out/oracle" -lm -pthread || exit 1
 [ -f $R/cornell-original-64-a.pfm ] || ./appm render scenes/cornell-original.scene --method pt --size 64x64 \
     --passes 4096 --threads 2 -q --sampler random --seed 1000003 -o $R/cornell-original-64-a.pfm > /dev/null || exit 1

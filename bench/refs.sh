@@ -1,14 +1,11 @@
-# bench/refs.sh - sourced by bench/bounds.sh and bench/edgecap.sh: the 64x64
-# references of docs/algorithm.md 4.13 (built once, then reused) and args(),
-# the reference arguments of bench/eqcpu for a scene.
+# bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh and bench/edgecap.sh: the 64x64
+# references of docs/algorithm.md 4.13 and the reference arguments of
+# bench/eqcpu for each of its four scenes.  Needs R (the reference folder).
 #
 # The committed sphere box reference; two path-traced halves for
 # CornellBox-Original; two ppm halves for caustic-glass and water-caustic (a
 # path tracer cannot reach their spot or tiny light through glass or water;
-# these lean toward ppm's kernel).  The masked RMSE leaves out the pixels whose
-# reference luminance is at least 1 (10 for water-caustic): the light seen
-# directly.
-R=bench/ref
+# these lean toward ppm's kernel).  Built once, then reused.
 ref() { # name scene method passes extra...
     n=$1 sc=$2 m=$3 p=$4
     shift 4
@@ -18,10 +15,15 @@ ref() { # name scene method passes extra...
             --sampler random --seed $seed "$@" -o $R/$n-$s.pfm > /dev/null || exit 1
     done
 }
-ref cornell-original-64 cornell-original pt 4096
-ref caustic-glass-64 caustic-glass ppm 3000 --photons 16384
-ref water-caustic-64 water-caustic ppm 600 --photons 16384
-args() { # scene: REF_A REF_B MASK REF_MSE
+refs() {
+    ref cornell-original-64 cornell-original pt 4096
+    ref caustic-glass-64 caustic-glass ppm 3000 --photons 16384
+    ref water-caustic-64 water-caustic ppm 600 --photons 16384
+}
+# bench/eqcpu's REF_A REF_B MASK REF_MSE for a scene; the mask leaves out the
+# pixels whose reference luminance is at least 1 (10 for water-caustic): the
+# light seen directly
+args() {
     case $1 in
     cornell-sphere) echo "$R/cornell-sphere-64.pfm $R/cornell-sphere-64.pfm 1.0 $(sed 's/ref_mse=//' $R/cornell-sphere-64.mse)" ;;
     water-caustic) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 10.0 0" ;;
