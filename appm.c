@@ -4498,9 +4498,10 @@ nomem:
  * most APPM__LEAF_MAX triangles counts as a leaf: its triangles are consecutive
  * (the build puts them in leaf order) and one pack tests them together, for
  * about the cost of one triangle, where its binary nodes would cost box tests
- * and visits; in a large tree a bigger one may too (flat leaves, below).  Every wide node so consumes at least one binary interior node,
- * so there are at most (nnode - 1) / 2 + 1 of them, and the tree is no deeper
- * than the binary one.  Nodes are laid out depth first, the children of a node
+ * and visits; in a large tree a bigger one may too (flat leaves, below).
+ * Every wide node so consumes at least one binary interior node, so there are
+ * at most (nnode - 1) / 2 + 1 of them, and the tree is no deeper than the
+ * binary one.  Nodes are laid out depth first, the children of a node
  * consecutively; a leaf's packs are consecutive, in the order leaves are made. */
 typedef struct appm__collapse_item {
     uint32_t bin, wide, depth;
