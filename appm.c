@@ -3381,7 +3381,7 @@ typedef struct appm__wnode {
 /* A leaf's triangles in packs of four, structure of arrays, so that one vector
  * operation evaluates a step of the watertight test for four triangles.  A
  * leaf child of a wide node names its first pack (first) and its triangles
- * (count, up to APPM__LEAF_MAX unless the binary build made a larger leaf);
+ * (count: up to APPM__LEAF_MAX, APPM__LEAF_FLAT in a large tree, or a binary leaf's);
  * its packs are consecutive, the last one padded with copies of its first
  * lane whose index is APPM__NO_TRI, so they are never reported.  The scalar
  * path of a SIMD build tests the leaf's triangles in appm_scene.tri, where
@@ -4498,9 +4498,10 @@ nomem:
  * most APPM__LEAF_MAX triangles counts as a leaf: its triangles are consecutive
  * (the build puts them in leaf order) and one pack tests them together, for
  * about the cost of one triangle, where its binary nodes would cost box tests
- * and visits.  Every wide node so consumes at least one binary interior node,
- * so there are at most (nnode - 1) / 2 + 1 of them, and the tree is no deeper
- * than the binary one.  Nodes are laid out depth first, the children of a node
+ * and visits; in a large tree a bigger one may too (flat leaves, below).
+ * Every wide node so consumes at least one binary interior node, so there are
+ * at most (nnode - 1) / 2 + 1 of them, and the tree is no deeper than the
+ * binary one.  Nodes are laid out depth first, the children of a node
  * consecutively; a leaf's packs are consecutive, in the order leaves are made. */
 typedef struct appm__collapse_item {
     uint32_t bin, wide, depth;
@@ -4508,10 +4509,29 @@ typedef struct appm__collapse_item {
 
 typedef struct appm__collapse { /* scratch of the collapse */
     uint32_t *cnt, *fst;        /* per binary node: its subtree's triangles, the first of them */
+    float *cost;                /* per binary node: its subtree's cost over its area */
+    unsigned char *leaf;        /* per binary node: it becomes one leaf */
     uint32_t npack;             /* packs written so far */
 } appm__collapse;
 
-#define APPM__LEAFLIKE(s, c, i) ((s)->node[i].count || (c)->cnt[i] <= APPM__LEAF_MAX)
+/* Flat leaves: in a tree of at least APPM__FLAT_TRIS triangles (the bunny's
+ * wide tree and packs take 5 MB, past any core's own cache), a subtree of up
+ * to APPM__LEAF_FLAT triangles also becomes one leaf when the surface-area
+ * cost of testing all its packs is no more than that of its binary subtree
+ * with an interior node at APPM__FLAT_NODE packs.  The traversal of such a
+ * tree waits on memory: a node's children are known only when the node has
+ * arrived, while the packs of a leaf are consecutive and stream in.  A level
+ * less pays for the extra packs there (bunny, 1e6 random rays, SSE2: closest
+ * hits 2.1x -> 2.5-2.7x the binary tree; AVX2 2.0-2.2x -> 2.6x), not in a tree
+ * that fits (the 2188-triangle sphere box: 5 % slower, its scalar path 25 %).
+ * Every build makes the same tree, so that SIMD and scalar builds break exact
+ * ties alike and render the same bytes. */
+#ifndef APPM__LEAF_FLAT
+#define APPM__LEAF_FLAT 16
+#endif
+#define APPM__FLAT_TRIS 32768
+#define APPM__FLAT_NODE 2.0f
+#define APPM__LEAFLIKE(s, c, i) ((c)->leaf[i])
 
 /* The leaf of triangles [first, first + count): its packs, written at the end
  * (the last one padded with copies of its first lane, marked APPM__NO_TRI);
@@ -4590,15 +4610,29 @@ static void appm__collapse_node(appm_scene *s, appm__collapse *cs, appm__collaps
     }
 }
 
-/* The subtree sizes and first triangles (children follow their parent in the
- * array, so one backward sweep), and the number of packs the leaves need. */
+/* The subtree sizes, first triangles and which subtrees become leaves
+ * (children follow their parent in the array, so one backward sweep), and the
+ * number of packs the leaves need.  cost[i] is the flat-leaf rule's cost of
+ * subtree i in pack tests times area: the sum over its nodes n of area(n)
+ * times APPM__FLAT_NODE for an interior one, times its packs for a leaf. */
 static uint32_t appm__collapse_count(const appm_scene *s, appm__collapse *c)
 {
-    uint32_t i = s->nnode, np = 0;
+    uint32_t i = s->nnode, np = 0, cap = s->ntri >= APPM__FLAT_TRIS ? APPM__LEAF_FLAT : APPM__LEAF_MAX;
     while (i-- > 0) {
         const appm__node *n = &s->node[i];
+        double dx = n->bmax[0] - n->bmin[0], dy = n->bmax[1] - n->bmin[1], dz = n->bmax[2] - n->bmin[2];
+        float a = (float)(dx * dy + dy * dz + dz * dx), flat, inner;
         c->cnt[i] = n->count ? n->count : c->cnt[n->first] + c->cnt[n->first + 1];
         c->fst[i] = n->count ? n->first : c->fst[n->first];
+        flat = a * (float)((c->cnt[i] + 3) / 4);
+        if (n->count) {
+            c->leaf[i] = 1;
+            c->cost[i] = flat;
+            continue;
+        }
+        inner = APPM__FLAT_NODE * a + c->cost[n->first] + c->cost[n->first + 1];
+        c->leaf[i] = c->cnt[i] <= APPM__LEAF_MAX || (c->cnt[i] <= cap && flat <= inner);
+        c->cost[i] = c->leaf[i] ? flat : inner;
     }
     for (i = 0; i < s->nnode; ++i) {
         const appm__node *n = &s->node[i];
@@ -4667,10 +4701,12 @@ static appm_status appm__bvh_collapse(appm_scene *s)
     c.npack = 0;
     c.cnt = (uint32_t *)appm__alloc(m, s->nnode, sizeof *c.cnt);
     c.fst = (uint32_t *)appm__alloc(m, s->nnode, sizeof *c.fst);
+    c.cost = (float *)appm__alloc(m, s->nnode, sizeof *c.cost);
+    c.leaf = (unsigned char *)appm__alloc(m, s->nnode, 1);
     stack = (appm__collapse_item *)appm__alloc(m, (APPM__BVH_W - 1) * (size_t)APPM__BVH_MAX_DEPTH + APPM__BVH_W,
                                                sizeof *stack);
     s->wnode_mem = NULL;
-    if (c.cnt && c.fst && stack) {
+    if (c.cnt && c.fst && c.cost && c.leaf && stack) {
         /* in 64 bits: the sum can exceed a 32-bit size_t (wasm32) */
         uint64_t bytes;
         s->npack = appm__collapse_count(s, &c);
@@ -4694,6 +4730,8 @@ static appm_status appm__bvh_collapse(appm_scene *s)
     appm__free(m, stack);
     appm__free(m, c.cnt);
     appm__free(m, c.fst);
+    appm__free(m, c.cost);
+    appm__free(m, c.leaf);
     return st;
 }
 

@@ -60,7 +60,8 @@
  *     on every x86-64 build, with AVX2 given -mavx2 or -march=native, and with
  *     NEON on aarch64, as the compiler's own macros say; tcc, other targets and
  *     -DAPPM_SIMD=0 use a portable scalar test.  Its leaves (up to 4
- *     triangles) are tested four triangles at once in SSE2/NEON lanes, with the
+ *     triangles; up to 16 in a mesh of 32768 or more, where the surface-area
+ *     cost says so) are tested four triangles at once in SSE2/NEON lanes, with the
  *     scalar watertight test's float operations per lane.  The scalar tests compute the
  *     same floats, so a SIMD build and its -DAPPM_SIMD=0 twin (same compiler,
  *     same other flags) render the same bytes, and so do gcc's default and

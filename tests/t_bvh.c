@@ -483,14 +483,29 @@ static void wide_walk(const appm_scene *s, uint32_t ni, uint32_t depth, unsigned
     }
 }
 
-static void check_wide_tree(const appm_scene *s, const char *name)
+/* The largest leaf of the wide tree: at most 8 triangles (the binary build's
+ * largest leaf) in a small tree, at most APPM__LEAF_FLAT in a large one. */
+static uint32_t check_leaf_sizes(const appm_scene *s, const char *name)
+{
+    uint32_t i, j, big = 0, cap = s->ntri >= APPM__FLAT_TRIS ? APPM__LEAF_FLAT : 8;
+    for (i = 0; i < s->nwnode; ++i)
+        for (j = 0; j < APPM__BVH_W; ++j) {
+            uint32_t c = s->wnode[i].count[j];
+            if (c != APPM__W_INNER && c > big) big = c;
+        }
+    CHECK_MSG(big <= cap, "%s: a leaf of %u triangles (at most %u)", name, big, cap);
+    return big;
+}
+
+/* Returns the largest leaf's triangle count. */
+static uint32_t check_wide_tree(const appm_scene *s, const char *name)
 {
     unsigned char *seen = (unsigned char *)calloc(s->ntri ? s->ntri : 1, 1);
     uint32_t nodes = 0, maxd = 0, i, missing = 0;
     long bad = 0;
     appm_scene_info in;
     CHECK(seen != NULL);
-    if (!seen) return;
+    if (!seen) return 0;
     wide_walk(s, 0, 1, seen, &nodes, &maxd, &bad);
     for (i = 0; i < s->ntri; ++i) missing += seen[i] != 1;
     printf("%s: wide tree %u nodes, depth %u, %u packs\n", name, s->nwnode, s->wdepth, s->npack);
@@ -499,6 +514,7 @@ static void check_wide_tree(const appm_scene *s, const char *name)
     appm_scene_get_info(s, &in);
     CHECK(in.bvh_nodes == s->nwnode && in.bvh_depth == s->wdepth);
     free(seen);
+    return check_leaf_sizes(s, name);
 }
 
 /* All ray families against one scene.  n: number of uniform random rays; the
@@ -615,6 +631,7 @@ static void test_bvh_vs_brute(void)
     CHECK_MSG(appm_scene_load(path, NULL, &s, &d) == APPM_OK, "%s:%u: %s", d.file, d.line, d.message);
     if (on_path(s)) {
         CHECK(s->ntri > 60000);
+        CHECK(check_leaf_sizes(s, "bunny") > 8); /* it has flat leaves, traced below */
         bvh_vs_brute(s, "bunny", quick ? 10000 : 100000, quick ? 100 : 1000, 1);
         appm_scene_destroy(s);
     }
