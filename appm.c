@@ -6313,6 +6313,19 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      loses 5 - 53 % at RHI 2 (water-caustic most); made conservative enough
  *      to tie at RHI 2 it loses at RHI 4.  A bandwidth tied to the radius,
  *      h = max(h_j, c R), ties at RHI 2 and loses at 4.  Neither is used.
+ *      Edge caps on the bound (algorithm.md 4.17, bench/edgecap.patch): per
+ *      pixel and component hi = min(RHI_wide max(r1, r_auto) j^(-1/6), gamma D),
+ *      D the world distance to the nearest discontinuity in a 7x7 window of
+ *      the running image (no gathering point, another surface, or a second
+ *      difference I_q + I_q' - 2 I_i beyond 3 sd of its noise).  They narrow
+ *      the edges as the oracle of 4.16 asks (held-out MSE at the edges 0.934
+ *      -> 0.918 on the sphere box, 1.115 -> 1.056 on CornellBox-Original, with
+ *      gamma 1), and with RHI_wide 4 they widen the smooth pixels (0.995 ->
+ *      0.791 on CornellBox-Original).  At equal passes: -1 to -6 % RMSE on the
+ *      two boxes, +4 to +13 % on water-caustic with gamma 1, within 1 % on
+ *      three scenes (and -2 % on CornellBox-Original) with gamma 1.5 and no
+ *      widening; at equal time the wide bound loses 4 - 9 % on the caustic
+ *      scenes, and the test costs 6 - 10 % of processor time.  Not used.
  *      The Laplacian of the running image (algorithm.md 4.18: a least-squares
  *      quadratic fitted to the 5x5 neighbours' photon terms on the same
  *      surface, dI^2 = max(pooled dI_h^2, dI_img^2 - k Var); bench/imglap.patch)

@@ -13,6 +13,11 @@
 # bench/bounds.sh does) and writes its files to ORACLE_OUT (default
 # bench/out/oracle-rhiH), reusing the ppm images of ORACLE_PPM (default
 # bench/out/oracle); the tables' "bound" stays today's 2x.
+# ORACLE_PATCH=FILE renders appm built from appm.c with that patch applied
+# (bench/edgecap.patch: the edge caps of docs/algorithm.md 4.17), and
+# ORACLE_DEFS="MACRO=VALUE,..." with those macros of section 10 set by sed
+# (after the patch), into ORACLE_OUT (default bench/out/oracle-defs), with
+# the ppm images of ORACLE_PPM as above.
 # ORACLE_APPM=BINARY renders appm with that build instead (for example one of
 # bench/imglap.sh's variants); give it its own ORACLE_OUT, and ORACLE_PPM for
 # ppm images already rendered.
@@ -24,18 +29,31 @@ N=${ORACLE_PASSES:-256}
 seeds=${ORACLE_SEEDS:-"1 2 3 4 5"}
 fs=${ORACLE_F:-"0.125 0.177 0.25 0.354 0.5 0.707 1 1.41 2 2.83 4 8"}
 rhi=${ORACLE_RHI:-2.0}
+defs=${ORACLE_DEFS:-}
+pat=${ORACLE_PATCH:-}
 out=${ORACLE_OUT:-bench/out/oracle}
 [ "$rhi" = 2.0 ] || out=${ORACLE_OUT:-bench/out/oracle-rhi$rhi}
+[ -z "$defs$pat" ] || out=${ORACLE_OUT:-bench/out/oracle-defs}
 ppmout=$out
-[ "$rhi" = 2.0 ] || ppmout=${ORACLE_PPM:-bench/out/oracle}
+[ "$rhi" = 2.0 ] && [ -z "$defs$pat" ] || ppmout=${ORACLE_PPM:-bench/out/oracle}
 [ -n "${ORACLE_PPM:-}" ] && ppmout=$ORACLE_PPM
 R=bench/ref
 mkdir -p "$out" "$ppmout"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
 APPM=./appm
-if [ "$rhi" != 2.0 ]; then
+if [ "$rhi" != 2.0 ] || [ -n "$defs$pat" ]; then
     sed "s/^#define APPM__RHI 2.0 /#define APPM__RHI $rhi /" appm.c > "$out/appm.c"
     grep -q "^#define APPM__RHI $rhi " "$out/appm.c" || { echo "bench: APPM__RHI not found"; exit 1; }
+    if [ -n "$pat" ]; then # the patch may touch the tests too: apply it to a copy of both
+        rm -rf "$out/src" && mkdir -p "$out/src/tests" && cp "$out/appm.c" "$out/src/" &&
+            cp tests/t_appm.c "$out/src/tests/" && patch -s -p1 -d "$out/src" < "$pat" &&
+            cp "$out/src/appm.c" "$out/appm.c" || { echo "bench: $pat does not apply"; exit 1; }
+    fi
+    for d in $(echo "$defs" | tr ',' ' '); do
+        m=${d%%=*} val=${d#*=}
+        sed "s/^#define $m [^ ]*/#define $m $val/" "$out/appm.c" > "$out/t.c" && mv "$out/t.c" "$out/appm.c"
+        grep -q "^#define $m $val" "$out/appm.c" || { echo "bench: $m not found"; exit 1; }
+    done
     cp appm.h main.c "$out/"
     $CC -std=c99 -O2 -I"$out" "$out/main.c" "$out/appm.c" -o "$out/appm" -lm -pthread || exit 1
     APPM=$out/appm

@@ -1,4 +1,4 @@
-# bench/refs.sh - sourced by bench/bounds.sh and bench/imglap.sh: the 64x64
+# bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh and bench/edgecap.sh: the 64x64
 # references of docs/algorithm.md 4.13 and the reference arguments of
 # bench/eqcpu for each of its four scenes.  Needs R (the reference folder).
 #
