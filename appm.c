@@ -4531,7 +4531,6 @@ typedef struct appm__collapse { /* scratch of the collapse */
 #endif
 #define APPM__FLAT_TRIS 32768
 #define APPM__FLAT_NODE 2.0f
-#define APPM__LEAFLIKE(s, c, i) ((c)->leaf[i])
 
 /* The leaf of triangles [first, first + count): its packs, written at the end
  * (the last one padded with copies of its first lane, marked APPM__NO_TRI);
@@ -4581,7 +4580,7 @@ static void appm__collapse_node(appm_scene *s, appm__collapse *cs, appm__collaps
             const appm__node *c = &bn[kid[i]];
             double dx = c->bmax[0] - c->bmin[0], dy = c->bmax[1] - c->bmin[1], dz = c->bmax[2] - c->bmin[2];
             double a = dx * dy + dy * dz + dz * dx;
-            if (!APPM__LEAFLIKE(s, cs, kid[i]) && a > area) {
+            if (!cs->leaf[kid[i]] && a > area) {
                 area = a;
                 best = i;
             }
@@ -4598,7 +4597,7 @@ static void appm__collapse_node(appm_scene *s, appm__collapse *cs, appm__collaps
         }
         if (!c) {
             wn->first[i] = wn->count[i] = 0;
-        } else if (APPM__LEAFLIKE(s, cs, kid[i])) {
+        } else if (cs->leaf[kid[i]]) {
             wn->first[i] = appm__emit_leaf(s, cs, cs->fst[kid[i]], cs->cnt[kid[i]]);
             wn->count[i] = cs->cnt[kid[i]];
         } else {
@@ -4637,11 +4636,11 @@ static uint32_t appm__collapse_count(const appm_scene *s, appm__collapse *c)
     for (i = 0; i < s->nnode; ++i) {
         const appm__node *n = &s->node[i];
         uint32_t k;
-        if (APPM__LEAFLIKE(s, c, i)) continue; /* opened: its leaf-like children become leaves */
+        if (c->leaf[i]) continue; /* opened: its leaf-like children become leaves */
         for (k = 0; k < 2; ++k)
-            if (APPM__LEAFLIKE(s, c, n->first + k)) np += (c->cnt[n->first + k] + 3) / 4;
+            if (c->leaf[n->first + k]) np += (c->cnt[n->first + k] + 3) / 4;
     }
-    if (APPM__LEAFLIKE(s, c, 0)) np = (c->cnt[0] + 3) / 4;
+    if (c->leaf[0]) np = (c->cnt[0] + 3) / 4;
 #if !defined(APPM__PACKS)
     np = 0;
 #endif
@@ -4719,7 +4718,7 @@ static appm_status appm__bvh_collapse(appm_scene *s)
         s->wnode = (appm__wnode *)((char *)s->wnode_mem + (64 - addr % 64) % 64);
         s->pack = (appm__tpack *)(s->wnode + cap); /* 64-byte aligned too */
         s->ptri = (uint32_t *)(s->pack + s->npack);
-        if (APPM__LEAFLIKE(s, &c, 0)) {
+        if (c.leaf[0]) {
             appm__collapse_single(s, &c);
             s->nwnode = s->wdepth = 1;
         } else {

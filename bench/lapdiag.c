@@ -25,19 +25,8 @@
  * and of the variance ratio. */
 #include "appm.c" /* appm.c with bench/imglap.patch applied: built by bench/lapdiag.sh */
 #include <stdio.h>
+#include "pixstat.h"
 
-static int dcmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-static double q(double *v, size_t n, double f)
-{
-    if (!n) return 0.0 / 0.0;
-    qsort(v, n, sizeof *v, dcmp);
-    return v[(size_t)(f * (double)(n - 1) + 0.5)];
-}
 
 #define NSTAT 4
 static const char *const stat_name[NSTAT] = {"|dI_ref|/|dI_h|", "|dI_img|/|dI_h|", "|dI_ref|/sqrt(dI2p)",
@@ -69,7 +58,6 @@ int main(int argc, char **argv)
     cfg.threads = 1;
     cfg.seed = strtoull(argv[4], NULL, 10);
     if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) return 2;
-    (void)argc;
     for (j = 0; j < passes; ++j) appm_renderer_pass(r);
     npix = (size_t)r->w * r->h;
     dref = (double *)calloc(npix, sizeof *dref);
@@ -79,13 +67,11 @@ int main(int argc, char **argv)
      * zero), so that appm__img_lap fits it; the running terms kept aside */
     {
         double *keep = (double *)malloc(npix * 6 * sizeof(double)), *dimg = (double *)malloc(npix * sizeof(double));
-        double *var = (double *)malloc(npix * sizeof(double));
         int *ok = (int *)malloc(npix * sizeof(int)), *okr = (int *)malloc(npix * sizeof(int));
         for (i = 0; i < npix; ++i) {
             double t[2], v;
             ok[i] = r->vp[i].segs > 0 && appm__img_lap(r, i, t, &v);
             dimg[i] = ok[i] ? t[0] + t[1] : 0.0;
-            var[i] = v;
         }
         for (i = 0; i < npix; ++i) {
             appm__appm_px *a = (appm__appm_px *)appm__state(r, i);
@@ -112,27 +98,10 @@ int main(int argc, char **argv)
         }
         for (i = 0; i < npix; ++i) {
             const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
-            int x = (int)(i % r->w), y = (int)(i / r->w), dx, dy, nn = 0;
-            double lo = 1e30, hi = 0.0, mean = 0.0, dh, dp, vm = 0.0, vmeas;
+            double dh, dp, vm = 0.0, vmeas;
             int c;
-            if (!ok[i] || !okr[i] || appm__lum(appm__v((float)ref.rgb[3 * i], (float)ref.rgb[3 * i + 1],
-                                                              (float)ref.rgb[3 * i + 2])) >= 1.0f)
-                continue;
-            for (dy = -1; dy <= 1; ++dy)
-                for (dx = -1; dx <= 1; ++dx) {
-                    int xx = x + dx, yy = y + dy;
-                    const float *p;
-                    double l;
-                    if (xx < 0 || yy < 0 || xx >= (int)r->w || yy >= (int)r->h) continue;
-                    p = ref.rgb + 3 * ((size_t)yy * r->w + xx);
-                    l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
-                    lo = l < lo ? l : lo;
-                    hi = l > hi ? l : hi;
-                    mean += l;
-                    nn++;
-                }
-            mean /= nn;
-            reg = (hi - lo) > 0.5 * mean ? 0 : 1;
+            if (!ok[i] || !okr[i] || pix_lum(ref.rgb + 3 * i) >= 1.0) continue;
+            reg = pix_edge(ref.rgb, r->w, r->h, (unsigned)(i % r->w), (unsigned)(i / r->w)) ? 0 : 1;
             dh = fabs(a->k[0].dI + a->k[1].dI);
             dp = sqrt((a->k[0].dI2p > 0 ? a->k[0].dI2p : 0.0) + (a->k[1].dI2p > 0 ? a->k[1].dI2p : 0.0));
             for (c = 0; c < APPM__NCOMP; ++c) {
@@ -147,14 +116,14 @@ int main(int argc, char **argv)
             st[reg][2][n] = fabs(dref[i]) / dp;
             st[reg][3][n] = vm / vmeas;
         }
-        free(keep), free(dimg), free(var), free(ok), free(okr);
+        free(keep), free(dimg), free(ok), free(okr);
     }
     printf("%s passes=%lu seed=%s r_auto=%.4g\n", argv[1], passes, argv[4], r->r_auto);
     for (reg = 0; reg < 2; ++reg) {
         printf("  %-6s n=%4lu", reg ? "smooth" : "edges", (unsigned long)cnt[reg]);
         for (k = 0; k < NSTAT; ++k)
-            printf("  %s %.3g [%.3g %.3g]", stat_name[k], q(st[reg][k], cnt[reg], 0.5), q(st[reg][k], cnt[reg], 0.25),
-                   q(st[reg][k], cnt[reg], 0.75));
+            printf("  %s %.3g [%.3g %.3g]", stat_name[k], pix_quant(st[reg][k], cnt[reg], 0.5), pix_quant(st[reg][k], cnt[reg], 0.25),
+                   pix_quant(st[reg][k], cnt[reg], 0.75));
         printf("\n");
     }
     appm_renderer_destroy(r);

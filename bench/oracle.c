@@ -34,6 +34,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "pixstat.h"
 #include <math.h>
 
 #define MAXF 32
@@ -41,20 +42,6 @@
 #define MAXR 32
 #define KAPPA 0.8660254
 
-static double lum(const float *p) { return 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]; }
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-static double quant(double *v, size_t n, double q)
-{
-    if (!n) return 0.0 / 0.0;
-    qsort(v, n, sizeof *v, cmp);
-    return v[(size_t)(q * (double)(n - 1) + 0.5)];
-}
 
 static int readimg(const char *path, appm_image *im, unsigned w, unsigned h)
 {
@@ -96,14 +83,14 @@ static void report(const char *name, set *s, int nf, const double *F, double tot
     if (!s->n) return;
     printf("%-13s n=%4lu f*=%.3g [%.3g %.3g] appm_u=%.3g (c %.3g d %.3g) f*>bound=%.2f f*>u=%.2f at_bound=%.2f "
            "best_global_f=%.3g mse/best: oracle %.3f appm_u %.3f bound %.3f\n",
-           name, (unsigned long)s->n, quant(s->fs, s->n, 0.5), quant(s->fs, s->n, 0.25), quant(s->fs, s->n, 0.75),
-           quant(s->u, s->n, 0.5), quant(s->uc, s->n, 0.5), quant(s->ud, s->n, 0.5),
+           name, (unsigned long)s->n, pix_quant(s->fs, s->n, 0.5), pix_quant(s->fs, s->n, 0.25), pix_quant(s->fs, s->n, 0.75),
+           pix_quant(s->u, s->n, 0.5), pix_quant(s->uc, s->n, 0.5), pix_quant(s->ud, s->n, 0.5),
            (double)s->above_bound / s->n, (double)s->above_u / s->n, (double)s->at_bound / s->n, F[kb],
            s->e_or / s->e_f[kb], s->e_u / s->e_f[kb], s->e_b / s->e_f[kb]);
     if (s->nd)
         printf("%-13s   held-out seed: share of appm_u's error %.3f; |log2 f*(first)/f*(last)| median %.2f; "
                "mse/(best global f %.3g of the first seeds): oracle %.3f appm_u %.3f appm's image %.3f\n",
-               name, s->t_u / tot_u, quant(s->dlog, s->nd, 0.5), F[kt], s->t_or / s->te_f[kt], s->t_u / s->te_f[kt],
+               name, s->t_u / tot_u, pix_quant(s->dlog, s->nd, 0.5), F[kt], s->t_or / s->te_f[kt], s->t_u / s->te_f[kt],
                s->t_appm / s->te_f[kt]);
 }
 
@@ -222,13 +209,13 @@ int main(int argc, char **argv)
         for (x = 0; x < w; ++x) {
             size_t p = (size_t)y * w + x;
             const double *ep = e + p * nf;
-            double u[3], lo = 1e30, hi = 0.0, mean = 0.0, fs, ra, ftr = 0.0, fte = 0.0;
-            int kb = 0, ktr = 0, dx, dy, nn = 0, inset[4], m;
-            if (lum(ref.rgb + 3 * p) >= 1.0) continue;
+            double u[3], fs, ra, ftr = 0.0, fte = 0.0;
+            int kb = 0, ktr = 0, inset[4], m;
+            if (pix_lum(ref.rgb + 3 * p) >= 1.0) continue;
             for (c = 0; c < 3; ++c) {
                 double v[MAXS];
                 for (s = 0; s < ns; ++s) v[s] = ar[s][c].rgb[3 * p];
-                qsort(v, ns, sizeof *v, cmp);
+                qsort(v, ns, sizeof *v, pix_dcmp);
                 u[c] = KAPPA * v[ns / 2] / rauto;
             }
             if (!(u[0] > 0.0) || u[0] != u[0]) continue;
@@ -245,25 +232,13 @@ int main(int argc, char **argv)
                 fte = argmin(te, F, nf, &ke);
                 ktr = kt;
             }
-            for (dy = -1; dy <= 1; ++dy)
-                for (dx = -1; dx <= 1; ++dx) {
-                    int xx = (int)x + dx, yy = (int)y + dy;
-                    double l;
-                    if (xx < 0 || yy < 0 || xx >= (int)w || yy >= (int)h) continue;
-                    l = lum(ref.rgb + 3 * ((size_t)yy * w + xx));
-                    lo = l < lo ? l : lo;
-                    hi = l > hi ? l : hi;
-                    mean += l;
-                    nn++;
-                }
-            mean /= nn;
             inset[0] = -1;
             for (r = 0; r < nreg; ++r)
                 if (x >= rx0[r] && x < rx1[r] && y >= ry0[r] && y < ry1[r]) {
                     inset[0] = r;
                     break;
                 }
-            inset[1] = (hi - lo) > 0.5 * mean ? nreg : nreg + 1;
+            inset[1] = pix_edge(ref.rgb, w, h, x, y) ? nreg : nreg + 1;
             inset[2] = nreg + 2;
             ra = 0.0;
             for (s = 0; s < ns; ++s) ra += ar[s][0].rgb[3 * p];

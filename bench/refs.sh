@@ -1,6 +1,7 @@
-# bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh and bench/edgecap.sh: the 64x64
-# references of docs/algorithm.md 4.13 and the reference arguments of
-# bench/eqcpu for each of its four scenes.  Needs R (the reference folder).
+# bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh, bench/edgecap.sh
+# and bench/lapdiag.sh: the 64x64 references of docs/algorithm.md 4.13 and the
+# reference arguments of bench/eqcpu for each of its four scenes.  Needs R (the
+# reference folder).
 #
 # The committed sphere box reference; two path-traced halves for
 # CornellBox-Original; two ppm halves for caustic-glass and water-caustic (a
