@@ -4515,17 +4515,19 @@ typedef struct appm__collapse { /* scratch of the collapse */
 } appm__collapse;
 
 /* Flat leaves: in a tree of at least APPM__FLAT_TRIS triangles (the bunny's
- * wide tree and packs take 5 MB, past any core's own cache), a subtree of up
+ * wide tree and packs take 5.0 MB with leaves of four, past any core's own
+ * cache; 3.75 MB with flat leaves, whose packs are fuller), a subtree of up
  * to APPM__LEAF_FLAT triangles also becomes one leaf when the surface-area
  * cost of testing all its packs is no more than that of its binary subtree
  * with an interior node at APPM__FLAT_NODE packs.  The traversal of such a
  * tree waits on memory: a node's children are known only when the node has
  * arrived, while the packs of a leaf are consecutive and stream in.  A level
- * less pays for the extra packs there (bunny, 1e6 random rays, SSE2: closest
- * hits 2.1x -> 2.5-2.7x the binary tree; AVX2 2.0-2.2x -> 2.6x), not in a tree
- * that fits (the 2188-triangle sphere box: 5 % slower, its scalar path 25 %).
- * Every build makes the same tree, so that SIMD and scalar builds break exact
- * ties alike and render the same bytes. */
+ * less pays for the more triangles tested per leaf there (bunny, 1e6 random
+ * rays, closest hits against the binary tree: SSE2 1.96-2.05x -> 2.33-2.53x,
+ * AVX2 2.04-2.15x -> 2.62-2.69x), not in a tree that fits (the 2188-triangle
+ * sphere box: 5 % slower, its scalar path 27 %).  Every build makes the same
+ * tree, so that SIMD and scalar builds break exact ties alike and render the
+ * same bytes. */
 #ifndef APPM__LEAF_FLAT
 #define APPM__LEAF_FLAT 16
 #endif
