@@ -24,7 +24,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-bounds fuzz web \
+.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-bounds bench-corner fuzz web \
         test-web clean
 
 all: appm
@@ -87,6 +87,9 @@ bench-sampler: appm
 
 bench-bounds: appm
 	sh bench/bounds.sh
+
+bench-corner: appm
+	sh bench/corner.sh
 
 fuzz:
 	sh tests/fuzz/run.sh

@@ -193,6 +193,10 @@ typedef void (*appm_log_fn)(void *user, const char *file, unsigned line, const c
 
 /* ---- Configuration --------------------------------------------------------- */
 
+/* appm also renormalises its kernel where the surface ends inside it (a wall
+ * meeting the floor, a box's edge), found from the neighbouring pixels' planes:
+ * without it every seam is dark by the kernel's missing part (docs/algorithm.md
+ * 4.19).  ppm and sppm keep their papers' estimators. */
 typedef enum appm_method {
     APPM_METHOD_APPM = 0, /* adaptive bandwidth, per pixel and pass (default)       */
     APPM_METHOD_PPM,      /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */

@@ -757,6 +757,200 @@ static void test_components_deterministic(void)
     appm_scene_destroy(s);
 }
 
+/* ---- 10.5: the kernel cut at a corner ---------------------------------------- */
+
+/* The kernel's mass beyond a line at distance u R, by brute force on a 600 x 600
+ * grid over the unit disc, against appm__cut_tail's closed form. */
+static double cut_tail_brute(double u, int biweight)
+{
+    double in = 0.0, all = 0.0;
+    int i, k, n = 600;
+    for (i = 0; i < n; ++i)
+        for (k = 0; k < n; ++k) {
+            double x = -1.0 + (i + 0.5) * 2.0 / n, y = -1.0 + (k + 0.5) * 2.0 / n, q = x * x + y * y, w;
+            if (q >= 1.0) continue;
+            w = biweight ? (1.0 - q) * (1.0 - q) : 1.0;
+            all += w;
+            if (x > u) in += w;
+        }
+    return in / all;
+}
+
+static void test_cut_tail(void)
+{
+    static const double us[] = {0.0, 0.05, 0.25, 0.5, 0.77, 0.95};
+    unsigned i;
+    int b;
+    for (b = 0; b < 2; ++b)
+        for (i = 0; i < sizeof us / sizeof us[0]; ++i) {
+            double f = appm__cut_tail(us[i], b), ref = cut_tail_brute(us[i], b);
+            CHECK_MSG(fabs(f - ref) < 2e-4, "%s kernel, u = %.2f: tail %.6f, brute force %.6f",
+                      b ? "biweight" : "uniform", us[i], f, ref);
+        }
+    CHECK(appm__cut_tail(1.0, 1) == 0.0 && appm__cut_tail(3.0, 0) == 0.0);
+    CHECK(appm__cut_tail(0.0, 1) == 0.5 && appm__cut_tail(0.0, 0) == 0.5);
+    { /* the masses the estimate divides by: none, one line, two perpendicular lines through x, the floor */
+        appm__gather g;
+        memset(&g, 0, sizeof g);
+        g.biweight = 1;
+        CHECK(appm__cut_mass(&g, 1.0) == 1.0);
+        g.ncut = 1;
+        g.cut_u[0][0] = 1.0f;
+        g.cut_d[0] = 0.5f;
+        CHECK_NEAR(appm__cut_mass(&g, 2.0), 1.0 - cut_tail_brute(0.25, 1), 2e-4);
+        g.ncut = 2;
+        g.cut_d[0] = 0.0f;
+        g.cut_u[1][1] = 1.0f;
+        g.cut_d[1] = 1.0f;
+        CHECK_NEAR(appm__cut_mass(&g, 2.0), 0.5 * (1.0 - cut_tail_brute(0.5, 1)), 2e-4);
+        g.cut_d[1] = 0.0f;
+        CHECK_NEAR(appm__cut_mass(&g, 2.0), 0.25, 1e-12);
+        g.ncut = 3;
+        g.cut_u[2][0] = -1.0f;
+        CHECK_NEAR(appm__cut_mass(&g, 2.0), APPM__CUT_MMIN, 1e-12);
+    }
+}
+
+/* A synthetic pass of 10 x 7 visible points, one scene unit apart: columns 0-4
+ * on a floor (z = 0, normal +z), columns 5-9 on a second plane through the line
+ * x = 5, z = 0.  kind 0: a wall facing the floor (x = 5, normal -x: a concave
+ * corner); 1: the side of a box whose top the floor is (normal +x, below the
+ * top: a convex edge); 2: a wall of the same orientation moved 20 units back
+ * (a depth step: its plane, extended, would meet the floor at x = 25); 3: a
+ * curved surface (normals turning by 15 degrees a pixel). */
+static void cut_scene(appm_renderer *r, appm__vp *vp, int kind)
+{
+    int x, y;
+    memset(r, 0, sizeof *r);
+    memset(vp, 0, 70 * sizeof *vp);
+    r->w = 10;
+    r->h = 7;
+    r->vp = vp;
+    for (y = 0; y < 7; ++y)
+        for (x = 0; x < 10; ++x) {
+            appm__vp *v = &vp[y * 10 + x];
+            float depth = (float)x - 4.5f;
+            v->segs = 1;
+            v->footprint = 1.0f;
+            v->R = v->Rc = 2.0f;
+            if (x < 5) {
+                v->x = appm__v((float)x + 0.5f, (float)y, 0.0f);
+                v->n = appm__v(0, 0, 1);
+            } else if (kind == 0) {
+                v->x = appm__v(5.0f, (float)y, depth);
+                v->n = appm__v(-1, 0, 0);
+            } else if (kind == 1) {
+                v->x = appm__v(5.0f, (float)y, -depth);
+                v->n = appm__v(1, 0, 0);
+            } else if (kind == 2) {
+                v->x = appm__v(25.0f, (float)y, depth);
+                v->n = appm__v(-1, 0, 0);
+            } else {
+                float a = 0.2618f * (float)(x - 3 + y % 2);
+                v->x = appm__v(5.0f + depth * 0.3f, (float)y, depth);
+                v->n = appm__v(-sinf(a), 0.0f, cosf(a));
+            }
+        }
+    for (y = 0; y < 7; ++y) appm__edge_row(r, (uint32_t)y);
+}
+
+static void test_cut_lines(void)
+{
+    static appm__vp vp[70];
+    appm_renderer r;
+    appm__gather g;
+    int kind;
+    for (kind = 0; kind < 4; ++kind) {
+        size_t i = 3 * 10 + 4; /* row 3, the floor's last column: x = 4.5 */
+        cut_scene(&r, vp, kind);
+        memset(&g, 0, sizeof g);
+        g.x = vp[i].x;
+        g.n = vp[i].n;
+        appm__basis(g.n, &g.t, &g.b);
+        g.biweight = 1;
+        appm__cut_lines(&r, i, &g);
+        if (kind < 2) {
+            CHECK_MSG(g.ncut == 1, "kind %d: %d lines, not 1", kind, g.ncut);
+            if (g.ncut == 1) {
+                /* towards +x, 0.5 away */
+                appm__v3 u = appm__add(appm__scale(g.t, g.cut_u[0][0]), appm__scale(g.b, g.cut_u[0][1]));
+                CHECK_NEAR(u.x, 1.0, 1e-5);
+                CHECK_NEAR(g.cut_d[0], 0.5, 1e-5);
+                CHECK_NEAR(appm__cut_mass(&g, 2.0), 1.0 - appm__cut_tail(0.25, 1), 1e-12);
+            }
+        } else {
+            CHECK_MSG(g.ncut == 0, "kind %d: %d lines, not 0", kind, g.ncut);
+        }
+        if (kind < 3) CHECK(vp[i].edge == 0 && vp[3 * 10 + 1].edge == 3 && vp[3 * 10 + 5].edge == 0);
+        /* three columns away: the line at 3.5 is beyond R = 2 */
+        i = 3 * 10 + 1;
+        memset(&g, 0, sizeof g);
+        g.x = vp[i].x;
+        g.n = vp[i].n;
+        appm__basis(g.n, &g.t, &g.b);
+        appm__cut_lines(&r, i, &g);
+        CHECK(g.ncut == 0);
+    }
+}
+
+/* Where the surface ends inside the kernel, the estimate without the cut is
+ * dark by the kernel's missing part; with it, it agrees with the path tracer.
+ * CornellBox-Original at 32 x 32: the pixels next to a corner or an edge (a
+ * 4-neighbour on another surface, in the last pass) against a path-traced
+ * render of 2048 passes, mean relative error over those pixels. */
+static void test_corner_bias(void)
+{
+    static float ref[32 * 32 * 3], img[2][32 * 32 * 3];
+    static uint8_t edge[32 * 32];
+    appm_scene *s = NULL;
+    appm_diag d;
+    double err[2] = {0.0, 0.0}, n = 0.0;
+    int t, i;
+    if (appm_scene_load("scenes/cornell-original.scene", NULL, &s, &d) != APPM_OK) {
+        CHECK_MSG(0, "cannot load CornellBox-Original: %s", d.message);
+        return;
+    }
+    for (t = 0; t < 3; ++t) { /* 0, 1: appm with and without the cut; 2: the path tracer */
+        appm_config cfg;
+        appm_renderer *r = NULL;
+        appm_image im;
+        appm_config_init(&cfg);
+        cfg.width = cfg.height = 32;
+        cfg.threads = 2;
+        cfg.seed = 11;
+        cfg.method = t == 2 ? APPM_METHOD_PT : APPM_METHOD_APPM;
+        if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) {
+            CHECK_MSG(0, "renderer: %s", d.message);
+            continue;
+        }
+        CHECK(r->cut == (t != 2)); /* appm cuts, the path tracer has no kernel */
+        if (t == 1) r->cut = 0;
+        for (i = 0; i < (t == 2 ? 2048 : 256); ++i) appm_renderer_pass(r);
+        appm_renderer_image(r, &im);
+        memcpy(t == 2 ? ref : img[t], im.rgb, sizeof ref);
+        if (t == 0)
+            for (i = 0; i < 32 * 32; ++i) edge[i] = r->vp[i].segs && r->vp[i].edge == 0;
+        appm_renderer_destroy(r);
+    }
+    for (i = 0; i < 32 * 32; ++i) {
+        double L = 0.2126 * ref[3 * i] + 0.7152 * ref[3 * i + 1] + 0.0722 * ref[3 * i + 2];
+        if (!edge[i] || !(L > 0.02) || L >= 1.0) continue; /* not at an edge, black, or the light */
+        for (t = 0; t < 2; ++t)
+            err[t] += (0.2126 * img[t][3 * i] + 0.7152 * img[t][3 * i + 1] + 0.0722 * img[t][3 * i + 2]) / L - 1.0;
+        n += 1.0;
+    }
+    CHECK_MSG(n > 100, "%.0f pixels at an edge", n);
+    if (n > 0) {
+        err[0] /= n;
+        err[1] /= n;
+    }
+    printf("CornellBox-Original 32x32, 256 passes: %.0f pixels at an edge, mean error against the path tracer "
+           "with the cut %+.4f, without %+.4f\n", n, err[0], err[1]);
+    CHECK_MSG(err[1] < -0.05, "without the cut the pixels at an edge err by %+.4f, not below -0.05", err[1]);
+    CHECK_MSG(fabs(err[0]) < 0.025, "with the cut the pixels at an edge err by %+.4f, not within 0.025", err[0]);
+    appm_scene_destroy(s);
+}
+
 int main(void)
 {
     test_kernel_normalisation();
@@ -770,5 +964,8 @@ int main(void)
     test_scene_insensitivity();
     test_caustic_radii();
     test_components_deterministic();
+    test_cut_tail();
+    test_cut_lines();
+    test_corner_bias();
     return check_finish();
 }
