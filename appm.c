@@ -6364,6 +6364,7 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__CUT_MMIN 0.2                       /* the least kernel mass divided by */
 #define APPM__CUT_LINES 4                        /* lines kept per gather (its cut_u, cut_d) */
 #define APPM__CUT_WIN 4                          /* the widest window, (2 W + 1)^2 pixels */
+#define APPM__CUT_LAP 1                          /* the Laplacian's kernels renormalised too */
 #define APPM__CUT_CAND 24                        /* candidate lines per window */
 
 /* Per-pixel state of each method (beside appm__pixel, which all share), named
@@ -6427,7 +6428,44 @@ typedef struct appm__gather {
      * surface of x does not go; u (in t, b) points from x towards line k, d its distance */
     int ncut;
     float cut_u[APPM__CUT_LINES][2], cut_d[APPM__CUT_LINES];
+    double lw[5]; /* 1 / the mass of the Laplacian's kernels at x + h t, x - h t, x + h b, x - h b
+                   * and x (10.5; 1 without lines), set by the query */
 } appm__gather;
+
+/* 10.5: the part of the kernel K_R (biweight or uniform) beyond a line at distance
+ * u R from its centre.  Biweight: the 1-D marginal is (16 / (5 pi)) (1 - x^2)^(5/2),
+ * and with x = sin th its integral from 0 is (16 / (5 pi)) G(th), G = 5 th / 16 +
+ * 15 sin 2th / 64 + 3 sin 4th / 64 + sin 6th / 192.  Uniform: the circular segment. */
+static double appm__cut_tail(double u, int biweight)
+{
+    double th;
+    if (!(u < 1.0)) return 0.0;
+    if (u < 0.0) return 1.0 - appm__cut_tail(-u, biweight); /* the centre beyond the line */
+    if (u == 0.0) return 0.5;
+    if (!biweight) return (acos(u) - u * sqrt(1.0 - u * u)) / APPM__PI;
+    { /* sin 2th = 2uc, sin 4th = 2 sin 2th cos 2th, sin 6th = 3 sin 2th - 4 sin^3 2th (c = cos th) */
+        double c = sqrt(1.0 - u * u), s2 = 2.0 * u * c, c2 = 1.0 - 2.0 * u * u;
+        th = asin(u);
+        return 0.5 - (16.0 / (5.0 * APPM__PI)) * (5.0 * th / 16.0 + 15.0 * s2 / 64.0 + 6.0 * s2 * c2 / 64.0 +
+                                                  (3.0 * s2 - 4.0 * s2 * s2 * s2) / 192.0);
+    }
+}
+
+/* 10.5: the mass m on the surface of x of the kernel K_R centred at x + (sx, sy)
+ * (in t, b), inside every cut line of g: the product of what each line leaves
+ * (exact for one line, and by symmetry for two perpendicular lines of which
+ * one passes through the centre), floored at APPM__CUT_MMIN.  1 without lines. */
+static double appm__cut_mass_at(const appm__gather *g, double R, double sx, double sy)
+{
+    double m = 1.0;
+    int k;
+    if (!(R > 0.0)) return 1.0;
+    for (k = 0; k < g->ncut; ++k)
+        m *= 1.0 - appm__cut_tail((g->cut_d[k] - sx * g->cut_u[k][0] - sy * g->cut_u[k][1]) / R, g->biweight);
+    return m > APPM__CUT_MMIN ? m : APPM__CUT_MMIN;
+}
+
+static double appm__cut_mass(const appm__gather *g, double R) { return appm__cut_mass_at(g, R, 0.0, 0.0); }
 
 /* One photon's share of a gather's sums (e, eg, s, dl, count: one component's;
  * lobe: the glossy lobe's value at the photon's direction). */
@@ -6470,8 +6508,8 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             c[2] = a + 1.0 + 2.0 * db;
             c[3] = a + 1.0 - 2.0 * db;
             for (k = 0; k < 4; ++k)
-                if (c[k] < 1.0) sum += (1.0 - c[k]) * (1.0 - c[k]);
-            if (a < 1.0) sum -= 4.0 * (1.0 - a) * (1.0 - a);
+                if (c[k] < 1.0) sum += g->lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
+            if (a < 1.0) sum -= 4.0 * g->lw[4] * (1.0 - a) * (1.0 - a);
             *dl += sum * q;
         }
     }
@@ -6513,7 +6551,17 @@ static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, 
  * lum(Psi), whose first factor is (0.2126 W f_x) gamma_x, as before. */
 static void appm__gather_consts(appm__gather *g)
 {
+    int k;
     g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
+    for (k = 0; k < 5; ++k) g->lw[k] = 1.0;
+    if (APPM__CUT_LAP && g->ncut > 0 && g->h > 0.0f) { /* the stencil's kernels, each renormalised by its own mass */
+        double h = g->h;
+        g->lw[0] = 1.0 / appm__cut_mass_at(g, h, h, 0.0);
+        g->lw[1] = 1.0 / appm__cut_mass_at(g, h, -h, 0.0);
+        g->lw[2] = 1.0 / appm__cut_mass_at(g, h, 0.0, h);
+        g->lw[3] = 1.0 / appm__cut_mass_at(g, h, 0.0, -h);
+        g->lw[4] = 1.0 / appm__cut_mass_at(g, h, 0.0, 0.0);
+    }
     g->qw[0] = 0.2126 * g->wf.x;
     g->qw[1] = 0.7152 * g->wf.y;
     g->qw[2] = 0.0722 * g->wf.z;
@@ -6570,37 +6618,6 @@ static uint64_t appm__lap_count(uint64_t j)
 }
 
 /* One component's sums (kernel radius R) into its estimates. */
-/* 10.5: the part of the kernel K_R (biweight or uniform) beyond a line at distance
- * u R from its centre.  Biweight: the 1-D marginal is (16 / (5 pi)) (1 - x^2)^(5/2),
- * and with x = sin th its integral from 0 is (16 / (5 pi)) G(th), G = 5 th / 16 +
- * 15 sin 2th / 64 + 3 sin 4th / 64 + sin 6th / 192.  Uniform: the circular segment. */
-static double appm__cut_tail(double u, int biweight)
-{
-    double th;
-    if (!(u < 1.0)) return 0.0;
-    if (u <= 0.0) return 0.5;
-    if (!biweight) return (acos(u) - u * sqrt(1.0 - u * u)) / APPM__PI;
-    { /* sin 2th = 2uc, sin 4th = 2 sin 2th cos 2th, sin 6th = 3 sin 2th - 4 sin^3 2th (c = cos th) */
-        double c = sqrt(1.0 - u * u), s2 = 2.0 * u * c, c2 = 1.0 - 2.0 * u * u;
-        th = asin(u);
-        return 0.5 - (16.0 / (5.0 * APPM__PI)) * (5.0 * th / 16.0 + 15.0 * s2 / 64.0 + 6.0 * s2 * c2 / 64.0 +
-                                                  (3.0 * s2 - 4.0 * s2 * s2 * s2) / 192.0);
-    }
-}
-
-/* 10.5: the kernel's mass m on the surface of x, inside every cut line of g:
- * the product of what each line leaves (exact for one line, and by symmetry for
- * two perpendicular lines of which one passes through x), floored at
- * APPM__CUT_MMIN.  1 without lines. */
-static double appm__cut_mass(const appm__gather *g, double R)
-{
-    double m = 1.0;
-    int k;
-    if (!(R > 0.0)) return 1.0;
-    for (k = 0; k < g->ncut; ++k) m *= 1.0 - appm__cut_tail(g->cut_d[k] / R, g->biweight);
-    return m > APPM__CUT_MMIN ? m : APPM__CUT_MMIN;
-}
-
 static void appm__sums_finish(const appm__gather *g, double R, const double *se, const double *seg, double ss,
                               double sdl, uint64_t count, double invM, double *e, double *s, double *dl)
 {
@@ -7218,9 +7235,10 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * of a box's top - the same-surface test keeps the other surface's photons out,
  * and no photon of x's surface lies beyond the edge, so (1/M) sum k_R Psi
  * estimates m L(x), m < 1 the part of the kernel's mass on the surface: a
- * bias of first order, -(1 - m) L, which at the pixel next to a corner is
- * 10-40 % (the dark seams of every Cornell box at a few photons per pixel) and
- * which no r^2 term of the MSE model describes.  The remedy is the classic one
+ * bias of first order, -(1 - m) L, up to half of L at the seam itself and
+ * -8 % on average over the pixels next to a seam of CornellBox-Original (32x32,
+ * 256 passes, against the path tracer: tests/t_appm.c), which no r^2 term of
+ * the MSE model describes.  The remedy is the classic one
  * for a density estimate near the edge of its support: divide by m (and s_j by
  * m^2, the estimate's variance growing with it).
  *
@@ -7233,21 +7251,28 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * n_q.(x - q) of the sign that puts x inside.  The biweight's mass beyond a line
  * at distance u R is (16 / (5 pi)) int_u^1 (1 - t^2)^(5/2) dt (appm__cut_tail).
  * A line counts only if two neighbours give it (to 0.995 in direction and
- * 0.02 R in distance: a plane, not a curved surface, whose normals turn from
+ * 0.02 of the reach in distance: a plane, not a curved surface, whose normals turn from
  * pixel to pixel), only if q lies near it (within 2 W pixel widths, so that a
  * surface seen beside x across a depth step, whose plane only extended would
- * meet x's, does not count) and only within R of x.  The candidates are the
- * pixels of the (2W+1)^2 window, W = R / (pixel width) + 1 (at most 4), that
+ * meet x's, does not count) and only within reach of x (the largest radius of
+ * the gather, or 2h on the passes that estimate the Laplacian).  The
+ * candidates are the pixels of the (2W+1)^2 window, W = reach / (pixel width)
+ * + 1 (at most APPM__CUT_WIN), that
  * have a 4-neighbour on another surface (vp.edge, set with the radii): a
  * line between two pixels separates two 4-neighbours.  Several lines: the
  * product of what each leaves (exact for one, and for two perpendicular lines
  * of which one passes through x).  m is floored at APPM__CUT_MMIN.
  *
- * Not corrected: the Laplacian's 5-point stencil (its shifted kernels are cut
- * as well, which reads as curvature and narrows r at corners), and a surface
- * that ends where no pixel sees its neighbour (the image's border, a hidden
- * side).  APPM__CUT (section 10's constants): 0 off, 1 appm, 2 every photon
- * method; ppm and sppm keep their papers' estimators (both measured in 4.19). */
+ * The Laplacian's 5-point stencil (4.6) is cut as well, each of its kernels
+ * by its own amount (centred at x +- h t, x +- h b, possibly beyond the line,
+ * where more than half of it is gone), and uncorrected reads the edge as
+ * curvature; each is divided by its own mass (gather.lw, APPM__CUT_LAP), with
+ * the lines sought within 2h on the passes that estimate it.  Not corrected:
+ * the first-order remainder R grad L . c (c the centroid of the kept part),
+ * and a surface that ends where no pixel sees its neighbour (the image's
+ * border, a hidden side).  APPM__CUT (section 10's constants): 0 off, 1 appm,
+ * 2 every photon method; ppm and sppm keep their papers' estimators (both
+ * measured in 4.19). */
 static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
 {
     const appm__vp *v = &r->vp[i];
@@ -7256,6 +7281,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     float lu[APPM__CUT_CAND][2], ld[APPM__CUT_CAND]; /* candidate lines: direction, distance */
     int ls[APPM__CUT_CAND], nl = 0, k;              /* and how many neighbours give each */
     g->ncut = 0;
+    if (APPM__CUT_LAP && 2.0f * g->h > Rm) Rm = 2.0f * g->h; /* the Laplacian's kernels reach 2h */
     if (!(Rm > 0.0f)) return;
     W = fp > 0.0f && Rm / fp < (float)APPM__CUT_WIN ? (int64_t)(Rm / fp) + 1 : APPM__CUT_WIN;
     if (W > APPM__CUT_WIN) W = APPM__CUT_WIN;

@@ -854,6 +854,53 @@ static void cut_scene(appm_renderer *r, appm__vp *vp, int kind)
     for (y = 0; y < 7; ++y) appm__edge_row(r, (uint32_t)y);
 }
 
+/* The Laplacian's kernels cut as well: a flat field (rho = 1/4) on a surface that
+ * ends at x = 0.04, gathered at 0 with R = 0.1 (the edge at 0.4 R: 14 % of the
+ * kernel beyond it) and h = 0.05 (the kernel at x + h t is centred beyond it).  With the line each of the five kernels is
+ * divided by its own mass, so the estimate is rho and the Laplacian 0 in
+ * expectation (4 SE); without it the stencil reads the edge as curvature. */
+static void test_cut_laplacian(void)
+{
+    int t, T = check_quick() ? 300 : 1500, cut;
+    for (cut = 0; cut < 2; ++cut) {
+        double se = 0.0, se2 = 0.0, sd = 0.0, sd2 = 0.0, me, md, ee, ed;
+        appm__rng rng;
+        appm__rng_seed(&rng, 31, 0, APPM__DOMAIN_TEST, 0);
+        for (t = 0; t < T; ++t) {
+            appm__gather g;
+            double ev[3], s, dl;
+            unsigned i;
+            toy_gather_init(&g, 0.1f, 0.05f, 1);
+            if (cut) {
+                g.ncut = 1;
+                g.cut_u[0][0] = g.t.x; /* world +x in (t, b) */
+                g.cut_u[0][1] = g.b.x;
+                g.cut_d[0] = 0.04f;
+            }
+            for (i = 0; i < 4000; ++i) {
+                appm__photon p = toy_photon(&rng, 1);
+                if (p.x < 0.04f) appm__gather_photon(&g, &p, 0.01f, 0.01f);
+            }
+            appm__gather_finish(&g, 1.0 / 4000, ev, &s, &dl);
+            se += ev[1];
+            se2 += ev[1] * ev[1];
+            sd += dl;
+            sd2 += dl * dl;
+        }
+        me = se / T;
+        md = sd / T;
+        ee = sqrt((se2 / T - me * me) / (T - 1));
+        ed = sqrt((sd2 / T - md * md) / (T - 1));
+        if (cut) {
+            CHECK_MSG(fabs(me - TOY_L0) < 4.0 * ee, "cut: estimate %.5f vs %.2f (se %.5f)", me, TOY_L0, ee);
+            CHECK_MSG(fabs(md) < 4.0 * ed, "cut: Laplacian %.3f vs 0 (se %.3f)", md, ed);
+        } else {
+            CHECK_MSG(me < TOY_L0 - 4.0 * ee, "no cut: estimate %.5f not below %.2f (se %.5f)", me, TOY_L0, ee);
+            CHECK_MSG(md < -10.0 * ed, "no cut: Laplacian %.3f not far below 0 (se %.3f)", md, ed);
+        }
+    }
+}
+
 static void test_cut_lines(void)
 {
     static appm__vp vp[70];
@@ -965,6 +1012,7 @@ int main(void)
     test_caustic_radii();
     test_components_deterministic();
     test_cut_tail();
+    test_cut_laplacian();
     test_cut_lines();
     test_corner_bias();
     return check_finish();
