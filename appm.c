@@ -6344,6 +6344,9 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      error 1.26 against 0.95 of the best fixed radius), lost 0.4 - 3 % at
  *      equal passes there, gained 1 - 2.5 % on water-caustic, cost 6 % more
  *      instructions, tied at equal time at RHI 2 and lost 2 - 30 % at RHI 4.
+ *      With the seams corrected (10.5), RHI 3 (or 3 for the diffuse
+ *      component only) gained 5 - 6 % on CornellBox-Original and lost on the
+ *      sphere box at equal time (algorithm.md 4.19): RHI stays at 2.
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
@@ -7259,8 +7262,8 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * candidates are the pixels of the (2W+1)^2 window, W = reach / (pixel width)
  * + 1 (at most APPM__CUT_WIN), that
  * have a 4-neighbour on another surface (vp.edge, set with the radii): a
- * line between two pixels separates two 4-neighbours.  Several lines: the
- * product of what each leaves (exact for one, and for two perpendicular lines
+ * line between two pixels separates two 4-neighbours.  Several lines (the
+ * APPM__CUT_LINES nearest): the product of what each leaves (exact for one, and for two perpendicular lines
  * of which one passes through x).  m is floored at APPM__CUT_MMIN.
  *
  * The Laplacian's 5-point stencil (4.6) is cut as well, each of its kernels
@@ -7330,13 +7333,17 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
                 ls[nl++] = 1;
             }
         }
-    for (k = 0; k < nl && g->ncut < APPM__CUT_LINES; ++k)
-        if (ls[k] >= 2) {
-            g->cut_u[g->ncut][0] = lu[k][0];
-            g->cut_u[g->ncut][1] = lu[k][1];
-            g->cut_d[g->ncut] = ld[k];
-            g->ncut++;
-        }
+    while (g->ncut < APPM__CUT_LINES) { /* the nearest of the lines two neighbours give */
+        int best = -1;
+        for (k = 0; k < nl; ++k)
+            if (ls[k] >= 2 && (best < 0 || ld[k] < ld[best])) best = k;
+        if (best < 0) break;
+        g->cut_u[g->ncut][0] = lu[best][0];
+        g->cut_u[g->ncut][1] = lu[best][1];
+        g->cut_d[g->ncut] = ld[best];
+        g->ncut++;
+        ls[best] = 0;
+    }
 }
 
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
