@@ -4,10 +4,11 @@
 #   make test-long    the slow statistical tests (more samples)
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), wasm32-wasi,
 #                     C89/C++ header
-#   make bench        the speed/accuracy suite (bench/README.md); make bench-quick: a subset;
+#   make bench        the speed/accuracy suite (bench/run.sh); make bench-quick: a subset;
 #                     make bench-glossy: CornellBox-Glossy alone
 #                     make bench-sampler: --sampler qmc against random on every scene
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
+#   make bench-corner the kernel cut at a seam, with and without, at equal passes (bench/corner.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 #   make web          web/appm.wasm and the scenes of the classroom page (clang, lld, wasi-libc)

@@ -6297,7 +6297,7 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      the coupled MSE); dI^2 is pooled over neighbouring pixels; and where
  *      the surface ends inside the kernel the estimate is divided by the
  *      kernel's mass on the surface (10.5, algorithm.md 4.19: the seams of a
- *      box were 10-40 % dark; equal-pass RMSE 0.79x on CornellBox-Original).
+ *      box were 8 % dark on average; equal-pass RMSE 0.73x on CornellBox-Original).
  *
  *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
  *      256x256, 30 s, 2 threads; RMSE against the path-traced reference):
@@ -6368,6 +6368,7 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__CUT_LINES 4                        /* lines kept per gather (its cut_u, cut_d) */
 #define APPM__CUT_WIN 4                          /* the widest window, (2 W + 1)^2 pixels */
 #define APPM__CUT_LAP 1                          /* the Laplacian's kernels renormalised too */
+#define APPM__CUT_FOOT 2.5                       /* a line counts if a q's foot is this many pixel widths from x's */
 #define APPM__CUT_CAND 24                        /* candidate lines per window */
 
 /* Per-pixel state of each method (beside appm__pixel, which all share), named
@@ -7257,7 +7258,11 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * 0.02 of the reach in distance: a plane, not a curved surface, whose normals turn from
  * pixel to pixel), only if q lies near it (within 2 W pixel widths, so that a
  * surface seen beside x across a depth step, whose plane only extended would
- * meet x's, does not count) and only within reach of x (the largest radius of
+ * meet x's, does not count), only if one of them has its foot on the line
+ * within APPM__CUT_FOOT pixel widths of x's (the other surface meets x's only
+ * where its pixels show it: beyond the end of a box's face, its plane extended
+ * would cut a floor that goes on; measured against ray-cast masses, 4.19) and
+ * only within reach of x (the largest radius of
  * the gather, or 2h on the passes that estimate the Laplacian).  The
  * candidates are the pixels of the (2W+1)^2 window, W = reach / (pixel width)
  * + 1 (at most APPM__CUT_WIN), that
@@ -7280,8 +7285,9 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
 {
     const appm__vp *v = &r->vp[i];
     int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dy, W, x, y, xa, xb, ya, yb;
-    float Rm = v->R > v->Rc ? v->R : v->Rc, fp = v->footprint;
+    float Rm = v->R > v->Rc ? v->R : v->Rc, fp = v->footprint, pw;
     float lu[APPM__CUT_CAND][2], ld[APPM__CUT_CAND]; /* candidate lines: direction, distance */
+    float lf[APPM__CUT_CAND];                       /* the nearest foot of a q along the line */
     int ls[APPM__CUT_CAND], nl = 0, k;              /* and how many neighbours give each */
     g->ncut = 0;
     if (APPM__CUT_LAP && 2.0f * g->h > Rm) Rm = 2.0f * g->h; /* the Laplacian's kernels reach 2h */
@@ -7303,7 +7309,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     for (y = ya; y <= yb; ++y)
         for (x = xa; x <= xb; ++x) {
             const appm__vp *q;
-            float c, at, ab, al, g0, d, hq, ux, uy;
+            float c, at, ab, al, g0, d, hq, ux, uy, sq;
             appm__v3 xq;
             q = &r->vp[(size_t)(y * (int64_t)r->w + x)];
             if (q->edge != 0 || q == v) continue; /* a plane's pixels next to the line give it */
@@ -7321,22 +7327,28 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
             if (!(hq < 2.0f * (float)W * (fp > 0.0f ? fp : Rm))) continue;
             ux = (g0 > 0.0f ? -at : at) / al;
             uy = (g0 > 0.0f ? -ab : ab) / al;
+            /* where q's foot lies along the line, measured from x's foot: the other surface
+             * meets x's only where its pixels show it, not along its plane extended */
+            sq = fabsf(uy * appm__dot(xq, g->t) - ux * appm__dot(xq, g->b));
             for (k = 0; k < nl; ++k)
                 if (lu[k][0] * ux + lu[k][1] * uy > 0.995f && fabsf(ld[k] - d) < 0.02f * Rm) break;
             if (k < nl) {
                 ls[k]++;
                 if (d < ld[k]) ld[k] = d;
+                if (sq < lf[k]) lf[k] = sq;
             } else if (nl < APPM__CUT_CAND) {
                 lu[nl][0] = ux;
                 lu[nl][1] = uy;
                 ld[nl] = d;
+                lf[nl] = sq;
                 ls[nl++] = 1;
             }
         }
+    pw = fp > 0.0f ? fp : Rm;
     while (g->ncut < APPM__CUT_LINES) { /* the nearest of the lines two neighbours give */
         int best = -1;
         for (k = 0; k < nl; ++k)
-            if (ls[k] >= 2 && (best < 0 || ld[k] < ld[best])) best = k;
+            if (ls[k] >= 2 && lf[k] < APPM__CUT_FOOT * pw && (best < 0 || ld[k] < ld[best])) best = k;
         if (best < 0) break;
         g->cut_u[g->ncut][0] = lu[best][0];
         g->cut_u[g->ncut][1] = lu[best][1];

@@ -815,9 +815,11 @@ static void test_cut_tail(void)
  * on a floor (z = 0, normal +z), columns 5-9 on a second plane through the line
  * x = 5, z = 0.  kind 0: a wall facing the floor (x = 5, normal -x: a concave
  * corner); 1: the side of a box whose top the floor is (normal +x, below the
- * top: a convex edge); 2: a wall of the same orientation moved 20 units back
- * (a depth step: its plane, extended, would meet the floor at x = 25); 3: a
- * curved surface (normals turning by 15 degrees a pixel). */
+ * top: a convex edge); 2: the wall of kind 0 seen 20 units up (a depth step: its
+ * plane, extended, would meet the floor at the seam of kind 0, but none of its
+ * pixels lies near that line); 3: a curved surface (normals turning by 35
+ * degrees a pixel along x and 14 along y: no two pixels share a plane); 4: the
+ * wall of kind 0 in rows 0-1 only, the floor going on beyond its end. */
 static void cut_scene(appm_renderer *r, appm__vp *vp, int kind)
 {
     int x, y;
@@ -833,22 +835,22 @@ static void cut_scene(appm_renderer *r, appm__vp *vp, int kind)
             v->segs = 1;
             v->footprint = 1.0f;
             v->R = v->Rc = 2.0f;
-            if (x < 5) {
+            if (x < 5 || (kind == 4 && y > 1)) {
                 v->x = appm__v((float)x + 0.5f, (float)y, 0.0f);
                 v->n = appm__v(0, 0, 1);
-            } else if (kind == 0) {
+            } else if (kind == 0 || kind == 4) {
                 v->x = appm__v(5.0f, (float)y, depth);
                 v->n = appm__v(-1, 0, 0);
             } else if (kind == 1) {
                 v->x = appm__v(5.0f, (float)y, -depth);
                 v->n = appm__v(1, 0, 0);
             } else if (kind == 2) {
-                v->x = appm__v(25.0f, (float)y, depth);
+                v->x = appm__v(5.0f, (float)y, 20.0f + depth);
                 v->n = appm__v(-1, 0, 0);
             } else {
-                float a = 0.2618f * (float)(x - 3 + y % 2);
+                float a = 0.61f * (float)(x - 3), b = 0.25f * (float)(y - 3);
                 v->x = appm__v(5.0f + depth * 0.3f, (float)y, depth);
-                v->n = appm__v(-sinf(a), 0.0f, cosf(a));
+                v->n = appm__v(-sinf(a) * cosf(b), sinf(b), cosf(a) * cosf(b));
             }
         }
     for (y = 0; y < 7; ++y) appm__edge_row(r, (uint32_t)y);
@@ -907,7 +909,7 @@ static void test_cut_lines(void)
     appm_renderer r;
     appm__gather g;
     int kind;
-    for (kind = 0; kind < 4; ++kind) {
+    for (kind = 0; kind < 5; ++kind) {
         size_t i = 3 * 10 + 4; /* row 3, the floor's last column: x = 4.5 */
         cut_scene(&r, vp, kind);
         memset(&g, 0, sizeof g);
@@ -925,10 +927,28 @@ static void test_cut_lines(void)
                 CHECK_NEAR(g.cut_d[0], 0.5, 1e-5);
                 CHECK_NEAR(appm__cut_mass(&g, 2.0), 1.0 - appm__cut_tail(0.25, 1), 1e-12);
             }
-        } else {
+        } else if (kind < 4) {
             CHECK_MSG(g.ncut == 0, "kind %d: %d lines, not 0", kind, g.ncut);
         }
-        if (kind < 3) CHECK(vp[i].edge == 0 && vp[3 * 10 + 1].edge == 3 && vp[3 * 10 + 5].edge == 0);
+        if (kind < 4) CHECK(vp[i].edge == 0 && vp[3 * 10 + 1].edge == 3 && vp[3 * 10 + 5].edge == 0);
+        if (kind == 4) { /* beyond the wall's end (its nearest pixel 3 rows off): no line; at its foot: one */
+            size_t j = 1 * 10 + 4;
+            CHECK(vp[i].edge != 0 && vp[1 * 10 + 6].edge == 0);
+            memset(&g, 0, sizeof g);
+            g.x = vp[j].x;
+            g.n = vp[j].n;
+            appm__basis(g.n, &g.t, &g.b);
+            appm__cut_lines(&r, j, &g);
+            CHECK_MSG(g.ncut == 1, "kind 4, row 1: %d lines, not 1", g.ncut);
+            i = 4 * 10 + 4;
+            memset(&g, 0, sizeof g);
+            g.x = vp[i].x;
+            g.n = vp[i].n;
+            appm__basis(g.n, &g.t, &g.b);
+            appm__cut_lines(&r, i, &g);
+            CHECK_MSG(g.ncut == 0, "kind 4, row 4: %d lines, not 0", g.ncut);
+            continue;
+        }
         /* three columns away: the line at 3.5 is beyond R = 2 */
         i = 3 * 10 + 1;
         memset(&g, 0, sizeof g);
