@@ -903,6 +903,17 @@ static void test_cut_laplacian(void)
     }
 }
 
+/* The cut lines of pixel i of the synthetic pass, into g (biweight). */
+static void cut_lines_at(const appm_renderer *r, size_t i, appm__gather *g)
+{
+    memset(g, 0, sizeof *g);
+    g->x = r->vp[i].x;
+    g->n = r->vp[i].n;
+    appm__basis(g->n, &g->t, &g->b);
+    g->biweight = 1;
+    appm__cut_lines(r, i, g);
+}
+
 static void test_cut_lines(void)
 {
     static appm__vp vp[70];
@@ -912,12 +923,7 @@ static void test_cut_lines(void)
     for (kind = 0; kind < 5; ++kind) {
         size_t i = 3 * 10 + 4; /* row 3, the floor's last column: x = 4.5 */
         cut_scene(&r, vp, kind);
-        memset(&g, 0, sizeof g);
-        g.x = vp[i].x;
-        g.n = vp[i].n;
-        appm__basis(g.n, &g.t, &g.b);
-        g.biweight = 1;
-        appm__cut_lines(&r, i, &g);
+        cut_lines_at(&r, i, &g);
         if (kind < 2) {
             CHECK_MSG(g.ncut == 1, "kind %d: %d lines, not 1", kind, g.ncut);
             if (g.ncut == 1) {
@@ -934,28 +940,14 @@ static void test_cut_lines(void)
         if (kind == 4) { /* beyond the wall's end (its nearest pixel 3 rows off): no line; at its foot: one */
             size_t j = 1 * 10 + 4;
             CHECK(vp[i].edge != 0 && vp[1 * 10 + 6].edge == 0);
-            memset(&g, 0, sizeof g);
-            g.x = vp[j].x;
-            g.n = vp[j].n;
-            appm__basis(g.n, &g.t, &g.b);
-            appm__cut_lines(&r, j, &g);
+            cut_lines_at(&r, j, &g);
             CHECK_MSG(g.ncut == 1, "kind 4, row 1: %d lines, not 1", g.ncut);
-            i = 4 * 10 + 4;
-            memset(&g, 0, sizeof g);
-            g.x = vp[i].x;
-            g.n = vp[i].n;
-            appm__basis(g.n, &g.t, &g.b);
-            appm__cut_lines(&r, i, &g);
+            cut_lines_at(&r, 4 * 10 + 4, &g);
             CHECK_MSG(g.ncut == 0, "kind 4, row 4: %d lines, not 0", g.ncut);
             continue;
         }
         /* three columns away: the line at 3.5 is beyond R = 2 */
-        i = 3 * 10 + 1;
-        memset(&g, 0, sizeof g);
-        g.x = vp[i].x;
-        g.n = vp[i].n;
-        appm__basis(g.n, &g.t, &g.b);
-        appm__cut_lines(&r, i, &g);
+        cut_lines_at(&r, 3 * 10 + 1, &g);
         CHECK(g.ncut == 0);
     }
 }
