@@ -8176,7 +8176,6 @@ APPM_API const char *appm_renderer_last_error(const appm_renderer *r)
     return r ? r->last_error : "";
 }
 
-/* Every pixel's gather radius of this pass, from its method (10.2). */
 /* 10.5: whether a 4-neighbour of pixel i sees a surface whose normal is 60
  * degrees or more from i's (APPM__NORMAL_COS): a corner or an edge passes
  * between them.  Any line between two pixels also separates two 4-neighbours. */
@@ -8213,6 +8212,7 @@ static void appm__edge_row(appm_renderer *r, uint32_t row)
     }
 }
 
+/* Every pixel's gather radius of this pass, from its method (10.2). */
 static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;

@@ -10,7 +10,7 @@
 # and for water-caustic also a pair made the same way with the cut.
 # CORNER_SEAM=1 also renders the small-radius water reference of 4.19 (some
 # 6 minutes on two cores) and prints bench/seam's comparison at the seams.
-# Results: bench/out/corner/log.txt, one line per run, then the medians.
+# Results: bench/out/corner/log.txt, one line per run; the medians are printed.
 set -u
 CC=${CC:-cc}
 seeds=${CORNER_SEEDS:-"1 2 3"}
@@ -27,6 +27,7 @@ for v in $vars; do
     *) sed "s/^#define APPM__CUT [0-9]*/#define APPM__CUT $v/" appm.c ;;
     esac > "$out/appm-$v.c"
     grep -q '^#define APPM__CUT [02]' "$out/appm-$v.c" || { echo "bench: APPM__CUT not found"; exit 1; }
+    [ $v != est ] || grep -q '^#define APPM__CUT_LAP 0' "$out/appm-$v.c" || { echo "bench: APPM__CUT_LAP not found"; exit 1; }
     $CC -std=c99 -O2 -I. bench/eqcpu.c "$out/appm-$v.c" -o "$out/eqcpu-$v" -lm -pthread || exit 1
 done
 $CC -std=c99 -O2 -I. "$out/appm-2.c" main.c -o "$out/appm-cut" -lm -pthread || exit 1
