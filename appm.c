@@ -6445,7 +6445,6 @@ static double appm__cut_tail(double u, int biweight)
     double th;
     if (!(u < 1.0)) return 0.0;
     if (u < 0.0) return 1.0 - appm__cut_tail(-u, biweight); /* the centre beyond the line */
-    if (u == 0.0) return 0.5;
     if (!biweight) return (acos(u) - u * sqrt(1.0 - u * u)) / APPM__PI;
     { /* sin 2th = 2uc, sin 4th = 2 sin 2th cos 2th, sin 6th = 3 sin 2th - 4 sin^3 2th (c = cos th) */
         double c = sqrt(1.0 - u * u), s2 = 2.0 * u * c, c2 = 1.0 - 2.0 * u * u;
@@ -7285,7 +7284,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
 {
     const appm__vp *v = &r->vp[i];
     int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dy, W, x, y, xa, xb, ya, yb;
-    float Rm = v->R > v->Rc ? v->R : v->Rc, fp = v->footprint, pw;
+    float Rm = v->R > v->Rc ? v->R : v->Rc, fp = v->footprint, pw; /* pw: a pixel's width at x */
     float lu[APPM__CUT_CAND][2], ld[APPM__CUT_CAND]; /* candidate lines: direction, distance */
     float lf[APPM__CUT_CAND];                       /* the nearest foot of a q along the line */
     int ls[APPM__CUT_CAND], nl = 0, k;              /* and how many neighbours give each */
@@ -7293,7 +7292,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     if (APPM__CUT_LAP && 2.0f * g->h > Rm) Rm = 2.0f * g->h; /* the Laplacian's kernels reach 2h */
     if (!(Rm > 0.0f)) return;
     W = fp > 0.0f && Rm / fp < (float)APPM__CUT_WIN ? (int64_t)(Rm / fp) + 1 : APPM__CUT_WIN;
-    if (W > APPM__CUT_WIN) W = APPM__CUT_WIN;
+    pw = fp > 0.0f ? fp : Rm;
     { /* no flagged pixel within W (Chebyshev distance): no corner in reach */
         int any = 0;
         for (dy = -W; dy <= W && !any; ++dy) {
@@ -7324,7 +7323,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
             d = fabsf(g0) / al;
             if (!(d < Rm)) continue;
             hq = fabsf(appm__dot(v->n, xq)) / al; /* q's distance from the line, in its plane */
-            if (!(hq < 2.0f * (float)W * (fp > 0.0f ? fp : Rm))) continue;
+            if (!(hq < 2.0f * (float)W * pw)) continue;
             ux = (g0 > 0.0f ? -at : at) / al;
             uy = (g0 > 0.0f ? -ab : ab) / al;
             /* where q's foot lies along the line, measured from x's foot: the other surface
@@ -7344,7 +7343,6 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
                 ls[nl++] = 1;
             }
         }
-    pw = fp > 0.0f ? fp : Rm;
     while (g->ncut < APPM__CUT_LINES) { /* the nearest of the lines two neighbours give */
         int best = -1;
         for (k = 0; k < nl; ++k)
