@@ -5383,6 +5383,8 @@ struct appm_renderer {
         double R;        /* the radius of the last gather */
     } ppm;               /* Knaus-Zwicker's global radius (section 10) */
     double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
+    double sj;           /* appm: j^(-1/6) for j = sj_pass, the radius's and its bounds' factor */
+    uint64_t sj_pass;    /* the pass sj was computed for (0: none yet) */
     unsigned threads, max_depth;
     uint64_t seed, pass;
     appm__sobol_tab *sobol; /* --sampler qmc: appm__sobol_table (section 2.3); NULL: random */
@@ -6700,7 +6702,7 @@ static void appm__appm_bounds_sj(double r1, double r_auto, double sj, double *lo
     *hi = APPM__RHI * (r1 > r_auto ? r1 : r_auto) * sj;
 }
 
-static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, double *hi)
+APPM__UNUSED static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, double *hi)
 {
     appm__appm_bounds_sj(r1, r_auto, pow((double)j, -1.0 / 6.0), lo, hi);
 }
@@ -6709,10 +6711,10 @@ static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, 
  * the initial radius, r_auto the automatic one, cf the constant of the radius
  * formula, di2 the dI^2 to use (< 0 or NaN: the component's own, appm__di2).
  * Never NaN, 0 or inf: every path ends inside the bounds of appm__appm_bounds. */
-static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j, const appm__appm_state *p,
-                                double cf, double di2)
+static double appm__appm_radius_sj(double r1, double r_auto, uint64_t M, uint64_t j, double sj,
+                                   const appm__appm_state *p, double cf, double di2)
 {
-    double lo, hi, sj = pow((double)j, -1.0 / 6.0), rad = r1 * sj;
+    double lo, hi, rad = r1 * sj;
     appm__appm_bounds_sj(r1, r_auto, sj, &lo, &hi);
     if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* too few photons seen to estimate anything: widen, as a k-nearest-
@@ -6733,6 +6735,14 @@ static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j
     if (!(rad >= lo)) rad = lo; /* also catches NaN */
     if (rad > hi) rad = hi;
     return rad;
+}
+
+/* The same with j^(-1/6) computed here (the renderer's passes use
+ * appm__pass_sj). */
+APPM__UNUSED static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j,
+                                             const appm__appm_state *p, double cf, double di2)
+{
+    return appm__appm_radius_sj(r1, r_auto, M, j, pow((double)j, -1.0 / 6.0), p, cf, di2);
 }
 
 /* The Laplacian bandwidth of pass j: h_j = kappa r_auto j^(-1/8), a fixed schedule
@@ -7051,10 +7061,18 @@ static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux wh
 static const appm__field appm__appm_fields[] = {APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"),
                                                 APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c")};
 
+/* j^(-1/6) of the renderer's pass: computed once a pass (pow is most of the
+ * radius's cost), or here for a caller between passes. */
+static double appm__pass_sj(const appm_renderer *r)
+{
+    return r->sj_pass == r->pass && r->sj > 0.0 ? r->sj : pow((double)r->pass, -1.0 / 6.0);
+}
+
 static double appm__appm_comp_radius(const appm_renderer *r, const appm__appm_px *a, int c)
 {
     const appm__appm_state *p = &a->k[c];
-    return appm__appm_radius(r->r1, r->r_auto, r->M, r->pass, p, APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
+    return appm__appm_radius_sj(r->r1, r->r_auto, r->M, r->pass, appm__pass_sj(r), p, APPM__CF_SPLIT,
+                                p->dI2p > 0.0 ? p->dI2p : -1.0);
 }
 
 static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
@@ -7164,7 +7182,7 @@ static void appm__appm_pass_end(appm_renderer *r)
     uint64_t n = 0, at = 0;
     double lo, hi;
     if (r->lap_h > 0.0 && r->pass >= APPM__WARMUP) appm__parallel_for(r->threads, r->h, appm__pool_task, r);
-    appm__appm_bounds(r->r1, r->r_auto, r->pass, &lo, &hi);
+    appm__appm_bounds_sj(r->r1, r->r_auto, appm__pass_sj(r), &lo, &hi);
     for (i = 0; i < npix; ++i) {
         const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
         double R;
@@ -7305,7 +7323,8 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     yb = y0 + W >= (int64_t)r->h ? (int64_t)r->h - 1 : y0 + W;
     xa = x0 - W < 0 ? 0 : x0 - W;
     xb = x0 + W >= (int64_t)r->w ? (int64_t)r->w - 1 : x0 + W;
-    for (y = ya; y <= yb; ++y)
+    for (y = ya; y <= yb; ++y) {
+        if (r->vp[(size_t)(y * (int64_t)r->w + x0)].edge > W) continue; /* no flagged pixel in this row's window */
         for (x = xa; x <= xb; ++x) {
             const appm__vp *q;
             float c, at, ab, al, g0, d, hq, ux, uy, sq;
@@ -7343,6 +7362,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
                 ls[nl++] = 1;
             }
         }
+    }
     while (g->ncut < APPM__CUT_LINES) { /* the nearest of the lines two neighbours give */
         int best = -1;
         for (k = 0; k < nl; ++k)
@@ -8306,6 +8326,8 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
     }
     r->lap_h = (est->caps & APPM__CAP_LAPLACIAN) && appm__lap_pass(r->pass) ? appm__lap_h(r->r_auto, r->pass)
                                                                              : 0.0;
+    r->sj = pow((double)r->pass, -1.0 / 6.0);
+    r->sj_pass = r->pass;
     appm__parallel_for(r->threads, r->h, appm__radius_task, r);
     cell = appm__median_gather_radius(r);
     t[0] = appm__seconds();
