@@ -1,0 +1,133 @@
+#!/bin/sh
+# bench/eqcurve.sh - appm (and variants of it) against ppm at its defaults, at
+# equal processor time over a range of budgets, from one error curve per run.
+#
+# Equal-time comparisons at one budget are noisy on this kind of machine, and
+# with the low-discrepancy sampler the error of a pass count is not a smooth
+# function of it: between seeds and runs, appm / ppm on the sphere box ran from
+# 0.82 to 1.22 at 3 CPU-seconds (docs/algorithm.md 4.19).  So each run renders
+# a fixed number of passes and prints its error and processor time every K
+# passes (bench/eqcpu with EQCPU_CURVE=K); the runs of a seed are interleaved.
+# For each seed, each budget t of EQC_BUDGETS (processor seconds, 2 threads)
+# reads every method's error at time t off its curve (linear between the
+# points) and the ratio to ppm's; printed are the median over budgets and
+# seeds, and the same at equal passes.  The processor time is the run's own:
+# a load that changes during a run still shows; the pass costs are printed
+# so that they can be checked against an instruction count.
+#
+#   EQC_SCENES   scenes (default: the four of bench/bounds.sh, and water-caustic against the
+#                reference made with the kernel cut, water-cutref)
+#   EQC_SEEDS    seeds (default 1 2 3)
+#   EQC_BUDGETS  budgets in CPU-seconds (default 1.5 2 2.5 3)
+#   EQC_VARIANTS "name:MACRO=VALUE,MACRO=VALUE name2:..." appm built with
+#                those #defines of appm.c changed (beside appm as it is)
+#   EQC_OUT      folder (default bench/out/eqcurve)
+#   EQC_COST=instr  also compare at an equal instruction count, which no load
+#                changes: each build's instructions per pass on each scene are
+#                counted once (valgrind's callgrind, passes 32 to 96, some
+#                minutes), and the budgets are ppm's passes 0.5 - 1 x the
+#                scene's count; the images are those of the curves (equal
+#                passes are deterministic)
+# References and masks as bench/bounds.sh (bench/refs.sh builds them once).
+set -u
+CC=${CC:-cc}
+seeds=${EQC_SEEDS:-"1 2 3"}
+budgets=${EQC_BUDGETS:-"1.5 2 2.5 3"}
+scenes=${EQC_SCENES:-"cornell-sphere cornell-original caustic-glass water-caustic water-cutref"}
+variants=${EQC_VARIANTS:-}
+out=${EQC_OUT:-bench/out/eqcurve}
+mkdir -p "$out"
+[ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
+R=bench/ref
+. bench/refs.sh
+refs
+$CC -std=c99 -O2 -I. bench/eqcpu.c appm.c -o "$out/eqcpu-appm" -lm -pthread || exit 1
+names="appm"
+for v in $variants; do
+    n=${v%%:*} defs=${v#*:}
+    cp appm.c "$out/appm-$n.c"
+    for d in $(echo "$defs" | tr ',' ' '); do
+        m=${d%%=*} val=${d#*=}
+        sed "s/^#define $m [^ ]*/#define $m $val/" "$out/appm-$n.c" > "$out/t.c" && mv "$out/t.c" "$out/appm-$n.c"
+        grep -q "^#define $m $val" "$out/appm-$n.c" || { echo "bench: $m not found"; exit 1; }
+    done
+    $CC -std=c99 -O2 -I. bench/eqcpu.c "$out/appm-$n.c" -o "$out/eqcpu-$n" -lm -pthread || exit 1
+    names="$names $n"
+done
+passes() { # enough passes for every method to pass the largest budget on a loaded machine
+    case $1 in
+    cornell-sphere) echo 700 ;; cornell-original) echo 800 ;; caustic-glass) echo 800 ;; water-*) echo 260 ;;
+    *) echo 600 ;;
+    esac
+}
+# water-cutref: water-caustic against the reference pair made with the kernel cut (bench/corner.sh
+# builds it; docs/algorithm.md 4.19)
+scene() { case $1 in water-cutref) echo water-caustic ;; *) echo $1 ;; esac; }
+refargs() {
+    case $1 in
+    water-cutref) echo "$R/water-caustic-64-cut-a.pfm $R/water-caustic-64-cut-b.pfm 10.0 0" ;;
+    *) args $1 ;;
+    esac
+}
+for s in $seeds; do
+    for sc in $scenes; do
+        n=$(passes $sc)
+        [ $sc != water-cutref ] || [ -f $R/water-caustic-64-cut-b.pfm ] || { echo "bench: run bench/corner.sh first"; exit 1; }
+        EQCPU_CURVE=10 "$out/eqcpu-appm" scenes/$(scene $sc).scene ppm $s -$n 0 0 $(refargs $sc) > "$out/$sc-ppm-s$s.txt" ||
+            exit 1
+        for v in $names; do
+            EQCPU_CURVE=10 "$out/eqcpu-$v" scenes/$(scene $sc).scene appm $s -$n 0 0 $(refargs $sc) > "$out/$sc-$v-s$s.txt" ||
+                exit 1
+        done
+        echo "$sc seed=$s: $(for m in ppm $names; do tail -1 "$out/$sc-$m-s$s.txt" |
+            sed "s/^passes=\([^ ]*\) cpu=\([^ ]*\).*/$m \1 passes \2 s;/"; done)"
+    done
+done
+# instructions per pass of build $1 (method $2) on scene $3: (I(96 passes) - I(32)) / 64
+instr() {
+    f=$out/instr-$1-$2-$(scene $3).txt
+    [ -s "$f" ] && [ "$f" -nt "$out/eqcpu-$1" ] && { cat "$f"; return; }
+    for p in 32 96; do
+        valgrind --tool=callgrind --callgrind-out-file=/dev/null "$out/eqcpu-$1" scenes/$(scene $3).scene $2 1 -$p 0 0 \
+            $(refargs $3) 2>&1 | sed -n 's/.*refs: *//p' | tr -d ,
+    done | awk '{ i[NR] = $1 } END { printf "%.0f", (i[2] - i[1]) / 64 }' | tee "$f"
+}
+# err_at FILE KEY VALUE: the masked RMSE where column KEY (passes or cpu) reaches VALUE, linear
+# between the curve's points; empty beyond its end
+err_at() {
+    sed -n 's/^curve passes=\([^ ]*\) cpu=\([^ ]*\) rmse=[^ ]* rmse_masked=\([^ ]*\)$/\1 \2 \3/p' "$1" |
+        awk -v key="$2" -v t="$3" '{ x = key == "cpu" ? $2 : $1
+            if (x >= t) { if (NR == 1 || x == px) print $3; else print pe + ($3 - pe) * (t - px) / (x - px); done = 1; exit }
+            px = x; pe = $3 }'
+}
+median() { sort -n | awk '{ a[NR] = $1 } END { if (NR) printf "%.3f (%d: %.3f - %.3f)", NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2, NR, a[1], a[NR] }'; }
+echo "masked RMSE ratio to ppm at its defaults: median over budgets and seeds (count: range)"
+for sc in $scenes; do
+    n=$(passes $sc)
+    for v in $names; do
+        et=$(for s in $seeds; do for t in $budgets; do
+            a=$(err_at "$out/$sc-$v-s$s.txt" cpu $t) b=$(err_at "$out/$sc-ppm-s$s.txt" cpu $t)
+            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+        ep=$(for s in $seeds; do for p in $(awk "BEGIN { for (k = 4; k <= 8; ++k) print int($n * k / 80) * 10 }"); do
+            a=$(err_at "$out/$sc-$v-s$s.txt" passes $p) b=$(err_at "$out/$sc-ppm-s$s.txt" passes $p)
+            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+        cost=$(for s in $seeds; do
+            a=$(tail -1 "$out/$sc-$v-s$s.txt" | sed 's/.* cpu=\([^ ]*\).*/\1/') b=$(tail -1 "$out/$sc-ppm-s$s.txt" | sed 's/.* cpu=\([^ ]*\).*/\1/')
+            awk "BEGIN { print $a / $b }"; done | median)
+        echo "$sc $v: equal time $et; equal passes (0.5 - 1 x $n) $ep; CPU per pass / ppm's $cost"
+    done
+done
+[ "${EQC_COST:-}" = instr ] || exit 0
+echo "masked RMSE ratio to ppm at its defaults at equal instructions: median over budgets and seeds"
+for sc in $scenes; do
+    n=$(passes $sc)
+    cp=$(instr appm ppm $sc)
+    for v in $names; do
+        ca=$(instr $v appm $sc)
+        ei=$(for s in $seeds; do for k in 4 5 6 7 8; do
+            p=$(awk "BEGIN { print $n * $k / 8 }") q=$(awk "BEGIN { print $n * $k / 8 * $cp / $ca }")
+            a=$(err_at "$out/$sc-$v-s$s.txt" passes $q) b=$(err_at "$out/$sc-ppm-s$s.txt" passes $p)
+            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+        echo "$sc $v: equal instructions $ei; instructions per pass $ca, ppm's $cp ($(awk "BEGIN { printf \"%.3f\", $ca / $cp }")x)"
+    done
+done
