@@ -6359,6 +6359,7 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__KMIN 8.0                           /* photons before adapting */
 #define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
 #define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
+#define APPM__RHI_DIFFUSE 2.0                    /* the same for the diffuse component (10.3) */
 #define APPM__CF_SPLIT (APPM__CF / 2.0)          /* c_f of each component (10.3) */
 #define APPM__POOL 1                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
@@ -6695,27 +6696,23 @@ static double appm__di2(const appm__appm_state *p, uint64_t n)
 }
 
 /* The lower and upper bounds of the radius of pass j: [RLO min(r1, r_auto),
- * RHI max(r1, r_auto)] j^(-1/6). */
-static void appm__appm_bounds_sj(double r1, double r_auto, double sj, double *lo, double *hi)
+ * rhi max(r1, r_auto)] j^(-1/6), rhi being APPM__RHI or APPM__RHI_DIFFUSE. */
+static void appm__appm_bounds_sj(double r1, double r_auto, double sj, double rhi, double *lo, double *hi)
 {
     *lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * sj;
-    *hi = APPM__RHI * (r1 > r_auto ? r1 : r_auto) * sj;
-}
-
-APPM__UNUSED static void appm__appm_bounds(double r1, double r_auto, uint64_t j, double *lo, double *hi)
-{
-    appm__appm_bounds_sj(r1, r_auto, pow((double)j, -1.0 / 6.0), lo, hi);
+    *hi = rhi * (r1 > r_auto ? r1 : r_auto) * sj;
 }
 
 /* Radius for pass j from one component's statistics after j-1 passes; r1 is
  * the initial radius, r_auto the automatic one, cf the constant of the radius
- * formula, di2 the dI^2 to use (< 0 or NaN: the component's own, appm__di2).
- * Never NaN, 0 or inf: every path ends inside the bounds of appm__appm_bounds. */
-static double appm__appm_radius_sj(double r1, double r_auto, uint64_t M, uint64_t j, double sj,
+ * formula, di2 the dI^2 to use (< 0 or NaN: the component's own, appm__di2),
+ * rhi the upper bound's factor.  Never NaN, 0 or inf: every path ends inside
+ * the bounds of appm__appm_bounds_sj. */
+static double appm__appm_radius_sj(double r1, double r_auto, uint64_t M, uint64_t j, double sj, double rhi,
                                    const appm__appm_state *p, double cf, double di2)
 {
     double lo, hi, rad = r1 * sj;
-    appm__appm_bounds_sj(r1, r_auto, sj, &lo, &hi);
+    appm__appm_bounds_sj(r1, r_auto, sj, rhi, &lo, &hi);
     if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* too few photons seen to estimate anything: widen, as a k-nearest-
          * neighbour radius would, instead of waiting at a radius that may be
@@ -6742,7 +6739,7 @@ static double appm__appm_radius_sj(double r1, double r_auto, uint64_t M, uint64_
 APPM__UNUSED static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j,
                                              const appm__appm_state *p, double cf, double di2)
 {
-    return appm__appm_radius_sj(r1, r_auto, M, j, pow((double)j, -1.0 / 6.0), p, cf, di2);
+    return appm__appm_radius_sj(r1, r_auto, M, j, pow((double)j, -1.0 / 6.0), APPM__RHI, p, cf, di2);
 }
 
 /* The Laplacian bandwidth of pass j: h_j = kappa r_auto j^(-1/8), a fixed schedule
@@ -7068,11 +7065,14 @@ static double appm__pass_sj(const appm_renderer *r)
     return r->sj_pass == r->pass && r->sj > 0.0 ? r->sj : pow((double)r->pass, -1.0 / 6.0);
 }
 
+/* Each component's upper bound: APPM__RHI_DIFFUSE or APPM__RHI. */
+static double appm__comp_rhi(int c) { return c == APPM__COMP_DIFFUSE ? APPM__RHI_DIFFUSE : APPM__RHI; }
+
 static double appm__appm_comp_radius(const appm_renderer *r, const appm__appm_px *a, int c)
 {
     const appm__appm_state *p = &a->k[c];
-    return appm__appm_radius_sj(r->r1, r->r_auto, r->M, r->pass, appm__pass_sj(r), p, APPM__CF_SPLIT,
-                                p->dI2p > 0.0 ? p->dI2p : -1.0);
+    return appm__appm_radius_sj(r->r1, r->r_auto, r->M, r->pass, appm__pass_sj(r), appm__comp_rhi(c), p,
+                                APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
 }
 
 static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
@@ -7174,22 +7174,24 @@ static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
 }
 
 /* appm_stats.clamped: the fraction of this pass's gathering pixels whose
- * dominant component's radius sits at a bound of appm__appm_bounds; after a
+ * dominant component's radius sits at a bound of its own (appm__appm_bounds_sj); after a
  * Laplacian pass, also the pooled dI^2 (10.4). */
 static void appm__appm_pass_end(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     uint64_t n = 0, at = 0;
-    double lo, hi;
+    double lo, hi[APPM__NCOMP], sj = appm__pass_sj(r);
+    int c;
     if (r->lap_h > 0.0 && r->pass >= APPM__WARMUP) appm__parallel_for(r->threads, r->h, appm__pool_task, r);
-    appm__appm_bounds_sj(r->r1, r->r_auto, appm__pass_sj(r), &lo, &hi);
+    for (c = 0; c < APPM__NCOMP; ++c) appm__appm_bounds_sj(r->r1, r->r_auto, sj, appm__comp_rhi(c), &lo, &hi[c]);
     for (i = 0; i < npix; ++i) {
         const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
         double R;
         if (r->vp[i].segs == 0 || r->vp[i].segs >= r->max_depth) continue;
-        R = a->k[appm__appm_dominant(a)].R;
+        c = appm__appm_dominant(a);
+        R = a->k[c].R;
         n++;
-        at += (R <= lo * (1.0 + 1e-6) || R >= hi * (1.0 - 1e-6)) ? 1u : 0u;
+        at += (R <= lo * (1.0 + 1e-6) || R >= hi[c] * (1.0 - 1e-6)) ? 1u : 0u;
     }
     r->stats.clamped = n ? (double)at / (double)n : 0.0;
 }
@@ -7301,7 +7303,7 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
 static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
 {
     const appm__vp *v = &r->vp[i];
-    int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dy, W, x, y, xa, xb, ya, yb;
+    int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), W, x, y, xa, xb, ya, yb;
     float Rm = v->R > v->Rc ? v->R : v->Rc, fp = v->footprint, pw; /* pw: a pixel's width at x */
     float lu[APPM__CUT_CAND][2], ld[APPM__CUT_CAND]; /* candidate lines: direction, distance */
     float lf[APPM__CUT_CAND];                       /* the nearest foot of a q along the line */
@@ -7311,20 +7313,14 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     if (!(Rm > 0.0f)) return;
     W = fp > 0.0f && Rm / fp < (float)APPM__CUT_WIN ? (int64_t)(Rm / fp) + 1 : APPM__CUT_WIN;
     pw = fp > 0.0f ? fp : Rm;
-    { /* no flagged pixel within W (Chebyshev distance): no corner in reach */
-        int any = 0;
-        for (dy = -W; dy <= W && !any; ++dy) {
-            y = y0 + dy;
-            if (y >= 0 && y < (int64_t)r->h && r->vp[(size_t)(y * (int64_t)r->w + x0)].edge <= W) any = 1;
-        }
-        if (!any) return;
-    }
     ya = y0 - W < 0 ? 0 : y0 - W;
     yb = y0 + W >= (int64_t)r->h ? (int64_t)r->h - 1 : y0 + W;
     xa = x0 - W < 0 ? 0 : x0 - W;
     xb = x0 + W >= (int64_t)r->w ? (int64_t)r->w - 1 : x0 + W;
     for (y = ya; y <= yb; ++y) {
-        if (r->vp[(size_t)(y * (int64_t)r->w + x0)].edge > W) continue; /* no flagged pixel in this row's window */
+        /* vp.edge of (x0, y): the distance to the nearest flagged pixel of row y; beyond W
+         * this row's part of the window has no candidate */
+        if (r->vp[(size_t)(y * (int64_t)r->w + x0)].edge > W) continue;
         for (x = xa; x <= xb; ++x) {
             const appm__vp *q;
             float c, at, ab, al, g0, d, hq, ux, uy, sq;

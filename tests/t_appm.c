@@ -325,8 +325,8 @@ static void test_component_guards(void)
             for (y = 0; y < nv; ++y)
                 for (k = 0; k < 3; ++k)
                     for (pd = 0; pd < sizeof pooled / sizeof pooled[0]; ++pd) {
-                        double lo, hi, r[2];
-                        int c;
+                        double lo, hi[2], r[2];
+                        int c, same;
                         memset(&a, 0, sizeof a);
                         a.k[0].S = vals[x];
                         a.k[0].dI = vals[y];
@@ -341,12 +341,16 @@ static void test_component_guards(void)
                         a.k[0].dI2p = pooled[pd];
                         a.k[1].dI2p = pooled[(pd + k) % (sizeof pooled / sizeof pooled[0])];
                         fr.pass = j + 5;
-                        appm__appm_bounds(fr.r1, fr.r_auto, fr.pass, &lo, &hi);
+                        for (c = 0; c < 2; ++c) /* each component's own upper bound */
+                            appm__appm_bounds_sj(fr.r1, fr.r_auto, pow((double)fr.pass, -1.0 / 6.0),
+                                                 appm__comp_rhi(c), &lo, &hi[c]);
                         r[0] = appm__appm_radius_hook(&fr, &a);
                         r[1] = appm__appm_radius_caustic(&fr, &a);
-                        if (r[1] == -1.0) r[1] = r[0]; /* "the same as the diffuse one" */
+                        same = r[1] == -1.0;
+                        if (same) r[1] = r[0]; /* "the same as the diffuse one", within its bounds */
                         for (c = 0; c < 2; ++c)
-                            if (!(r[c] > 0.0) || !(r[c] < HUGE_VAL) || r[c] < lo * (1 - 1e-6) || r[c] > hi * (1 + 1e-6))
+                            if (!(r[c] > 0.0) || !(r[c] < HUGE_VAL) || r[c] < lo * (1 - 1e-6) ||
+                                r[c] > hi[same ? 0 : c] * (1 + 1e-6))
                                 bad++;
                         calls += 2;
                     }

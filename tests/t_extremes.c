@@ -1067,8 +1067,8 @@ static void test_albedo_one(void)
  * wall, the bias of every photon-mapping kernel wider than the room.  So the
  * view is narrow enough (16 x 16 pixels, 60 degrees) that the automatic
  * radius is small, r1 = 0.2 is given, and the largest radius any method
- * may use (appm: APPM__RHI = 4 times max(r1, automatic)) is checked to stay
- * below 2. */
+ * may use (appm: the larger of its upper bounds APPM__RHI and
+ * APPM__RHI_DIFFUSE times max(r1, automatic)) is checked to stay below 2. */
 static void test_camera_inside(void)
 {
     static const appm_method methods[4] = {APPM_METHOD_APPM, APPM_METHOD_PPM, APPM_METHOD_SPPM,
@@ -1112,7 +1112,8 @@ static void test_camera_inside(void)
             for (i = 0; rad && i < (size_t)16 * 16; ++i) rmax = rad[i] > rmax ? rad[i] : rmax;
             if (methods[mi] == APPM_METHOD_APPM) {
                 double rb = r->r_auto > r->r1 ? r->r_auto : r->r1;
-                CHECK_MSG(APPM__RHI * rb < 2.0, "the appm radius may reach %g", APPM__RHI * rb);
+                double rhi = APPM__RHI > APPM__RHI_DIFFUSE ? APPM__RHI : APPM__RHI_DIFFUSE;
+                CHECK_MSG(rhi * rb < 2.0, "the appm radius may reach %g", rhi * rb);
             }
             CHECK_MSG(rmax < 2.0, "inside a closed cube, %s: radius %g", method_name(methods[mi]), rmax);
             CHECK_MSG(nonzero == 0 && st.dropped_samples == 0, "inside a closed cube, %s: %lu values not 0",
