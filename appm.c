@@ -6288,8 +6288,9 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      and the toy of 4.9).  Safeguards (4.7): KZ radius r_1 j^(-1/6) while warming up; while a
  *      pixel has seen fewer than 8 photons its radius doubles each pass; the
  *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_auto),
- *      2 max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius), so the clamps
- *      shrink at the optimal rate.  The Laplacian bandwidth is a fixed
+ *      RHI max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius; RHI 2 for
+ *      the caustic component, 3 for the diffuse one), so the clamps shrink at
+ *      the optimal rate.  The Laplacian bandwidth is a fixed
  *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
  *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
  *      noise of its estimate.
@@ -6348,7 +6349,16 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *      instructions, tied at equal time at RHI 2 and lost 2 - 30 % at RHI 4.
  *      With the seams corrected (10.5), RHI 3 (or 3 for the diffuse
  *      component only) gained 5 - 6 % on CornellBox-Original and lost on the
- *      sphere box at equal time (algorithm.md 4.19): RHI stays at 2.
+ *      sphere box at equal time (algorithm.md 4.19).  Re-measured at an equal
+ *      instruction count, which no load of the machine changes (algorithm.md
+ *      4.20: bench/eqcurve.sh, EQC_COST=instr, 5 seeds, each error curve fitted
+ *      by a power of the passes): the diffuse component's bound at 3 gains 6 %
+ *      on CornellBox-Original and loses 1 % on the sphere box and caustic-glass,
+ *      1 - 2 % on water-caustic; 2.5 gains 5 % and loses 0 - 2 %, 4 loses
+ *      everywhere but on CornellBox-Original.  The caustic bound at 1.5 loses
+ *      5 - 11 % on the caustic scenes.  So APPM__RHI_DIFFUSE is 3 and APPM__RHI
+ *      2: the floor around a caustic takes a kernel twice as wide as the
+ *      caustic's (0.45 of it on the sphere box, tests/t_appm.c).
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
@@ -6359,7 +6369,7 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 #define APPM__KMIN 8.0                           /* photons before adapting */
 #define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
 #define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
-#define APPM__RHI_DIFFUSE 2.0                    /* the same for the diffuse component (10.3) */
+#define APPM__RHI_DIFFUSE 3.0                    /* the same for the diffuse component (algorithm.md 4.20) */
 #define APPM__CF_SPLIT (APPM__CF / 2.0)          /* c_f of each component (10.3) */
 #define APPM__POOL 1                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */

@@ -103,8 +103,9 @@
  *     2. radius: r = [c R(K) S / (M j mu2^2 dI^2)]^(1/6) from the pixel's running
  *        second moment S and Laplacian dI, per photon component (caustic:
  *        photons whose last bounce was specular; diffuse: the rest), clamped
- *        to [0.1 min(r1, r_auto), 2 max(r1, r_auto)] j^(-1/6) (r_auto: 2 pixel
- *        widths, as cfg.radius).
+ *        to [0.1 min(r1, r_auto), c max(r1, r_auto)] j^(-1/6) with c = 2 for the
+ *        caustic component and 3 for the diffuse one (r_auto: 2 pixel widths,
+ *        as cfg.radius).
  *     3. photon pass: M photon paths from the lights (chosen by power), stored at
  *        diffuse hits, binned into a hash grid.
  *     4. gather: per pixel, I += (1/j) ((1/M) sum_i k_r(x - y_i) W f gamma_i - I);

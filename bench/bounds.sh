@@ -3,8 +3,8 @@
 # (docs/algorithm.md 4.13).
 #
 # For each scene (64x64) and each seed of BOUNDS_SEEDS (default 1 2 3): appm
-# built with its upper bound APPM__RHI at each factor of BOUNDS_RHI (default
-# 1 1.5 2 4 8; nothing else changed) and ppm at its defaults, each for 3
+# built with both upper bounds (APPM__RHI and APPM__RHI_DIFFUSE) at each factor
+# of BOUNDS_RHI (default 1 1.5 2 4 8; nothing else changed) and ppm at its defaults, each for 3
 # processor seconds (bench/eqcpu: on a shared machine wall time measures the
 # other users too), interleaved so that a change of load hits all alike; then
 # ppm's 15-point grid (r0 in {1/4, 1/2, 1, 2, 4} x r_auto, alpha in {0.5, 2/3,
@@ -31,8 +31,10 @@ mkdir -p "$out"
 . bench/refs.sh
 refs
 for h in $rhis; do
-    sed "s/^#define APPM__RHI 2.0 /#define APPM__RHI $h /" appm.c > "$out/appm-rhi$h.c"
-    grep -q "^#define APPM__RHI $h " "$out/appm-rhi$h.c" || { echo "bench: APPM__RHI not found"; exit 1; }
+    sed -e "s/^#define APPM__RHI 2.0 /#define APPM__RHI $h /" \
+        -e "s/^#define APPM__RHI_DIFFUSE 3.0 /#define APPM__RHI_DIFFUSE $h /" appm.c > "$out/appm-rhi$h.c"
+    grep -q "^#define APPM__RHI $h " "$out/appm-rhi$h.c" && grep -q "^#define APPM__RHI_DIFFUSE $h " "$out/appm-rhi$h.c" ||
+        { echo "bench: APPM__RHI or APPM__RHI_DIFFUSE not found"; exit 1; }
     cp appm.h "$out/"
     $CC -std=c99 -O2 bench/eqcpu.c "$out/appm-rhi$h.c" -o "$out/eqcpu-rhi$h" -lm -pthread || exit 1
 done

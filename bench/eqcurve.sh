@@ -27,7 +27,8 @@
 #                counted once (valgrind's callgrind, passes 32 to 96, some
 #                minutes), and the budgets are ppm's passes 0.5 - 1 x the
 #                scene's count; the images are those of the curves (equal
-#                passes are deterministic)
+#                passes are deterministic); then the same read off each curve's power-law
+#                fit, and each variant against appm at equal instructions, paired by seed
 # References and masks as bench/bounds.sh (bench/refs.sh builds them once).
 set -u
 CC=${CC:-cc}
@@ -100,6 +101,14 @@ err_at() {
             if (x >= t) { if (NR == 1 || x == px) print $3; else print pe + ($3 - pe) * (t - px) / (x - px); done = 1; exit }
             px = x; pe = $3 }'
 }
+# fit_at FILE FROM P: the masked RMSE at P passes from a power law e = A n^b fitted (least squares in
+# log e, log n) to the curve's points from FROM passes on; smooths the pass-to-pass swings of the
+# low-discrepancy sampler, which an interpolated point keeps
+fit_at() {
+    sed -n 's/^curve passes=\([^ ]*\) cpu=[^ ]* rmse=[^ ]* rmse_masked=\([^ ]*\)$/\1 \2/p' "$1" |
+        awk -v lo="$2" -v p="$3" '$1 >= lo && $2 > 0 { x = log($1); y = log($2); n++; sx += x; sy += y; sxx += x * x; sxy += x * y }
+            END { if (n < 2) exit; b = (n * sxy - sx * sy) / (n * sxx - sx * sx); a = (sy - b * sx) / n; print exp(a + b * log(p)) }'
+}
 median() { sort -n | awk '{ a[NR] = $1 } END { if (NR) printf "%.3f (%d: %.3f - %.3f)", NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2, NR, a[1], a[NR] }'; }
 echo "masked RMSE ratio to ppm at its defaults: median over budgets and seeds (count: range)"
 for sc in $scenes; do
@@ -129,5 +138,23 @@ for sc in $scenes; do
             a=$(err_at "$out/$sc-$v-s$s.txt" passes $q) b=$(err_at "$out/$sc-ppm-s$s.txt" passes $p)
             [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
         echo "$sc $v: equal instructions $ei; instructions per pass $ca, ppm's $cp ($(awk "BEGIN { printf \"%.3f\", $ca / $cp }")x)"
+    done
+done
+echo "the same from each curve's power-law fit (passes n/4 to n), and each variant against appm, paired"
+for sc in $scenes; do
+    n=$(passes $sc)
+    cp=$(instr appm ppm $sc) c0=$(instr appm appm $sc)
+    for v in $names; do
+        ca=$(instr $v appm $sc)
+        ef=$(for s in $seeds; do for k in 4 5 6 7 8; do
+            p=$(awk "BEGIN { print $n * $k / 8 }") q=$(awk "BEGIN { print $n * $k / 8 * $cp / $ca }")
+            a=$(fit_at "$out/$sc-$v-s$s.txt" $((n / 4)) $q) b=$(fit_at "$out/$sc-ppm-s$s.txt" $((n / 4)) $p)
+            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+        ev=
+        [ $v = appm ] || ev="; against appm $(for s in $seeds; do for k in 4 5 6 7 8; do
+            p=$(awk "BEGIN { print $n * $k / 8 }") q=$(awk "BEGIN { print $n * $k / 8 * $c0 / $ca }")
+            a=$(fit_at "$out/$sc-$v-s$s.txt" $((n / 4)) $q) b=$(fit_at "$out/$sc-appm-s$s.txt" $((n / 4)) $p)
+            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)"
+        echo "$sc $v: fitted, equal instructions $ef$ev"
     done
 done

@@ -5,7 +5,7 @@
 # comments), and each variant is built from appm.c with that patch applied.
 #
 # Variants IMGLAP_VARIANTS (default "0:2 1:2 1:4"): ON:RHI[:K[:C]], appm built with
-# APPM__IMGLAP ON, APPM__RHI RHI, APPM__IMGLAP_K K (default 1) and
+# APPM__IMGLAP ON, both upper bounds (APPM__RHI, APPM__RHI_DIFFUSE) RHI, APPM__IMGLAP_K K (default 1) and
 # APPM__IMGLAP_COMPS C (default 3: both components; 1 the diffuse one), nothing else
 # changed; ON 0 renders today's image (checked with cmp: the patch's only other
 # change, the mean visible point it keeps, does not touch the image).  For each seed of IMGLAP_SEEDS (default
@@ -32,6 +32,7 @@ build() { # ON RHI K C -> $out/v-ON-RHI-K-C/
     mkdir -p "$d"
     patch -s -p1 -o "$d/appm-patched.c" appm.c bench/imglap.patch || { echo "bench: bench/imglap.patch does not apply"; exit 1; }
     sed -e "s/^#define APPM__IMGLAP 1 /#define APPM__IMGLAP $1 /" -e "s/^#define APPM__RHI 2.0 /#define APPM__RHI $2 /" \
+        -e "s/^#define APPM__RHI_DIFFUSE 3.0 /#define APPM__RHI_DIFFUSE $2 /" \
         -e "s/^#define APPM__IMGLAP_K 1.0 /#define APPM__IMGLAP_K $3 /" \
         -e "s/^#define APPM__IMGLAP_COMPS 3 /#define APPM__IMGLAP_COMPS $4 /" "$d/appm-patched.c" > "$d/appm.c"
     grep -q "^#define APPM__IMGLAP $1 " "$d/appm.c" && grep -q "^#define APPM__RHI $2 " "$d/appm.c" &&

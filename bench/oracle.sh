@@ -9,10 +9,12 @@
 # pixel's error-minimising f and compares it, per region, with appm's radius.
 # References as bench/bounds.sh builds them (the committed sphere box
 # reference; two path-traced halves for CornellBox-Original, the first used).
-# ORACLE_RHI=H renders appm built with its upper bound APPM__RHI at H (as
+# ORACLE_RHI=H renders appm built with both upper bounds at H (as
 # bench/bounds.sh does) and writes its files to ORACLE_OUT (default
 # bench/out/oracle-rhiH), reusing the ppm images of ORACLE_PPM (default
-# bench/out/oracle); the tables' "bound" stays today's 2x.
+# bench/out/oracle); the tables' "bound" stays 2x (the caustic component's;
+# the diffuse one's is 3x since docs/algorithm.md 4.20, and bench/oracle.c
+# counts a pixel at or beyond 2x as at the bound).
 # ORACLE_PATCH=FILE renders appm built from appm.c with that patch applied
 # (bench/edgecap.patch: the edge caps of docs/algorithm.md 4.17), and
 # ORACLE_DEFS="MACRO=VALUE,..." with those macros of section 10 set by sed
@@ -42,8 +44,10 @@ mkdir -p "$out" "$ppmout"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
 APPM=./appm
 if [ "$rhi" != 2.0 ] || [ -n "$defs$pat" ]; then
-    sed "s/^#define APPM__RHI 2.0 /#define APPM__RHI $rhi /" appm.c > "$out/appm.c"
-    grep -q "^#define APPM__RHI $rhi " "$out/appm.c" || { echo "bench: APPM__RHI not found"; exit 1; }
+    sed -e "s/^#define APPM__RHI 2.0 /#define APPM__RHI $rhi /" \
+        -e "s/^#define APPM__RHI_DIFFUSE 3.0 /#define APPM__RHI_DIFFUSE $rhi /" appm.c > "$out/appm.c"
+    grep -q "^#define APPM__RHI $rhi " "$out/appm.c" && grep -q "^#define APPM__RHI_DIFFUSE $rhi " "$out/appm.c" ||
+        { echo "bench: APPM__RHI or APPM__RHI_DIFFUSE not found"; exit 1; }
     if [ -n "$pat" ]; then # the patch may touch the tests too: apply it to a copy of both
         rm -rf "$out/src" && mkdir -p "$out/src/tests" && cp "$out/appm.c" "$out/src/" &&
             cp tests/t_appm.c "$out/src/tests/" && patch -s -p1 -d "$out/src" < "$pat" &&
