@@ -29,6 +29,13 @@
 #                scene's count; the images are those of the curves (equal
 #                passes are deterministic); then the same read off each curve's power-law
 #                fit, and each variant against appm at equal instructions, paired by seed
+#   EQC_GRID=1   with EQC_COST=instr: also ppm's 15-point grid (r0 in {1/4, 1/2, 1, 2, 4} x
+#                the automatic radius, alpha in {0.5, 2/3, 0.8}) on every scene and seed,
+#                each point at equal processor time against ppm's default (run before and
+#                after the grid, its cost per pass their mean), read off the fits; the best
+#                point (lowest median) against appm at equal instructions, paired.  The
+#                default point itself comes out within a few percent of 1: that is the
+#                noise of this comparison (some 10 minutes for the five scenes, 3 seeds)
 # References and masks as bench/bounds.sh (bench/refs.sh builds them once).
 set -u
 CC=${CC:-cc}
@@ -157,4 +164,44 @@ for sc in $scenes; do
             [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)"
         echo "$sc $v: fitted, equal instructions $ef$ev"
     done
+done
+[ "${EQC_GRID:-0}" = 1 ] || exit 0
+cost() { tail -1 "$1" | sed 's/^passes=\([^ ]*\) cpu=\([^ ]*\).*/\2 \1/' | awk '{ print $1 / $2 }'; }
+grid="0.25:0.5 0.25:0.6666667 0.25:0.8 0.5:0.5 0.5:0.6666667 0.5:0.8 1:0.5 1:0.6666667 1:0.8 2:0.5 2:0.6666667 2:0.8 4:0.5 4:0.6666667 4:0.8"
+echo "ppm's grid at equal processor time against its default (fitted), and appm against the grid's best point"
+for sc in $scenes; do
+    n=$(passes $sc) lo=$(($(passes $sc) / 4))
+    ra=$(./appm render scenes/$(scene $sc).scene --method ppm --size 64x64 --passes 1 --threads 1 -q --seed 1 \
+        -o "$out/r.pfm" | sed 's/.* radius=\([^ ]*\).*/\1/')
+    for s in $seeds; do
+        EQCPU_CURVE=10 "$out/eqcpu-appm" scenes/$(scene $sc).scene ppm $s -$n 0 0 $(refargs $sc) > "$out/$sc-gdef1-s$s.txt" || exit 1
+        for g in $grid; do
+            r0=$(awk "BEGIN { print $ra * ${g%%:*} }")
+            EQCPU_CURVE=10 "$out/eqcpu-appm" scenes/$(scene $sc).scene ppm $s -$n $r0 ${g#*:} $(refargs $sc) \
+                > "$out/$sc-g$g-s$s.txt" || exit 1
+        done
+        EQCPU_CURVE=10 "$out/eqcpu-appm" scenes/$(scene $sc).scene ppm $s -$n 0 0 $(refargs $sc) > "$out/$sc-gdef2-s$s.txt" || exit 1
+    done
+    best= bm=
+    for g in $grid; do
+        m=$(for s in $seeds; do
+            cd=$(awk "BEGIN { print ($(cost "$out/$sc-gdef1-s$s.txt") + $(cost "$out/$sc-gdef2-s$s.txt")) / 2 }")
+            cg=$(cost "$out/$sc-g$g-s$s.txt")
+            for k in 4 5 6 7 8; do
+                p=$(awk "BEGIN { print $n * $k / 8 }") q=$(awk "BEGIN { print $n * $k / 8 * $cd / $cg }")
+                a=$(fit_at "$out/$sc-g$g-s$s.txt" $lo $q) b=$(fit_at "$out/$sc-gdef1-s$s.txt" $lo $p)
+                [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+        echo "$sc ppm r0=${g%%:*}x alpha=${g#*:}: $m"
+        v=${m%% *}
+        if [ -z "$bm" ] || awk "BEGIN { exit !($v < $bm) }"; then best=$g bm=$v; fi
+    done
+    cp=$(instr appm ppm $sc) ca=$(instr appm appm $sc)
+    ab=$(for s in $seeds; do
+        cd=$(awk "BEGIN { print ($(cost "$out/$sc-gdef1-s$s.txt") + $(cost "$out/$sc-gdef2-s$s.txt")) / 2 }")
+        cg=$(cost "$out/$sc-g$best-s$s.txt")
+        for k in 4 5 6 7 8; do
+            qa=$(awk "BEGIN { print $n * $k / 8 * $cp / $ca }") qg=$(awk "BEGIN { print $n * $k / 8 * $cd / $cg }")
+            a=$(fit_at "$out/$sc-appm-s$s.txt" $lo $qa) b=$(fit_at "$out/$sc-g$best-s$s.txt" $lo $qg)
+            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+    echo "$sc: best grid point r0=${best%%:*}x alpha=${best#*:} ($bm of the default); appm against it $ab"
 done
