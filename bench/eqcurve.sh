@@ -116,6 +116,15 @@ fit_at() {
         awk -v lo="$2" -v p="$3" '$1 >= lo && $2 > 0 { x = log($1); y = log($2); n++; sx += x; sy += y; sxx += x * x; sxy += x * y }
             END { if (n < 2) exit; b = (n * sxy - sx * sy) / (n * sxx - sx * sx); a = (sy - b * sx) / n; print exp(a + b * log(p)) }'
 }
+# pair_fit A B SA SB N FROM: for k = 4 .. 8, the fitted error of curve A at N k / 8 x SA passes over
+# that of curve B at N k / 8 x SB (SA, SB: awk expressions), one ratio a line
+pair_fit() {
+    for k in 4 5 6 7 8; do
+        qa=$(awk "BEGIN { print $5 * $k / 8 * ($3) }") qb=$(awk "BEGIN { print $5 * $k / 8 * ($4) }")
+        a=$(fit_at "$1" $6 $qa) b=$(fit_at "$2" $6 $qb)
+        [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"
+    done
+}
 median() { sort -n | awk '{ a[NR] = $1 } END { if (NR) printf "%.3f (%d: %.3f - %.3f)", NR % 2 ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2, NR, a[1], a[NR] }'; }
 echo "masked RMSE ratio to ppm at its defaults: median over budgets and seeds (count: range)"
 for sc in $scenes; do
@@ -153,20 +162,17 @@ for sc in $scenes; do
     cp=$(instr appm ppm $sc) c0=$(instr appm appm $sc)
     for v in $names; do
         ca=$(instr $v appm $sc)
-        ef=$(for s in $seeds; do for k in 4 5 6 7 8; do
-            p=$(awk "BEGIN { print $n * $k / 8 }") q=$(awk "BEGIN { print $n * $k / 8 * $cp / $ca }")
-            a=$(fit_at "$out/$sc-$v-s$s.txt" $((n / 4)) $q) b=$(fit_at "$out/$sc-ppm-s$s.txt" $((n / 4)) $p)
-            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+        ef=$(for s in $seeds; do
+            pair_fit "$out/$sc-$v-s$s.txt" "$out/$sc-ppm-s$s.txt" "$cp / $ca" 1 $n $((n / 4)); done | median)
         ev=
-        [ $v = appm ] || ev="; against appm $(for s in $seeds; do for k in 4 5 6 7 8; do
-            p=$(awk "BEGIN { print $n * $k / 8 }") q=$(awk "BEGIN { print $n * $k / 8 * $c0 / $ca }")
-            a=$(fit_at "$out/$sc-$v-s$s.txt" $((n / 4)) $q) b=$(fit_at "$out/$sc-appm-s$s.txt" $((n / 4)) $p)
-            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)"
+        [ $v = appm ] || ev="; against appm $(for s in $seeds; do
+            pair_fit "$out/$sc-$v-s$s.txt" "$out/$sc-appm-s$s.txt" "$c0 / $ca" 1 $n $((n / 4)); done | median)"
         echo "$sc $v: fitted, equal instructions $ef$ev"
     done
 done
 [ "${EQC_GRID:-0}" = 1 ] || exit 0
 cost() { tail -1 "$1" | sed 's/^passes=\([^ ]*\) cpu=\([^ ]*\).*/\2 \1/' | awk '{ print $1 / $2 }'; }
+defcost() { awk "BEGIN { print ($(cost "$out/$1-gdef1-s$2.txt") + $(cost "$out/$1-gdef2-s$2.txt")) / 2 }"; }
 grid="0.25:0.5 0.25:0.6666667 0.25:0.8 0.5:0.5 0.5:0.6666667 0.5:0.8 1:0.5 1:0.6666667 1:0.8 2:0.5 2:0.6666667 2:0.8 4:0.5 4:0.6666667 4:0.8"
 echo "ppm's grid at equal processor time against its default (fitted), and appm against the grid's best point"
 for sc in $scenes; do
@@ -185,23 +191,15 @@ for sc in $scenes; do
     best= bm=
     for g in $grid; do
         m=$(for s in $seeds; do
-            cd=$(awk "BEGIN { print ($(cost "$out/$sc-gdef1-s$s.txt") + $(cost "$out/$sc-gdef2-s$s.txt")) / 2 }")
-            cg=$(cost "$out/$sc-g$g-s$s.txt")
-            for k in 4 5 6 7 8; do
-                p=$(awk "BEGIN { print $n * $k / 8 }") q=$(awk "BEGIN { print $n * $k / 8 * $cd / $cg }")
-                a=$(fit_at "$out/$sc-g$g-s$s.txt" $lo $q) b=$(fit_at "$out/$sc-gdef1-s$s.txt" $lo $p)
-                [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+            pair_fit "$out/$sc-g$g-s$s.txt" "$out/$sc-gdef1-s$s.txt" "$(defcost $sc $s) / $(cost "$out/$sc-g$g-s$s.txt")" 1 \
+                $n $lo; done | median)
         echo "$sc ppm r0=${g%%:*}x alpha=${g#*:}: $m"
         v=${m%% *}
         if [ -z "$bm" ] || awk "BEGIN { exit !($v < $bm) }"; then best=$g bm=$v; fi
     done
     cp=$(instr appm ppm $sc) ca=$(instr appm appm $sc)
     ab=$(for s in $seeds; do
-        cd=$(awk "BEGIN { print ($(cost "$out/$sc-gdef1-s$s.txt") + $(cost "$out/$sc-gdef2-s$s.txt")) / 2 }")
-        cg=$(cost "$out/$sc-g$best-s$s.txt")
-        for k in 4 5 6 7 8; do
-            qa=$(awk "BEGIN { print $n * $k / 8 * $cp / $ca }") qg=$(awk "BEGIN { print $n * $k / 8 * $cd / $cg }")
-            a=$(fit_at "$out/$sc-appm-s$s.txt" $lo $qa) b=$(fit_at "$out/$sc-g$best-s$s.txt" $lo $qg)
-            [ -n "$a" ] && [ -n "$b" ] && awk "BEGIN { print $a / $b }"; done; done | median)
+        pair_fit "$out/$sc-appm-s$s.txt" "$out/$sc-g$best-s$s.txt" "$cp / $ca" \
+            "$(defcost $sc $s) / $(cost "$out/$sc-g$best-s$s.txt")" $n $lo; done | median)
     echo "$sc: best grid point r0=${best%%:*}x alpha=${best#*:} ($bm of the default); appm against it $ab"
 done
