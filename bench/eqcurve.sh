@@ -176,7 +176,8 @@ defcost() { awk "BEGIN { print ($(cost "$out/$1-gdef1-s$2.txt") + $(cost "$out/$
 grid="0.25:0.5 0.25:0.6666667 0.25:0.8 0.5:0.5 0.5:0.6666667 0.5:0.8 1:0.5 1:0.6666667 1:0.8 2:0.5 2:0.6666667 2:0.8 4:0.5 4:0.6666667 4:0.8"
 echo "ppm's grid at equal processor time against its default (fitted), and appm against the grid's best point"
 for sc in $scenes; do
-    n=$(passes $sc) lo=$(($(passes $sc) / 4))
+    n=$(passes $sc)
+    lo=$((n / 4))
     ra=$(./appm render scenes/$(scene $sc).scene --method ppm --size 64x64 --passes 1 --threads 1 -q --seed 1 \
         -o "$out/r.pfm" | sed 's/.* radius=\([^ ]*\).*/\1/')
     for s in $seeds; do
