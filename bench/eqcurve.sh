@@ -16,7 +16,9 @@
 # so that they can be checked against an instruction count.
 #
 #   EQC_SCENES   scenes (default: the four of bench/bounds.sh, and water-caustic against the
-#                reference made with the kernel cut, water-cutref)
+#                reference made with the kernel cut, water-cutref); any other scene of scenes/
+#                with a bench/ref/SCENE-64.cmd is compared with its path-traced pair (built
+#                once, 20 s each; docs/algorithm.md 4.21 ran the other eight)
 #   EQC_SEEDS    seeds (default 1 2 3)
 #   EQC_BUDGETS  budgets in CPU-seconds (default 1.5 2 2.5 3)
 #   EQC_VARIANTS "name:MACRO=VALUE,MACRO=VALUE name2:..." appm built with
@@ -49,6 +51,7 @@ mkdir -p "$out"
 R=bench/ref
 . bench/refs.sh
 refs
+refs_pt $scenes
 $CC -std=c99 -O2 -I. bench/eqcpu.c appm.c -o "$out/eqcpu-appm" -lm -pthread || exit 1
 names="appm"
 for v in $variants; do

@@ -1,5 +1,5 @@
-# bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh, bench/edgecap.sh
-# and bench/lapdiag.sh: the 64x64 references of docs/algorithm.md 4.13 and the
+# bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh, bench/edgecap.sh,
+# bench/eqcurve.sh and bench/lapdiag.sh: the 64x64 references of docs/algorithm.md 4.13 and the
 # reference arguments of bench/eqcpu for each of its four scenes.  Needs R (the
 # reference folder).
 #
@@ -20,6 +20,17 @@ refs() {
     ref cornell-original-64 cornell-original pt 4096
     ref caustic-glass-64 caustic-glass ppm 3000 --photons 16384
     ref water-caustic-64 water-caustic ppm 600 --photons 16384
+}
+# refs_pt SCENE...: for the scenes refs() leaves out, the two path-traced halves of 4096 passes
+# that bench/ref/SCENE-64.cmd records (bench/run.sh's reference commands at 64x64); a light
+# reached only through glass or water would need ppm halves instead, as for the two above
+refs_pt() {
+    for sc; do
+        case $sc in
+        cornell-sphere | cornell-original | caustic-glass | water-*) ;;
+        *) ref $sc-64 $sc pt 4096 ;;
+        esac
+    done
 }
 # bench/eqcpu's REF_A REF_B MASK REF_MSE for a scene; the mask leaves out the
 # pixels whose reference luminance is at least 1 (10 for water-caustic): the
