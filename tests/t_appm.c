@@ -709,11 +709,12 @@ static void test_caustic_radii(void)
 }
 
 /* Same seed and passes, 1 and 3 threads: the same image, the same component
- * radii and the same clamped= (past a Laplacian pass, so pooling acts). */
+ * radii, the same clamped= (past a Laplacian pass, so pooling acts) and the
+ * same est_relerr. */
 static void test_components_deterministic(void)
 {
     static float img[2][24 * 24 * 3], rc[2][24 * 24], rd[2][24 * 24];
-    double clamped[2];
+    double clamped[2], relerr[2];
     appm_scene *s = NULL;
     appm_diag d;
     int t, i;
@@ -745,6 +746,7 @@ static void test_components_deterministic(void)
         if (b) memcpy(rd[t], b, sizeof rd[t]);
         appm_renderer_stats(r, &st);
         clamped[t] = st.clamped;
+        relerr[t] = st.est_relerr;
         { /* past the Laplacian pass 12: pooled dI^2 in the state */
             size_t q, pooled = 0;
             for (q = 0; q < (size_t)24 * 24; ++q)
@@ -757,6 +759,8 @@ static void test_components_deterministic(void)
     CHECK_MSG(memcmp(rc[0], rc[1], sizeof rc[0]) == 0 && memcmp(rd[0], rd[1], sizeof rd[0]) == 0,
               "1 and 3 threads: component radii differ");
     CHECK(clamped[0] == clamped[1]);
+    CHECK_MSG(relerr[0] > 0.0 && relerr[0] == relerr[1], "est_relerr %.17g with 1 thread, %.17g with 3", relerr[0],
+              relerr[1]);
     appm_scene_destroy(s);
 }
 
