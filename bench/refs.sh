@@ -1,6 +1,6 @@
 # bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh, bench/edgecap.sh,
 # bench/eqcurve.sh and bench/lapdiag.sh: the 64x64 references of docs/algorithm.md 4.13 and the
-# reference arguments of bench/eqcpu for each of its four scenes.  Needs R (the
+# reference arguments of bench/eqcpu for each scene.  Needs R (the
 # reference folder).
 #
 # The committed sphere box reference; two path-traced halves for
@@ -22,8 +22,8 @@ refs() {
     ref water-caustic-64 water-caustic ppm 600 --photons 16384
 }
 # refs_pt SCENE...: for the scenes refs() leaves out, the two path-traced halves of 4096 passes
-# that bench/ref/SCENE-64.cmd records (bench/run.sh's reference commands at 64x64); a light
-# reached only through glass or water would need ppm halves instead, as for the two above
+# that bench/ref/SCENE-64.cmd records; a light reached only through glass or water would need
+# ppm halves instead, as for the two above
 refs_pt() {
     for sc; do
         case $sc in
