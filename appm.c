@@ -12,18 +12,24 @@
  *                             their own deflate (LZ77 + Huffman), sRGB transfer,
  *                             write-to-temporary-then-rename
  *   4. OBJ/MTL and scenes     locale-free number parser, OBJ/MTL/`.scene`
- *                             readers with file:line errors, scene assembly
+ *                             readers with file:line errors
  *   5. BVH                    binned-SAH build, watertight ray/triangle test,
  *                             closest-hit and any-hit traversal, ray offsets
- *   6. Materials and lights   Lambert, mirror, Fresnel dielectric; light choice
- *                             by power, emission and next-event sampling
- *   7. Eye pass               camera paths to the first diffuse vertex
- *   8. Photon pass            photon paths, per-worker stores, chunk order
- *   9. Hash-grid photon map   counting sort into cells, range queries
- *  10. Estimators             kernels; ppm (Knaus-Zwicker), sppm
- *                             (Hachisuka-Jensen), appm (Kaplanyan-Dachsbacher)
+ *   6. Materials and lights   Lambert, mirror, Fresnel dielectric, glossy; light
+ *                             choice by power, emission and next-event sampling;
+ *                             scene assembly (loader arrays -> scene)
+ *   7. Photons and the map    32-byte photon records, octahedral directions, the
+ *                             hash grid: counting sort into cells, range queries
+ *   8. Renderer and eye pass  the renderer's state; camera paths to the first
+ *                             diffuse vertex
+ *   9. Photon pass            photon paths, per-worker stores, chunk order
+ *  10. Estimators             kernels and the gather's sums; ppm (Knaus-Zwicker),
+ *                             sppm (Hachisuka-Jensen); the paper's adaptive
+ *                             radius (Kaplanyan-Dachsbacher, appm-paper) and
+ *                             appm's extensions of it; the gather
  *  11. Path-tracing reference unidirectional, next-event estimation + MIS
- *  12. API glue               renderer life cycle, pass loop, statistics
+ *  12. Renderer               life cycle, the pass loop, image, maps, statistics
+ *  13. Checkpoints            the render state to a file and back
  *
  * CONVENTIONS
  *   Geometry is single precision (float3); every accumulator that grows with the
@@ -1081,7 +1087,7 @@ static void appm__smp_emit(appm__sampler *s, unsigned mask, float *u)
     for (k = 0; k < 4; ++k) u[k + 1] = v[k];
 }
 
-/* Camera (qmc only; random mode keeps its rotated R2 sequence, section 7.2). */
+/* Camera (qmc only; random mode keeps its rotated R2 sequence, section 8.1). */
 static void appm__smp_camera(const appm__sampler *s, int lens, float *u)
 {
     appm__ld_pair(s->tab, appm__ld_y(s->tab, 0, s->ir0), s->s0, 3u, u);
@@ -2360,7 +2366,7 @@ typedef struct appm__tri_info { /* 32 bytes: what shading reads after a hit */
     uint32_t mat;
     int32_t light;   /* index of its area light, or -1 */
     int32_t n0;      /* first of three shading normals in scene->normals, or -1 */
-    uint32_t nhash;  /* its corners' vn as written, hashed (for checkpoints, 12.2); 0 if flat */
+    uint32_t nhash;  /* its corners' vn as written, hashed (for checkpoints, section 13); 0 if flat */
 } appm__tri_info;
 
 enum { APPM__LIGHT_AREA = 0, APPM__LIGHT_POINT, APPM__LIGHT_SPOT, APPM__LIGHT_ENV };
@@ -2384,7 +2390,7 @@ typedef struct appm__camera {
     float fov, tan_half; /* full vertical field of view, degrees; tan(fov/2) */
     float aperture, focus;
     /* The camera statement as written, which the basis and tan_half derive from
-     * (for checkpoints, 12.2); framed: no statement, the loader framed the scene. */
+     * (for checkpoints, section 13); framed: no statement, the loader framed the scene. */
     appm__v3 target, sky;
     double fov_deg;
     int framed;
@@ -5271,56 +5277,486 @@ static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi
     return (float)(s->light[in->light].pick / in->area * ((double)t * t) / cos_l);
 }
 
-/* ==== 7. EYE PASS =========================================================
+/* ---- 6.3 The light table and scene assembly -------------------------------
  *
- * Every pass traces one eye path per pixel: a point in the pixel (box filter)
- * and on the lens - of the pixel's own low-discrepancy sequence, so that its
- * passes stratify the pixel (section 2.3), or uniformly jittered with
- * --sampler random - then through mirrors and glass until the first diffuse
- * or glossy vertex x (section 7.3).  There the path stops and becomes the
- * pixel's visible point for this pass (stochastic PPM: a new x every pass, so
- * anti-aliasing, depth of field and caustic paths all converge).  What the path
- * meets on the way is added to the pixel's direct term:
- *   emission Le of every surface hit on its front side (the light seen
- *   directly, or in a mirror), and at x the direct light by next-event
- *   estimation (one shadow ray to a light chosen by power).
- * With --direct photons the shadow ray is skipped and first-bounce photons are
- * gathered instead (the analytic tests and the teaching mode use this).
- *
- * Path length bookkeeping (--max-depth D, in segments from light to camera):
- * the eye path has e segments to x; emission met after k segments counts if
- * k <= D; direct light at x counts if e + 1 <= D; a photon that travelled p
- * segments counts at x if e + p <= D.
- *
- * The renderer's state is declared here, since every later section uses it.
+ * Loader arrays (section 4) -> an immutable scene: exact-size copies, bounds,
+ * the BVH (section 5), one light per emissive triangle plus the scene's
+ * lights with the table that picks them by power (6.2), and the camera.  Here,
+ * not in section 4, because it needs the BVH and the lights.
  */
-/* Everything a pass computes for a pixel stays here until the gather commits
- * it to the pixel's state, so a pass that fails (out of memory in the photon
- * pass) leaves no trace and can simply be run again. */
-typedef struct appm__vp { /* visible point of one pixel in the current pass: 92 bytes */
-    appm__v3 x;           /* position */
-    appm__v3 n;           /* unit geometric normal on the eye's side */
-    appm__v3 wf;          /* W f = W albedo / pi: multiplies each photon's gamma */
-    appm__v3 ld;          /* this pass's emission + direct light */
-    appm__v3 wg;          /* glossy: W Ks (Ns + 2) / (2 pi), the lobe's factor; else 0 */
-    appm__v3 rd;          /* glossy: reflect(wo, n_shading), the lobe's axis */
-    float ns;             /* glossy: the Phong exponent */
-    float footprint;      /* width of the pixel at x, scene units */
-    float R;              /* the radius of this pass (appm: of the diffuse photons) */
-    float Rc;             /* appm: the caustic photons' radius of this pass; 0: none */
-    uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
-    uint8_t edge;         /* 10.5: how many pixels along the row to the nearest pixel with a
-                           * neighbour on another surface (0: this one; 255: none near) */
-    uint8_t pad[2];
-} appm__vp;
+static void appm__loader_free(appm__loader *L)
+{
+    appm__array_free(L->mem, &L->pos);
+    appm__array_free(L->mem, &L->vn);
+    appm__array_free(L->mem, &L->nrm);
+    appm__array_free(L->mem, &L->tri);
+    appm__array_free(L->mem, &L->info);
+    appm__array_free(L->mem, &L->mat);
+    appm__array_free(L->mem, &L->names);
+    appm__array_free(L->mem, &L->face);
+    appm__array_free(L->mem, &L->lights);
+}
 
-/* Per-pixel state every method keeps across passes (40 bytes).  What a method
- * keeps beyond this (PPM's I, SPPM's tau, N, R, APPM's S, dI, ...) is its own
- * struct in section 10, in a separate array sized by its estimator entry. */
-typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pixel_fields (12.2) */
-    double ld[3];      /* sum over passes of emission + direct light (pt: of the whole path) */
-    double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
-} appm__pixel;
+/* Copies a loader array into an exact-size block owned by the scene. */
+static void *appm__take(appm__mem *m, appm__array *a, int *ok)
+{
+    void *p;
+    if (a->count == 0) return NULL;
+    p = appm__alloc(m, a->count, a->elem);
+    if (!p) {
+        *ok = 0;
+        return NULL;
+    }
+    memcpy(p, a->data, a->count * a->elem);
+    return p;
+}
+
+static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
+{
+    appm__free(m, s->tri);
+    appm__free(m, s->info);
+    appm__free(m, s->normals);
+    appm__free(m, s->mat);
+    appm__free(m, s->light);
+    appm__free(m, s->light_cdf);
+    appm__free(m, s->node);
+    appm__free(m, s->wnode_mem);
+}
+
+static double appm__mean3(const double *v) { return (v[0] + v[1] + v[2]) / 3.0; }
+
+/* The light-choice table: each light picked with its share of the total
+ * power (the mean of the three channels), as the cumulative s->light_cdf. */
+static appm_status appm__light_table(appm_scene *s, appm_diag *diag, const char *name)
+{
+    uint32_t i, k = s->nlight;
+    double total = 0.0;
+    for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
+    if (!(total > 0.0) || !(total < HUGE_VAL))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
+    /* Lights are picked by power, so every photon starts with about the total
+     * power in each channel: at most 3 times it (a channel against the mean of
+     * three), 15 times for a spot whose falloff spans its whole cone.  Photon
+     * weights are floats: beyond FLT_MAX / 16 every photon would overflow. */
+    if (total > FLT_MAX / 16.0)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "the lights emit %g W, more than a photon's single-precision weight can "
+                          "carry (%g W): use larger units or a smaller Ke",
+                          total, FLT_MAX / 16.0);
+    s->light_cdf[0] = 0.0;
+    for (i = 0; i < k; ++i) {
+        s->light[i].pick = appm__mean3(s->light[i].power) / total;
+        s->light_cdf[i + 1] = s->light_cdf[i] + s->light[i].pick;
+    }
+    s->light_cdf[k] = 1.0;
+    return APPM_OK;
+}
+
+/* Builds the light table: one area light per emissive triangle (after the BVH
+ * has fixed triangle order), then the point, spot and environment lights.  A
+ * bare OBJ in which nothing emits gets a constant white environment of
+ * radiance 1 (marked, so that the first light added to the scene replaces it). */
+static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char *name)
+{
+    uint32_t i, n = 0, k = 0, extra = (uint32_t)L->lights.count;
+    for (i = 0; i < s->ntri; ++i) n += s->mat[s->info[i].mat].emissive;
+    if (n + extra == 0 && L->bare_obj && s->ntri > 0) {
+        appm__light *l = (appm__light *)appm__array_push(L->mem, &L->lights);
+        if (!l) return APPM_ERR_NOMEM;
+        l->kind = APPM__LIGHT_ENV;
+        l->value = appm__v(1.0f, 1.0f, 1.0f);
+        extra = 1;
+        s->env_auto = 1;
+    }
+    if (n + extra == 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
+                          "the scene has no light (no material with Ke > 0, no light or environment)");
+    s->light = (appm__light *)appm__alloc(&s->mem, (size_t)n + extra, sizeof *s->light);
+    s->light_cdf = (double *)appm__alloc(&s->mem, (size_t)n + extra + 1, sizeof *s->light_cdf);
+    if (!s->light || !s->light_cdf) return APPM_ERR_NOMEM;
+    s->env = -1;
+    for (i = 0; i < s->ntri; ++i) {
+        const appm__material *m = &s->mat[s->info[i].mat];
+        appm__light *l;
+        if (!m->emissive) continue;
+        l = &s->light[k];
+        l->kind = APPM__LIGHT_AREA;
+        l->tri = i;
+        l->value = m->ke;
+        appm__light_power(s, l, l->power);
+        s->info[i].light = (int32_t)k++;
+    }
+    for (i = 0; i < extra; ++i) {
+        appm__light *l = &s->light[k];
+        *l = ((appm__light *)L->lights.data)[i];
+        if (l->kind == APPM__LIGHT_ENV) {
+            if (s->env >= 0)
+                return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
+            s->env = (int)k;
+        }
+        appm__light_power(s, l, l->power);
+        k++;
+    }
+    s->nlight = k;
+    return appm__light_table(s, L->diag, name);
+}
+
+/* Loader arrays -> scene: exact-size copies, bounds, BVH, lights, camera. */
+static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char *name)
+{
+    int ok = 1;
+    uint32_t i;
+    appm__bbox bb;
+    appm_status st;
+    if (L->tri.count == 0 && L->lights.count == 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the scene has no triangles");
+    s->ntri = (uint32_t)L->tri.count;
+    s->nnormals = (uint32_t)L->nrm.count;
+    s->nmat = (uint32_t)L->mat.count;
+    s->tri = (appm__tri *)appm__take(&s->mem, &L->tri, &ok);
+    s->info = (appm__tri_info *)appm__take(&s->mem, &L->info, &ok);
+    s->normals = (appm__v3 *)appm__take(&s->mem, &L->nrm, &ok);
+    s->mat = (appm__material *)appm__take(&s->mem, &L->mat, &ok);
+    if (!ok) return APPM_ERR_NOMEM;
+    s->dropped = L->dropped;
+    appm__bbox_empty(&bb);
+    for (i = 0; i < s->ntri; ++i) {
+        appm__bbox_grow(&bb, s->tri[i].p0);
+        appm__bbox_grow(&bb, s->tri[i].p1);
+        appm__bbox_grow(&bb, s->tri[i].p2);
+    }
+    if (s->ntri == 0) bb.lo = bb.hi = appm__v(0, 0, 0);
+    s->bmin = bb.lo;
+    s->bmax = bb.hi;
+    s->center = appm__scale(appm__add(bb.lo, bb.hi), 0.5f);
+    s->radius = 0.5f * appm__length(appm__sub(bb.hi, bb.lo));
+    if ((st = appm__bvh_build(s, L->diag)) != APPM_OK) return st;
+    if ((st = appm__scene_lights(s, L, name)) != APPM_OK) return st;
+    if (!L->have_camera) { /* frame the bounding sphere, looking along -z */
+        float rad = s->radius > 0.0f ? s->radius : 1.0f;
+        float dist = rad / (float)sin(0.5 * 40.0 * APPM__PI / 180.0) * 1.05f;
+        appm__v3 eye = appm__add(s->center, appm__v(0, 0, dist));
+        L->file = name;
+        if ((st = appm__camera_set(L, 0, eye, s->center, appm__v(0, 1, 0), 40.0)) != APPM_OK) return st;
+        L->cam.framed = 1;
+    }
+    s->cam = L->cam;
+    s->width = L->width ? L->width : 512;
+    s->height = L->height ? L->height : 512;
+    return APPM_OK;
+}
+
+static void appm__loader_init(appm__loader *L, appm__mem *m, const appm_config *cfg, appm_diag *diag)
+{
+    memset(L, 0, sizeof *L);
+    L->mem = m;
+    L->diag = diag;
+    if (cfg) {
+        L->log = cfg->log;
+        L->log_user = cfg->log_user;
+    }
+    appm__array_init(&L->pos, sizeof(appm__v3));
+    appm__array_init(&L->vn, sizeof(appm__v3));
+    appm__array_init(&L->nrm, sizeof(appm__v3));
+    appm__array_init(&L->tri, sizeof(appm__tri));
+    appm__array_init(&L->info, sizeof(appm__tri_info));
+    appm__array_init(&L->mat, sizeof(appm__material));
+    appm__array_init(&L->names, 1);
+    appm__array_init(&L->face, 2 * sizeof(int64_t));
+    appm__array_init(&L->lights, sizeof(appm__light));
+}
+
+/* A loader ready to read `file`, with material 0, the default diffuse, in place. */
+static appm_status appm__loader_begin(appm__loader *L, appm__mem *m, const appm_config *cfg,
+                                      appm_diag *diag, const char *file)
+{
+    appm__material *def;
+    appm__loader_init(L, m, cfg, diag);
+    L->file = file;
+    def = (appm__material *)appm__array_push(m, &L->mat);
+    if (!def || !appm__array_push(m, &L->names)) return APPM_ERR_NOMEM;
+    def->kind = APPM__MAT_DIFFUSE;
+    def->color = appm__v(0.8f, 0.8f, 0.8f);
+    def->ior = 1.5f;
+    return APPM_OK;
+}
+
+enum { APPM__TEXT_NONE = 0, APPM__TEXT_OBJ, APPM__TEXT_SCENE };
+
+/* Common path of the public loaders.  text_kind NONE: read `path` (a .scene or
+ * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead.
+ * files (SCENE only): the texts its meshes and material libraries name, instead
+ * of files on disk (NULL: read from disk). */
+static appm_status appm__scene_load(const char *path, int text_kind, const char *text, size_t text_len,
+                                    const char *mtl, size_t mtl_len, const appm_memory_file *files,
+                                    size_t nfiles, const appm_config *cfg, appm_scene **out, appm_diag *diag)
+{
+    appm__mem m;
+    appm__loader L;
+    appm_scene *s;
+    appm_status st;
+    appm_diag local;
+    if (!diag) diag = &local;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no output pointer");
+    *out = NULL;
+    if (!path) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene path");
+    appm__mem_init(&m, cfg);
+    m.diag = diag;
+    s = (appm_scene *)appm__alloc(&m, 1, sizeof *s);
+    if (!s) return APPM_ERR_NOMEM;
+    st = appm__loader_begin(&L, &m, cfg, diag, path);
+    L.mem_mtl = mtl;
+    L.mem_mtl_len = mtl ? mtl_len : 0;
+    L.files = files;
+    L.nfiles = files ? nfiles : 0;
+    appm__copy_str(s->name, sizeof s->name, path);
+    if (st == APPM_OK) {
+        if (text_kind == APPM__TEXT_OBJ) {
+            L.bare_obj = 1;
+            st = appm__obj_parse(&L, text, text_len, path);
+        } else if (text_kind == APPM__TEXT_SCENE) {
+            st = appm__scene_parse(&L, text, text_len, path);
+        } else if (appm__ends_with(path, ".obj")) {
+            L.file = NULL;
+            L.bare_obj = 1;
+            st = appm__obj_load(&L, path, 0);
+        } else {
+            char *buf;
+            size_t len;
+            st = appm__read_file(&m, path, &buf, &len, diag);
+            if (st == APPM_OK) {
+                st = appm__scene_parse(&L, buf, len, path);
+                appm__free(&m, buf);
+            }
+        }
+        if (st == APPM_OK) {
+            s->mem = m; /* from here on the scene's own counter tracks its blocks */
+            st = appm__scene_finish(s, &L, path);
+            m = s->mem;
+        }
+    }
+    if (st == APPM_ERR_NOMEM) appm__fail(diag, APPM_ERR_NOMEM, path, 0, "out of memory loading the scene");
+    appm__loader_free(&L);
+    if (st != APPM_OK) {
+        appm__scene_free_parts(&m, s);
+        appm__free(&m, s);
+        return st;
+    }
+    m.diag = NULL;
+    s->mem = m;
+    *out = s;
+    return APPM_OK;
+}
+
+APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
+                                     appm_diag *diag)
+{
+    return appm__scene_load(path, APPM__TEXT_NONE, NULL, 0, NULL, 0, NULL, 0, cfg, out, diag);
+}
+
+APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len, const char *mtl,
+                                                size_t mtl_len, const char *name,
+                                                const appm_config *cfg, appm_scene **out,
+                                                appm_diag *diag)
+{
+    if (!obj) {
+        appm__diag_clear(diag);
+        if (out) *out = NULL;
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, "no OBJ text");
+    }
+    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_OBJ, obj, obj_len, mtl, mtl_len, NULL, 0, cfg,
+                            out, diag);
+}
+
+APPM_API appm_status appm_scene_load_memory(const char *scene, size_t scene_len, const char *name,
+                                            const appm_memory_file *files, size_t nfiles,
+                                            const appm_config *cfg, appm_scene **out, appm_diag *diag)
+{
+    static const appm_memory_file none = {NULL, NULL, 0};
+    if (!scene || (!files && nfiles)) {
+        appm__diag_clear(diag);
+        if (out) *out = NULL;
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, scene ? "no files" : "no scene text");
+    }
+    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_SCENE, scene, scene_len, NULL, 0,
+                            files ? files : &none, files ? nfiles : 0, cfg, out, diag);
+}
+
+APPM_API void appm_scene_destroy(appm_scene *scene)
+{
+    appm__mem m;
+    if (!scene) return;
+    m = scene->mem;
+    appm__scene_free_parts(&m, scene);
+    appm__free(&m, scene);
+}
+
+APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
+{
+    uint32_t i;
+    if (!info) return;
+    memset(info, 0, sizeof *info);
+    if (!s) return;
+    info->triangles = s->ntri;
+    info->dropped_triangles = s->dropped;
+    for (i = 0; i < s->nmat; ++i) {
+        const appm__material *m = &s->mat[i];
+        if (i == 0) { /* the implicit default counts only if some face uses it */
+            uint32_t k;
+            for (k = 0; k < s->ntri && s->info[k].mat != 0; ++k) {
+            }
+            if (k == s->ntri) continue;
+        }
+        info->materials_diffuse += m->kind == APPM__MAT_DIFFUSE;
+        info->materials_mirror += m->kind == APPM__MAT_MIRROR;
+        info->materials_dielectric += m->kind == APPM__MAT_DIELECTRIC;
+        info->materials_glossy += m->kind == APPM__MAT_GLOSSY;
+        info->materials_emissive += m->emissive;
+    }
+    for (i = 0; i < s->nlight; ++i) {
+        const appm__light *l = &s->light[i];
+        double *p = l->kind == APPM__LIGHT_AREA    ? info->power_area
+                    : l->kind == APPM__LIGHT_POINT ? info->power_point
+                    : l->kind == APPM__LIGHT_SPOT  ? info->power_spot
+                                                   : info->power_environment;
+        info->lights_area += l->kind == APPM__LIGHT_AREA;
+        info->lights_point += l->kind == APPM__LIGHT_POINT;
+        info->lights_spot += l->kind == APPM__LIGHT_SPOT;
+        info->lights_environment += l->kind == APPM__LIGHT_ENV;
+        p[0] += l->power[0];
+        p[1] += l->power[1];
+        p[2] += l->power[2];
+    }
+    info->bbox_min[0] = s->bmin.x;
+    info->bbox_min[1] = s->bmin.y;
+    info->bbox_min[2] = s->bmin.z;
+    info->bbox_max[0] = s->bmax.x;
+    info->bbox_max[1] = s->bmax.y;
+    info->bbox_max[2] = s->bmax.z;
+    info->bvh_nodes = s->nwnode; /* the wide tree the renderer traverses */
+    info->bvh_depth = s->wdepth;
+    info->width = s->width;
+    info->height = s->height;
+    info->memory_bytes = s->mem.live;
+    info->peak_bytes = s->mem.peak;
+}
+
+/* Lights added to a loaded scene.  The light arrays are rebuilt one entry
+ * larger (or smaller), through the scene's own allocator, and the choice table
+ * is recomputed; the arrays are untouched when the call fails.  `drop` is the
+ * index of a light to leave out (-1: none), `add` the light to append (NULL:
+ * none). */
+static appm_status appm__scene_relight(appm_scene *s, int drop, const appm__light *add, appm_diag *diag)
+{
+    uint32_t n = s->nlight - (drop >= 0) + (add != NULL), i, k = 0;
+    appm__mem *m = &s->mem;
+    appm__light *nl;
+    double *cdf;
+    appm__light *old = s->light;
+    double *old_cdf = s->light_cdf;
+    uint32_t old_n = s->nlight;
+    int old_env = s->env;
+    appm_status st;
+    if (n == 0) return appm__fail(diag, APPM_ERR_INVALID_ARG, s->name, 0, "the scene would have no light");
+    m->diag = diag;
+    nl = (appm__light *)appm__alloc(m, n, sizeof *nl);
+    cdf = (double *)appm__alloc(m, (size_t)n + 1, sizeof *cdf);
+    m->diag = NULL;
+    if (!nl || !cdf) {
+        appm__free(m, nl);
+        appm__free(m, cdf);
+        return APPM_ERR_NOMEM;
+    }
+    s->env = -1;
+    for (i = 0; i < old_n; ++i) {
+        if ((int)i == drop) continue;
+        if (old[i].kind == APPM__LIGHT_ENV) s->env = (int)k;
+        nl[k++] = old[i]; /* area lights come first and are never dropped: triangle indices hold */
+    }
+    if (add) {
+        nl[k] = *add;
+        appm__light_power(s, &nl[k], nl[k].power);
+        if (add->kind == APPM__LIGHT_ENV) s->env = (int)k;
+        k++;
+    }
+    s->light = nl;
+    s->light_cdf = cdf;
+    s->nlight = k;
+    if ((st = appm__light_table(s, diag, s->name)) != APPM_OK) {
+        s->light = old;
+        s->light_cdf = old_cdf;
+        s->nlight = old_n;
+        s->env = old_env;
+        appm__free(m, nl);
+        appm__free(m, cdf);
+        return st;
+    }
+    appm__free(m, old);
+    appm__free(m, old_cdf);
+    return APPM_OK;
+}
+
+static int appm__finite_nonneg3(const double *v)
+{
+    int i;
+    for (i = 0; i < 3; ++i)
+        if (!(v[i] >= 0.0 && v[i] <= FLT_MAX)) return 0;
+    return 1;
+}
+
+APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double position[3],
+                                                const double intensity[3], appm_diag *diag)
+{
+    appm__light l;
+    appm_status st;
+    int i, drop;
+    appm__diag_clear(diag);
+    if (!scene || !position || !intensity)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or light");
+    for (i = 0; i < 3; ++i)
+        if (!(fabs(position[i]) <= FLT_MAX))
+            return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0, "point light: position is not finite");
+    if (!appm__finite_nonneg3(intensity))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
+                          "point light: intensity must be finite and >= 0");
+    memset(&l, 0, sizeof l);
+    l.kind = APPM__LIGHT_POINT;
+    l.pos = appm__v((float)position[0], (float)position[1], (float)position[2]);
+    l.value = appm__v((float)intensity[0], (float)intensity[1], (float)intensity[2]);
+    drop = scene->env_auto ? scene->env : -1;
+    st = appm__scene_relight(scene, drop, &l, diag);
+    if (st == APPM_OK) scene->env_auto = 0;
+    return st;
+}
+
+APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
+                                                appm_diag *diag)
+{
+    appm__light l;
+    appm_status st;
+    appm__diag_clear(diag);
+    if (!scene || !radiance) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or radiance");
+    if (!appm__finite_nonneg3(radiance))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
+                          "environment: radiance must be finite and >= 0");
+    memset(&l, 0, sizeof l);
+    l.kind = APPM__LIGHT_ENV;
+    l.value = appm__v((float)radiance[0], (float)radiance[1], (float)radiance[2]);
+    st = appm__scene_relight(scene, scene->env, &l, diag); /* replaces the one there, if any */
+    if (st == APPM_OK) scene->env_auto = 0;
+    return st;
+}
+
+/* ==== 7. PHOTONS AND THE HASH-GRID PHOTON MAP ==============================
+ *
+ * What a photon path leaves on a surface (section 9 traces the paths) and the
+ * map that finds the photons near a point (section 10 gathers them).  Neither
+ * needs a renderer: the tests build maps from photons of their own.  A photon
+ * is 32 bytes: its position, its weight gamma, and its incident direction and
+ * normal packed as octahedral coordinates (7.1); the map is a hashed uniform
+ * grid rebuilt every pass (7.2).
+ */
 
 typedef struct appm__photon { /* 32 bytes */
     float x, y, z;
@@ -5336,82 +5772,6 @@ typedef struct appm__photon { /* 32 bytes */
 #define APPM__COMP_DIFFUSE 0
 #define APPM__COMP_CAUSTIC 1
 #define APPM__NCOMP 2
-
-typedef struct appm__chunk_rec { /* where one chunk of photon paths left its photons */
-    uint32_t start, count;
-} appm__chunk_rec;
-
-/* The photon map of one pass (section 9): the photons sorted by hash bucket
- * and the table of bucket starts.  It borrows the photons (the renderer's
- * store, or any array) and owns only its table, so it can be built and
- * queried without a renderer. */
-typedef struct appm__pmap {
-    appm__photon *ph;  /* borrowed; photons [cell[b], cell[b+1]) lie in bucket b */
-    size_t n;          /* photons in the map */
-    uint32_t *cell;    /* 2^bits + 1 bucket starts */
-    float *bbox;       /* per bucket its photons' bounding box, lo xyz then hi xyz (section 9) */
-    size_t cell_cap;   /* entries allocated (the largest table so far: memory stays flat) */
-    uint32_t bits;     /* log2 of the number of buckets */
-    float cell_size, inv_cell;
-    appm__v3 lo;       /* the grid's origin: the photons' bounding-box corner */
-    float *hot;        /* the positions again, in map order, as three arrays x[cap], y[cap], z[cap]:
-                        * all a query's distance test reads, contiguous (section 9) */
-    float *side;       /* per photon, in map order: its normal n decoded (not normalised) and
-                        * c^2 |n|^2 (c = APPM__NORMAL_COS), what the same-surface test reads */
-    size_t hot_cap;    /* photons hot[] and side[] have room for (only grow: memory stays flat) */
-} appm__pmap;
-
-#define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius (speed only) */
-#define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
-
-struct appm__estimator; /* a method's entry in the table of section 10 */
-
-struct appm_renderer {
-    appm__mem mem;
-    appm_diag diag;
-    const appm_scene *scene;
-    const struct appm__estimator *est; /* the method: chosen once, at creation */
-    appm_direct direct;
-    uint32_t w, h;
-    uint64_t M;          /* photon paths per pass */
-    double r1;           /* initial radius (the user's, or r_auto) */
-    double r_auto;       /* the automatic radius (section 12): appm's scale for clamps and h */
-    int r1_auto;
-    double alpha;
-    struct {
-        double R2;       /* r_j^2 of the next gather */
-        double R;        /* the radius of the last gather */
-    } ppm;               /* Knaus-Zwicker's global radius (section 10) */
-    double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
-    double sj;           /* appm: j^(-1/6) for j = sj_pass, the radius's and its bounds' factor */
-    uint64_t sj_pass;    /* the pass sj was computed for (0: none yet) */
-    unsigned threads, max_depth;
-    uint64_t seed, pass;
-    appm__sobol_tab *sobol; /* --sampler qmc: appm__sobol_table (section 2.3); NULL: random */
-    unsigned nee_dims, emit_dims; /* appm__light_dims of the scene */
-    unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
-    int cut;             /* 10.5: the kernel renormalised where the surface ends inside it */
-    double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
-    float pixel_angle;   /* 2 tan(fov/2) / height */
-    appm__vp *vp;
-    appm__pixel *pix;
-    unsigned char *state; /* the method's per-pixel state: w h est->state_size bytes */
-    float *image;
-    float *aux[APPM_AUX_COUNT];
-    /* photon store: `tasks` regions of `cap` photons; chunk c is traced by task
-     * c % tasks, so the layout does not depend on scheduling */
-    appm__photon *ph;
-    size_t cap;
-    uint32_t tasks, nchunks;
-    appm__chunk_rec *chunk;
-    uint32_t *task_used;
-    int *task_failed;
-    uint32_t *dest;      /* scratch of the map's counting sort: one per slot of the store */
-    appm__pmap pmap;     /* this pass's photons, compacted and sorted (section 9) */
-    uint64_t dropped[APPM__MAX_THREADS];
-    appm_stats stats;
-    char last_error[256];
-};
 
 /* ---- 7.1 Octahedral unit vectors (Cigolle et al. 2014) ---------------------- */
 
@@ -5488,444 +5848,33 @@ APPM__UNUSED static appm__v3 appm__photon_normal(const appm__photon *p)
     return appm__normalize(appm__oct_unpack((float)p->n[0] * (1.0f / 127.0f), (float)p->n[1] * (1.0f / 127.0f)));
 }
 
-/* ---- 7.2 Camera rays ---------------------------------------------------------- */
+typedef struct appm__chunk_rec { /* where one chunk of photon paths left its photons */
+    uint32_t start, count;
+} appm__chunk_rec;
 
-/* --sampler random: where in the pixel (and on the lens) pass j samples: the R2 sequence of
- * Roberts (2018), x_j = frac(s + j g) with g = (1/phi2, 1/phi2^2), phi2 the
- * plastic number - or R4 with the lens, so that the lens and pixel coordinates
- * are not correlated.  Each pixel rotates the sequence by its own random offset
- * s (Cranley-Patterson), so pixels stay independent while the passes of one
- * pixel stratify its area: a pixel cut by the edge of a bright light converges
- * like 1/N instead of 1/sqrt(N), for every method alike. */
-static void appm__pixel_sample(uint64_t pass, appm__rng *rng, int lens, float *u)
-{
-    static const double g2[2] = {0.75487766624669276, 0.56984029099805327};
-    static const double g4[4] = {0.85667488385450558, 0.73389185662113744, 0.62870406338765426,
-                                 0.53859292022813244};
-    const double *g = lens ? g4 : g2;
-    int k, n = lens ? 4 : 2;
-    for (k = 0; k < n; ++k) {
-        double x = (double)appm__rng_float(rng) + (double)(pass % 16777216u) * g[k];
-        x -= floor(x);
-        u[k] = (float)x < 1.0f ? (float)x : 0.99999994f;
-    }
-}
+/* The photon map of one pass (7.2): the photons sorted by hash bucket
+ * and the table of bucket starts.  It borrows the photons (the renderer's
+ * store, or any array) and owns only its table, so it can be built and
+ * queried without a renderer. */
+typedef struct appm__pmap {
+    appm__photon *ph;  /* borrowed; photons [cell[b], cell[b+1]) lie in bucket b */
+    size_t n;          /* photons in the map */
+    uint32_t *cell;    /* 2^bits + 1 bucket starts */
+    float *bbox;       /* per bucket its photons' bounding box, lo xyz then hi xyz (7.2) */
+    size_t cell_cap;   /* entries allocated (the largest table so far: memory stays flat) */
+    uint32_t bits;     /* log2 of the number of buckets */
+    float cell_size, inv_cell;
+    appm__v3 lo;       /* the grid's origin: the photons' bounding-box corner */
+    float *hot;        /* the positions again, in map order, as three arrays x[cap], y[cap], z[cap]:
+                        * all a query's distance test reads, contiguous (7.2) */
+    float *side;       /* per photon, in map order: its normal n decoded (not normalised) and
+                        * c^2 |n|^2 (c = APPM__NORMAL_COS), what the same-surface test reads */
+    size_t hot_cap;    /* photons hot[] and side[] have room for (only grow: memory stays flat) */
+} appm__pmap;
 
-static void appm__camera_ray(const appm_renderer *r, const appm__sampler *smp, uint32_t px,
-                             uint32_t py, appm__ray *ray)
-{
-    const appm__camera *c = &r->scene->cam;
-    float su[4], u, v, l1 = 0.0f, l2 = 0.0f;
-    float aspect = (float)r->w / (float)r->h;
-    if (smp->qmc) {
-        appm__smp_camera(smp, c->aperture > 0.0f, su);
-    } else {
-        /* the rotation of pixel (px, py) is the same in every pass: a stream of its own */
-        appm__rng prng;
-        appm__rng_seed(&prng, r->seed, 0, APPM__DOMAIN_PIXEL, (uint64_t)py * r->w + px);
-        appm__pixel_sample(r->pass, &prng, c->aperture > 0.0f, su);
-    }
-    u = su[0];
-    v = su[1];
-    if (c->aperture > 0.0f) {
-        l1 = su[2];
-        l2 = su[3];
-    }
-    float sx = (2.0f * ((float)px + u) / (float)r->w - 1.0f) * c->tan_half * aspect;
-    float sy = (1.0f - 2.0f * ((float)py + v) / (float)r->h) * c->tan_half;
-    appm__v3 d = appm__normalize(
-        appm__add(c->forward, appm__add(appm__scale(c->right, sx), appm__scale(c->up, sy))));
-    appm__v3 o = c->eye;
-    if (c->aperture > 0.0f) {
-        /* thin lens: a point on the lens disk, aimed at where the pinhole ray
-         * meets the plane of focus */
-        appm__v3 disk = appm__cosine_dir(appm__v(0, 0, 1), l1, l2); /* x, y uniform in the disk */
-        appm__v3 focus = appm__add(c->eye, appm__scale(d, c->focus / appm__dot(d, c->forward)));
-        o = appm__add(c->eye, appm__add(appm__scale(c->right, disk.x * c->aperture),
-                                        appm__scale(c->up, disk.y * c->aperture)));
-        d = appm__normalize(appm__sub(focus, o));
-    }
-    appm__ray_init(ray, o, d, FLT_MAX);
-}
+#define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius (speed only) */
 
-static void appm__add3(double *acc, appm__v3 v)
-{
-    acc[0] += v.x;
-    acc[1] += v.y;
-    acc[2] += v.z;
-}
-
-/* Direct light at diffuse or glossy point sf seen from wo, by one shadow ray. */
-static appm__v3 appm__direct(const appm_renderer *r, const appm__surf *sf, const appm__material *m,
-                             appm__v3 wo, appm__sampler *smp, unsigned vertex)
-{
-    float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f, c;
-    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side);
-    float u[3];
-    appm__light_sample ls;
-    const appm_scene *s = r->scene;
-    appm__smp_light(smp, vertex, r->nee_dims, u);
-    if (!appm__sample_light(s, sf, ns, u[0], u[1], u[2], &ls)) return appm__v(0, 0, 0);
-    c = appm__dot(ls.wi, ns);
-    if (!(c > 0.0f) || !(appm__dot(ls.wi, ng) > 0.0f)) return appm__v(0, 0, 0);
-    if (appm__occluded(s, &ls.shadow, sf->tri, ls.skip)) return appm__v(0, 0, 0);
-    if (m->kind == APPM__MAT_GLOSSY) return appm__scale(appm__mul(appm__bsdf_f(m, ns, ls.wi, wo), ls.li), c);
-    return appm__scale(appm__mul(m->color, ls.li), c * (float)APPM__INV_PI);
-}
-
-/* ---- 7.3 Where eye paths stop ------------------------------------------------
- *
- * At a diffuse or glossy vertex the eye path stops and gathers, evaluating the
- * lobe per photon (section 10).  A very sharp lobe, Ns > APPM__GATHER_NS, would
- * leave only the few photons that arrive within its width of the mirror
- * direction, so there the vertex is split by the albedos instead: with
- * probability P_d the path gathers with the diffuse part alone (W / P_d), else
- * it continues through the lobe like a mirror (W f_lobe cos / ((1 - P_d)
- * pdf_lobe)).  Both are unbiased; which is less noisy was measured at equal
- * time: appm on CornellBox-Glossy at 64x64, 8 s, the floor's Ns (Ks 0.3)
- * raised, RMSE against a 6000-pass path-traced reference, medians of 3 seeds,
- * gathering the lobe / splitting every glossy vertex:
- *      Ns 80: 0.0053 / 0.0081   300: 0.0056 / 0.0065   1000: 0.0063 / 0.0072
- *      3000: 0.0069 / 0.0068   10000: 0.0104 / 0.0072
- * so the split starts where the two cross, Ns = 3000 (a lobe about 1 degree
- * wide).  A point or spot light seen through a continued lobe is missed, as in
- * a mirror (area lights are found by the continuation).
- */
-#ifndef APPM__GATHER_NS
-#define APPM__GATHER_NS 3000.0f
-#endif
-
-/* The material the eye path gathers with at m: m itself, or its diffuse part in
- * *tmp (W divided by P_d); NULL: continue with the lobe alone, left in *tmp (W
- * divided by 1 - P_d).  At a split vertex the choice takes u3 of the vertex's
- * BSDF numbers, the one the glossy sampler would use to pick the part; the
- * continuation then samples the lobe with its u1, u2 (it ignores u3). */
-static const appm__material *appm__eye_split(const appm__material *m, appm__material *tmp, appm__sampler *smp,
-                                             unsigned vertex, appm__v3 *W)
-{
-    float pd, u[4];
-    if (m->kind != APPM__MAT_GLOSSY || !(m->ns > APPM__GATHER_NS)) return m;
-    pd = appm__glossy_pd(m);
-    *tmp = *m;
-    appm__smp_bsdf(smp, vertex, 4u, u);
-    if (u[2] < pd) {
-        tmp->kind = APPM__MAT_DIFFUSE;
-        *W = appm__scale(*W, 1.0f / pd);
-        return tmp;
-    }
-    tmp->color = appm__v(0, 0, 0); /* P_d = 0: the sampler takes the lobe */
-    *W = appm__scale(*W, 1.0f / (1.0f - pd));
-    return NULL;
-}
-
-/* Makes sf the pixel's visible point of this pass (m diffuse or glossy). */
-static void appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__surf *sf, const appm__material *m,
-                             appm__v3 wo, appm__v3 W, unsigned segs, float travelled, appm__v3 *ld,
-                             appm__sampler *smp, unsigned worker)
-{
-    vp->x = sf->p;
-    vp->n = appm__dot(wo, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
-    vp->wf = appm__scale(appm__mul(W, m->color), (float)APPM__INV_PI);
-    vp->wg = vp->rd = appm__v(0, 0, 0);
-    vp->ns = 0.0f;
-    if (m->kind == APPM__MAT_GLOSSY) {
-        appm__v3 ns = appm__dot(wo, sf->ng) >= 0.0f ? sf->ns : appm__neg(sf->ns);
-        vp->wg = appm__scale(appm__mul(W, m->ks), (m->ns + 2.0f) * (float)(0.5 * APPM__INV_PI));
-        vp->rd = appm__normalize(appm__sub(appm__scale(ns, 2.0f * appm__dot(wo, ns)), wo));
-        vp->ns = m->ns;
-    }
-    vp->segs = (uint8_t)(segs > 255 ? 255 : segs);
-    vp->footprint = travelled * r->pixel_angle;
-    if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth)
-        *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1)));
-    if (!appm__finite3(vp->wf) || !appm__finite3(vp->wg)) {
-        vp->segs = 0;
-        r->dropped[worker]++;
-    }
-}
-
-static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
-{
-    const appm_scene *s = r->scene;
-    const size_t pi = (size_t)py * r->w + px;
-    appm__vp *vp = &r->vp[pi];
-    appm__sampler smp;
-    appm__ray ray;
-    appm__v3 W = appm__v(1, 1, 1), ld = appm__v(0, 0, 0);
-    uint32_t skip = UINT32_MAX;
-    unsigned segs = 0;
-    float travelled = 0.0f;
-    appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
-    appm__camera_ray(r, &smp, px, py, &ray);
-    vp->segs = 0;
-    for (;;) {
-        appm__hit h;
-        appm__surf sf;
-        const appm__material *m, *mg;
-        appm__material tmp;
-        appm__v3 wo;
-        appm__bsdf_sample bs;
-        float u3[4];
-        unsigned dims;
-        if (++segs > r->max_depth) break;
-        if (!appm__intersect(s, &ray, skip, &h)) {
-            if (s->env >= 0) ld = appm__add(ld, appm__mul(W, s->light[s->env].value));
-            break;
-        }
-        appm__surface(s, &h, &sf);
-        m = &s->mat[sf.mat];
-        wo = appm__neg(ray.d);
-        travelled += h.t;
-        if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) ld = appm__add(ld, appm__mul(W, m->ke));
-        if (m->kind == APPM__MAT_DIFFUSE || m->kind == APPM__MAT_GLOSSY) {
-            if ((mg = appm__eye_split(m, &tmp, &smp, segs - 1, &W)) != NULL) {
-                appm__eye_vertex(r, vp, &sf, mg, wo, W, segs, travelled, &ld, &smp, worker);
-                break;
-            }
-            m = &tmp; /* a sharp lobe: on through it */
-        }
-        dims = appm__bsdf_dims(m) | (segs > 4 ? 8u : 0u);
-        appm__smp_bsdf(&smp, segs - 1, dims, u3);
-        if (!appm__bsdf_sample_dir(m, &sf, wo, u3[0], u3[1], u3[2], APPM__RADIANCE, &bs))
-            break;
-        W = appm__mul(W, bs.weight);
-        if (segs > 4) { /* Russian roulette on long specular chains (glass) */
-            float q = appm__maxc(W);
-            if (q < 1.0f) {
-                if (appm__smp_rr(&smp, segs - 1, dims, u3) >= q) break;
-                W = appm__scale(W, 1.0f / q);
-            }
-        }
-        appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
-        skip = sf.tri;
-    }
-    if (appm__finite3(ld)) {
-        vp->ld = ld;
-    } else {
-        r->dropped[worker]++;
-        vp->ld = appm__v(0, 0, 0);
-    }
-}
-
-static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
-{
-    appm_renderer *r = (appm_renderer *)arg;
-    uint32_t x;
-    for (x = 0; x < r->w; ++x) appm__eye_pixel(r, x, row, worker);
-}
-
-/* ==== 8. PHOTON PASS ======================================================
- *
- * M photon paths per pass, in chunks of APPM__CHUNK paths.  Path i of pass j
- * draws its numbers from point i of the pass's block of a low-discrepancy
- * sequence (section 2.3) or from its own random stream (seed, j, i), so its
- * photons are the same whatever thread traces it.  Chunk c is traced by task c % T into region
- * c % T of the store; the grid build then reads the chunks in order c = 0, 1,
- * ..., which makes the photon order, and every sum over photons, independent
- * of the thread count.
- *
- * A photon is stored at every diffuse or glossy hit it reaches after p >= 2 segments
- * (p >= 1 with --direct photons: then the direct light comes from photons),
- * as long as p + 1 <= D leaves room for one eye segment.  Russian roulette
- * keeps the expected weight: continue with probability q = min(1, max(gamma')
- * / max(gamma)) and divide by q.  A region that fills up marks its task failed;
- * the store then grows (on the calling thread, outside the loop) and the pass
- * is traced again - the photons do not change, only where they are kept.
- * Each photon records its component: caustic when the bounce that sent it to
- * where it was stored was specular (the paths L S+ D of Jensen's caustic map
- * and the specular tail of longer ones), diffuse otherwise.
- */
-static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
-                                   appm__v3 gamma, unsigned segs, unsigned comp)
-{
-    appm__photon *p;
-    appm__v3 n = appm__dot(wi, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
-    float a, b;
-    if (r->task_used[task] >= r->cap) return 0;
-    p = &r->ph[(size_t)task * r->cap + r->task_used[task]++];
-    p->x = sf->p.x;
-    p->y = sf->p.y;
-    p->z = sf->p.z;
-    p->power[0] = gamma.x;
-    p->power[1] = gamma.y;
-    p->power[2] = gamma.z;
-    appm__oct_encode(wi, &a, &b);
-    p->wi[0] = (int16_t)appm__quant(a, 32767.0f);
-    p->wi[1] = (int16_t)appm__quant(b, 32767.0f);
-    appm__oct_encode(n, &a, &b);
-    p->n[0] = (int8_t)appm__quant(a, 127.0f);
-    p->n[1] = (int8_t)appm__quant(b, 127.0f);
-    p->segs = (uint8_t)(segs > 255 ? 255 : segs);
-    p->comp = (uint8_t)comp;
-    return 1;
-}
-
-/* The same for a photon of the diffuse component. */
-APPM__UNUSED static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
-                                           appm__v3 gamma, unsigned segs)
-{
-    return appm__store_photon_comp(r, task, sf, wi, gamma, segs, APPM__COMP_DIFFUSE);
-}
-
-/* Whether an eye path can gather at m (section 7.3): diffuse, or glossy with a
- * lobe it gathers or a diffuse part. */
-static int appm__stores_photons(const appm__material *m)
-{
-    if (m->kind == APPM__MAT_DIFFUSE) return 1;
-    if (m->kind != APPM__MAT_GLOSSY) return 0;
-    return m->ns <= APPM__GATHER_NS || m->color.x > 0.0f || m->color.y > 0.0f || m->color.z > 0.0f;
-}
-
-/* Bit 3 of the photon sampler's mask after a bounce off m (appm__smp_bsdf): the
- * roulette is asked for when the bounce's weight lowers the path's largest
- * channel.  The weight of a diffuse or mirror bounce is the colour itself, so
- * with every channel >= 1 (the white box) it never is, and glass has weight 1.
- * A hint only: the roulette's number is the same either way. */
-static unsigned appm__photon_rr_dim(const appm__material *m)
-{
-    if (m->kind == APPM__MAT_DIELECTRIC) return 0u;
-    if (m->kind != APPM__MAT_GLOSSY && m->color.x >= 1.0f && m->color.y >= 1.0f && m->color.z >= 1.0f)
-        return 0u;
-    return 8u;
-}
-
-/* Traces photon path `index` (cache: shared by the paths the worker traces in
- * turn, appm__sampler_photon); returns 0 if the task's region is full. */
-static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
-                             appm__ld_cache *cache)
-{
-    const appm_scene *s = r->scene;
-    appm__sampler smp;
-    appm__photon_start ps;
-    appm__ray ray;
-    appm__v3 gamma;
-    uint32_t skip;
-    unsigned segs = 0, comp = APPM__COMP_DIFFUSE; /* the component of a photon stored next */
-    unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
-    float ue[5];
-    appm__sampler_photon(&smp, r->sobol, cache, r->chains, r->seed, r->pass, r->M, index);
-    appm__smp_emit(&smp, r->emit_dims, ue);
-    if (!appm__emit(s, ue, &ps)) {
-        if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
-        return 1;
-    }
-    ray = ps.ray;
-    gamma = ps.gamma;
-    skip = ps.skip;
-    while (++segs + 1 <= r->max_depth) {
-        appm__hit h;
-        appm__surf sf;
-        const appm__material *m;
-        appm__v3 wi, g2;
-        appm__bsdf_sample bs;
-        float u3[4];
-        unsigned dims;
-        float q;
-        if (!appm__intersect(s, &ray, skip, &h)) break;
-        appm__surface(s, &h, &sf);
-        m = &s->mat[sf.mat];
-        wi = appm__neg(ray.d);
-        if (appm__stores_photons(m) && segs >= first) {
-            if (!appm__finite3(gamma)) {
-                r->dropped[worker]++;
-                break;
-            }
-            if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp)) return 0;
-        }
-        if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
-        dims = appm__bsdf_dims(m) | appm__photon_rr_dim(m);
-        appm__smp_bsdf(&smp, segs - 1, dims, u3);
-        if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs))
-            break;
-        g2 = appm__mul(gamma, bs.weight);
-        q = appm__maxc(gamma) > 0.0f ? appm__maxc(g2) / appm__maxc(gamma) : 0.0f;
-        if (q < 1.0f) {
-            if (!(appm__smp_rr(&smp, segs - 1, dims, u3) < q)) break;
-            g2 = appm__scale(g2, 1.0f / q);
-        }
-        gamma = g2;
-        comp = bs.specular ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE;
-        appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
-        skip = sf.tri;
-    }
-    return 1;
-}
-
-static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
-{
-    appm_renderer *r = (appm_renderer *)arg;
-    appm__ld_cache cache;
-    uint32_t c;
-    cache.set = 0;
-    r->task_used[task] = 0;
-    r->task_failed[task] = 0;
-    for (c = task; c < r->nchunks; c += r->tasks) {
-        uint64_t i0 = (uint64_t)c * APPM__CHUNK, i1 = i0 + APPM__CHUNK, i;
-        if (i1 > r->M) i1 = r->M;
-        r->chunk[c].start = r->task_used[task];
-        for (i = i0; i < i1; ++i) {
-            if (!appm__photon_path(r, task, i, worker, &cache)) {
-                r->task_failed[task] = 1;
-                return;
-            }
-        }
-        r->chunk[c].count = r->task_used[task] - r->chunk[c].start;
-    }
-}
-
-static appm_status appm__photon_pass(appm_renderer *r)
-{
-    for (;;) {
-        uint32_t t;
-        int failed = 0;
-        size_t ncap;
-        appm__photon *nph;
-        uint32_t *ndest;
-        appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
-        for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
-        if (!failed) return APPM_OK;
-        /* grow every region by half and trace again (rare: the first pass, or a
-         * pass that stores more photons than any before it) */
-        ncap = r->cap + r->cap / 2 + 4096;
-        if (ncap > (size_t)0xFFFFFFF0u / r->tasks)
-            return appm__fail(&r->diag, APPM_ERR_NOMEM, NULL, 0,
-                              "more than 4e9 photons stored in one pass: use fewer photons per pass");
-        nph = (appm__photon *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *nph);
-        ndest = nph ? (uint32_t *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *ndest) : NULL;
-        if (!ndest) {
-            appm__free(&r->mem, nph);
-            return APPM_ERR_NOMEM;
-        }
-        appm__free(&r->mem, r->ph);
-        appm__free(&r->mem, r->dest);
-        r->ph = nph;
-        r->dest = ndest;
-        r->cap = ncap;
-    }
-}
-
-/* Moves the regions' chunks together so that chunk c follows chunk c - 1 (the
- * chunks of one region are already in order; regions move down one after
- * another).  chunk[c].start becomes the offset in the compacted array, which
- * is what the map's build reads.  Returns the number of photons. */
-static size_t appm__store_compact(appm_renderer *r)
-{
-    size_t out = 0;
-    uint32_t t, c;
-    appm__chunk_rec *cr = r->chunk;
-    for (t = 0; t < r->tasks; ++t) {
-        size_t base = (size_t)t * r->cap;
-        for (c = t; c < r->nchunks; c += r->tasks) {
-            if (cr[c].count && base + cr[c].start != out)
-                memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
-            cr[c].start = (uint32_t)out;
-            out += cr[c].count;
-        }
-    }
-    return out;
-}
-
-/* ==== 9. HASH-GRID PHOTON MAP =============================================
+/* ---- 7.2 The hash grid ---------------------------------------------------------
  *
  * A uniform grid of cubic cells of size c, hashed into 2^k buckets (k chosen
  * so there are at least as many buckets as photons).  Built every pass by a
@@ -6246,6 +6195,547 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
     m->cell = NULL;
     m->bbox = m->hot = m->side = NULL;
     m->cell_cap = m->hot_cap = 0;
+}
+
+/* ==== 8. THE RENDERER AND THE EYE PASS ===================================
+ *
+ * The renderer's state is declared first, since every later section uses it:
+ * per pixel the visible point of the pass (appm__vp), what every method keeps
+ * across passes (appm__pixel) and the method's own state (section 10).
+ *
+ * Every pass traces one eye path per pixel: a point in the pixel (box filter)
+ * and on the lens - of the pixel's own low-discrepancy sequence, so that its
+ * passes stratify the pixel (section 2.3), or uniformly jittered with
+ * --sampler random - then through mirrors and glass until the first diffuse
+ * or glossy vertex x (section 8.2).  There the path stops and becomes the
+ * pixel's visible point for this pass (stochastic PPM: a new x every pass, so
+ * anti-aliasing, depth of field and caustic paths all converge).  What the path
+ * meets on the way is added to the pixel's direct term:
+ *   emission Le of every surface hit on its front side (the light seen
+ *   directly, or in a mirror), and at x the direct light by next-event
+ *   estimation (one shadow ray to a light chosen by power).
+ * With --direct photons the shadow ray is skipped and first-bounce photons are
+ * gathered instead (the analytic tests and the teaching mode use this).
+ *
+ * Path length bookkeeping (--max-depth D, in segments from light to camera):
+ * the eye path has e segments to x; emission met after k segments counts if
+ * k <= D; direct light at x counts if e + 1 <= D; a photon that travelled p
+ * segments counts at x if e + p <= D.
+ */
+/* Everything a pass computes for a pixel stays here until the gather commits
+ * it to the pixel's state, so a pass that fails (out of memory in the photon
+ * pass) leaves no trace and can simply be run again. */
+typedef struct appm__vp { /* visible point of one pixel in the current pass: 92 bytes */
+    appm__v3 x;           /* position */
+    appm__v3 n;           /* unit geometric normal on the eye's side */
+    appm__v3 wf;          /* W f = W albedo / pi: multiplies each photon's gamma */
+    appm__v3 ld;          /* this pass's emission + direct light */
+    appm__v3 wg;          /* glossy: W Ks (Ns + 2) / (2 pi), the lobe's factor; else 0 */
+    appm__v3 rd;          /* glossy: reflect(wo, n_shading), the lobe's axis */
+    float ns;             /* glossy: the Phong exponent */
+    float footprint;      /* width of the pixel at x, scene units */
+    float R;              /* the radius of this pass (appm: of the diffuse photons) */
+    float Rc;             /* appm: the caustic photons' radius of this pass; 0: none */
+    uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
+    uint8_t edge;         /* 10.5: how many pixels along the row to the nearest pixel with a
+                           * neighbour on another surface (0: this one; 255: none near) */
+    uint8_t pad[2];
+} appm__vp;
+
+/* Per-pixel state every method keeps across passes (40 bytes).  What a method
+ * keeps beyond this (PPM's I, SPPM's tau, N, R, APPM's S, dI, ...) is its own
+ * struct in section 10, in a separate array sized by its estimator entry. */
+typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pixel_fields (section 13) */
+    double ld[3];      /* sum over passes of emission + direct light (pt: of the whole path) */
+    double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
+} appm__pixel;
+
+struct appm__estimator; /* a method's entry in the table of section 10 */
+
+struct appm_renderer {
+    appm__mem mem;
+    appm_diag diag;
+    const appm_scene *scene;
+    const struct appm__estimator *est; /* the method: chosen once, at creation */
+    appm_direct direct;
+    uint32_t w, h;
+    uint64_t M;          /* photon paths per pass */
+    double r1;           /* initial radius (the user's, or r_auto) */
+    double r_auto;       /* the automatic radius (section 12): appm's scale for clamps and h */
+    int r1_auto;
+    double alpha;
+    struct {
+        double R2;       /* r_j^2 of the next gather */
+        double R;        /* the radius of the last gather */
+    } ppm;               /* Knaus-Zwicker's global radius (section 10) */
+    double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
+    double sj;           /* appm: j^(-1/6) for j = sj_pass, the radius's and its bounds' factor */
+    uint64_t sj_pass;    /* the pass sj was computed for (0: none yet) */
+    unsigned threads, max_depth;
+    uint64_t seed, pass;
+    appm__sobol_tab *sobol; /* --sampler qmc: appm__sobol_table (section 2.3); NULL: random */
+    unsigned nee_dims, emit_dims; /* appm__light_dims of the scene */
+    unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
+    int cut;             /* 10.5: the kernel renormalised where the surface ends inside it */
+    double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
+    float pixel_angle;   /* 2 tan(fov/2) / height */
+    appm__vp *vp;
+    appm__pixel *pix;
+    unsigned char *state; /* the method's per-pixel state: w h est->state_size bytes */
+    float *image;
+    float *aux[APPM_AUX_COUNT];
+    /* photon store: `tasks` regions of `cap` photons; chunk c is traced by task
+     * c % tasks, so the layout does not depend on scheduling */
+    appm__photon *ph;
+    size_t cap;
+    uint32_t tasks, nchunks;
+    appm__chunk_rec *chunk;
+    uint32_t *task_used;
+    int *task_failed;
+    uint32_t *dest;      /* scratch of the map's counting sort: one per slot of the store */
+    appm__pmap pmap;     /* this pass's photons, compacted and sorted (7.2) */
+    uint64_t dropped[APPM__MAX_THREADS];
+    appm_stats stats;
+    char last_error[256];
+};
+
+/* ---- 8.1 Camera rays ---------------------------------------------------------- */
+
+/* --sampler random: where in the pixel (and on the lens) pass j samples: the R2 sequence of
+ * Roberts (2018), x_j = frac(s + j g) with g = (1/phi2, 1/phi2^2), phi2 the
+ * plastic number - or R4 with the lens, so that the lens and pixel coordinates
+ * are not correlated.  Each pixel rotates the sequence by its own random offset
+ * s (Cranley-Patterson), so pixels stay independent while the passes of one
+ * pixel stratify its area: a pixel cut by the edge of a bright light converges
+ * like 1/N instead of 1/sqrt(N), for every method alike. */
+static void appm__pixel_sample(uint64_t pass, appm__rng *rng, int lens, float *u)
+{
+    static const double g2[2] = {0.75487766624669276, 0.56984029099805327};
+    static const double g4[4] = {0.85667488385450558, 0.73389185662113744, 0.62870406338765426,
+                                 0.53859292022813244};
+    const double *g = lens ? g4 : g2;
+    int k, n = lens ? 4 : 2;
+    for (k = 0; k < n; ++k) {
+        double x = (double)appm__rng_float(rng) + (double)(pass % 16777216u) * g[k];
+        x -= floor(x);
+        u[k] = (float)x < 1.0f ? (float)x : 0.99999994f;
+    }
+}
+
+static void appm__camera_ray(const appm_renderer *r, const appm__sampler *smp, uint32_t px,
+                             uint32_t py, appm__ray *ray)
+{
+    const appm__camera *c = &r->scene->cam;
+    float su[4], u, v, l1 = 0.0f, l2 = 0.0f;
+    float aspect = (float)r->w / (float)r->h;
+    if (smp->qmc) {
+        appm__smp_camera(smp, c->aperture > 0.0f, su);
+    } else {
+        /* the rotation of pixel (px, py) is the same in every pass: a stream of its own */
+        appm__rng prng;
+        appm__rng_seed(&prng, r->seed, 0, APPM__DOMAIN_PIXEL, (uint64_t)py * r->w + px);
+        appm__pixel_sample(r->pass, &prng, c->aperture > 0.0f, su);
+    }
+    u = su[0];
+    v = su[1];
+    if (c->aperture > 0.0f) {
+        l1 = su[2];
+        l2 = su[3];
+    }
+    float sx = (2.0f * ((float)px + u) / (float)r->w - 1.0f) * c->tan_half * aspect;
+    float sy = (1.0f - 2.0f * ((float)py + v) / (float)r->h) * c->tan_half;
+    appm__v3 d = appm__normalize(
+        appm__add(c->forward, appm__add(appm__scale(c->right, sx), appm__scale(c->up, sy))));
+    appm__v3 o = c->eye;
+    if (c->aperture > 0.0f) {
+        /* thin lens: a point on the lens disk, aimed at where the pinhole ray
+         * meets the plane of focus */
+        appm__v3 disk = appm__cosine_dir(appm__v(0, 0, 1), l1, l2); /* x, y uniform in the disk */
+        appm__v3 focus = appm__add(c->eye, appm__scale(d, c->focus / appm__dot(d, c->forward)));
+        o = appm__add(c->eye, appm__add(appm__scale(c->right, disk.x * c->aperture),
+                                        appm__scale(c->up, disk.y * c->aperture)));
+        d = appm__normalize(appm__sub(focus, o));
+    }
+    appm__ray_init(ray, o, d, FLT_MAX);
+}
+
+static void appm__add3(double *acc, appm__v3 v)
+{
+    acc[0] += v.x;
+    acc[1] += v.y;
+    acc[2] += v.z;
+}
+
+/* Direct light at diffuse or glossy point sf seen from wo, by one shadow ray. */
+static appm__v3 appm__direct(const appm_renderer *r, const appm__surf *sf, const appm__material *m,
+                             appm__v3 wo, appm__sampler *smp, unsigned vertex)
+{
+    float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f, c;
+    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side);
+    float u[3];
+    appm__light_sample ls;
+    const appm_scene *s = r->scene;
+    appm__smp_light(smp, vertex, r->nee_dims, u);
+    if (!appm__sample_light(s, sf, ns, u[0], u[1], u[2], &ls)) return appm__v(0, 0, 0);
+    c = appm__dot(ls.wi, ns);
+    if (!(c > 0.0f) || !(appm__dot(ls.wi, ng) > 0.0f)) return appm__v(0, 0, 0);
+    if (appm__occluded(s, &ls.shadow, sf->tri, ls.skip)) return appm__v(0, 0, 0);
+    if (m->kind == APPM__MAT_GLOSSY) return appm__scale(appm__mul(appm__bsdf_f(m, ns, ls.wi, wo), ls.li), c);
+    return appm__scale(appm__mul(m->color, ls.li), c * (float)APPM__INV_PI);
+}
+
+/* ---- 8.2 Where eye paths stop ------------------------------------------------
+ *
+ * At a diffuse or glossy vertex the eye path stops and gathers, evaluating the
+ * lobe per photon (section 10).  A very sharp lobe, Ns > APPM__GATHER_NS, would
+ * leave only the few photons that arrive within its width of the mirror
+ * direction, so there the vertex is split by the albedos instead: with
+ * probability P_d the path gathers with the diffuse part alone (W / P_d), else
+ * it continues through the lobe like a mirror (W f_lobe cos / ((1 - P_d)
+ * pdf_lobe)).  Both are unbiased; which is less noisy was measured at equal
+ * time: appm on CornellBox-Glossy at 64x64, 8 s, the floor's Ns (Ks 0.3)
+ * raised, RMSE against a 6000-pass path-traced reference, medians of 3 seeds,
+ * gathering the lobe / splitting every glossy vertex:
+ *      Ns 80: 0.0053 / 0.0081   300: 0.0056 / 0.0065   1000: 0.0063 / 0.0072
+ *      3000: 0.0069 / 0.0068   10000: 0.0104 / 0.0072
+ * so the split starts where the two cross, Ns = 3000 (a lobe about 1 degree
+ * wide).  A point or spot light seen through a continued lobe is missed, as in
+ * a mirror (area lights are found by the continuation).
+ */
+#ifndef APPM__GATHER_NS
+#define APPM__GATHER_NS 3000.0f
+#endif
+
+/* The material the eye path gathers with at m: m itself, or its diffuse part in
+ * *tmp (W divided by P_d); NULL: continue with the lobe alone, left in *tmp (W
+ * divided by 1 - P_d).  At a split vertex the choice takes u3 of the vertex's
+ * BSDF numbers, the one the glossy sampler would use to pick the part; the
+ * continuation then samples the lobe with its u1, u2 (it ignores u3). */
+static const appm__material *appm__eye_split(const appm__material *m, appm__material *tmp, appm__sampler *smp,
+                                             unsigned vertex, appm__v3 *W)
+{
+    float pd, u[4];
+    if (m->kind != APPM__MAT_GLOSSY || !(m->ns > APPM__GATHER_NS)) return m;
+    pd = appm__glossy_pd(m);
+    *tmp = *m;
+    appm__smp_bsdf(smp, vertex, 4u, u);
+    if (u[2] < pd) {
+        tmp->kind = APPM__MAT_DIFFUSE;
+        *W = appm__scale(*W, 1.0f / pd);
+        return tmp;
+    }
+    tmp->color = appm__v(0, 0, 0); /* P_d = 0: the sampler takes the lobe */
+    *W = appm__scale(*W, 1.0f / (1.0f - pd));
+    return NULL;
+}
+
+/* Makes sf the pixel's visible point of this pass (m diffuse or glossy). */
+static void appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__surf *sf, const appm__material *m,
+                             appm__v3 wo, appm__v3 W, unsigned segs, float travelled, appm__v3 *ld,
+                             appm__sampler *smp, unsigned worker)
+{
+    vp->x = sf->p;
+    vp->n = appm__dot(wo, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
+    vp->wf = appm__scale(appm__mul(W, m->color), (float)APPM__INV_PI);
+    vp->wg = vp->rd = appm__v(0, 0, 0);
+    vp->ns = 0.0f;
+    if (m->kind == APPM__MAT_GLOSSY) {
+        appm__v3 ns = appm__dot(wo, sf->ng) >= 0.0f ? sf->ns : appm__neg(sf->ns);
+        vp->wg = appm__scale(appm__mul(W, m->ks), (m->ns + 2.0f) * (float)(0.5 * APPM__INV_PI));
+        vp->rd = appm__normalize(appm__sub(appm__scale(ns, 2.0f * appm__dot(wo, ns)), wo));
+        vp->ns = m->ns;
+    }
+    vp->segs = (uint8_t)(segs > 255 ? 255 : segs);
+    vp->footprint = travelled * r->pixel_angle;
+    if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth)
+        *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1)));
+    if (!appm__finite3(vp->wf) || !appm__finite3(vp->wg)) {
+        vp->segs = 0;
+        r->dropped[worker]++;
+    }
+}
+
+static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
+{
+    const appm_scene *s = r->scene;
+    const size_t pi = (size_t)py * r->w + px;
+    appm__vp *vp = &r->vp[pi];
+    appm__sampler smp;
+    appm__ray ray;
+    appm__v3 W = appm__v(1, 1, 1), ld = appm__v(0, 0, 0);
+    uint32_t skip = UINT32_MAX;
+    unsigned segs = 0;
+    float travelled = 0.0f;
+    appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
+    appm__camera_ray(r, &smp, px, py, &ray);
+    vp->segs = 0;
+    for (;;) {
+        appm__hit h;
+        appm__surf sf;
+        const appm__material *m, *mg;
+        appm__material tmp;
+        appm__v3 wo;
+        appm__bsdf_sample bs;
+        float u3[4];
+        unsigned dims;
+        if (++segs > r->max_depth) break;
+        if (!appm__intersect(s, &ray, skip, &h)) {
+            if (s->env >= 0) ld = appm__add(ld, appm__mul(W, s->light[s->env].value));
+            break;
+        }
+        appm__surface(s, &h, &sf);
+        m = &s->mat[sf.mat];
+        wo = appm__neg(ray.d);
+        travelled += h.t;
+        if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) ld = appm__add(ld, appm__mul(W, m->ke));
+        if (m->kind == APPM__MAT_DIFFUSE || m->kind == APPM__MAT_GLOSSY) {
+            if ((mg = appm__eye_split(m, &tmp, &smp, segs - 1, &W)) != NULL) {
+                appm__eye_vertex(r, vp, &sf, mg, wo, W, segs, travelled, &ld, &smp, worker);
+                break;
+            }
+            m = &tmp; /* a sharp lobe: on through it */
+        }
+        dims = appm__bsdf_dims(m) | (segs > 4 ? 8u : 0u);
+        appm__smp_bsdf(&smp, segs - 1, dims, u3);
+        if (!appm__bsdf_sample_dir(m, &sf, wo, u3[0], u3[1], u3[2], APPM__RADIANCE, &bs))
+            break;
+        W = appm__mul(W, bs.weight);
+        if (segs > 4) { /* Russian roulette on long specular chains (glass) */
+            float q = appm__maxc(W);
+            if (q < 1.0f) {
+                if (appm__smp_rr(&smp, segs - 1, dims, u3) >= q) break;
+                W = appm__scale(W, 1.0f / q);
+            }
+        }
+        appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
+        skip = sf.tri;
+    }
+    if (appm__finite3(ld)) {
+        vp->ld = ld;
+    } else {
+        r->dropped[worker]++;
+        vp->ld = appm__v(0, 0, 0);
+    }
+}
+
+static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    uint32_t x;
+    for (x = 0; x < r->w; ++x) appm__eye_pixel(r, x, row, worker);
+}
+
+/* ==== 9. PHOTON PASS ======================================================
+ *
+ * M photon paths per pass, in chunks of APPM__CHUNK paths.  Path i of pass j
+ * draws its numbers from point i of the pass's block of a low-discrepancy
+ * sequence (section 2.3) or from its own random stream (seed, j, i), so its
+ * photons are the same whatever thread traces it.  Chunk c is traced by task c % T into region
+ * c % T of the store; the grid build then reads the chunks in order c = 0, 1,
+ * ..., which makes the photon order, and every sum over photons, independent
+ * of the thread count.
+ *
+ * A photon is stored at every diffuse or glossy hit it reaches after p >= 2 segments
+ * (p >= 1 with --direct photons: then the direct light comes from photons),
+ * as long as p + 1 <= D leaves room for one eye segment.  Russian roulette
+ * keeps the expected weight: continue with probability q = min(1, max(gamma')
+ * / max(gamma)) and divide by q.  A region that fills up marks its task failed;
+ * the store then grows (on the calling thread, outside the loop) and the pass
+ * is traced again - the photons do not change, only where they are kept.
+ * Each photon records its component: caustic when the bounce that sent it to
+ * where it was stored was specular (the paths L S+ D of Jensen's caustic map
+ * and the specular tail of longer ones), diffuse otherwise.
+ */
+#define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
+
+static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
+                                   appm__v3 gamma, unsigned segs, unsigned comp)
+{
+    appm__photon *p;
+    appm__v3 n = appm__dot(wi, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
+    float a, b;
+    if (r->task_used[task] >= r->cap) return 0;
+    p = &r->ph[(size_t)task * r->cap + r->task_used[task]++];
+    p->x = sf->p.x;
+    p->y = sf->p.y;
+    p->z = sf->p.z;
+    p->power[0] = gamma.x;
+    p->power[1] = gamma.y;
+    p->power[2] = gamma.z;
+    appm__oct_encode(wi, &a, &b);
+    p->wi[0] = (int16_t)appm__quant(a, 32767.0f);
+    p->wi[1] = (int16_t)appm__quant(b, 32767.0f);
+    appm__oct_encode(n, &a, &b);
+    p->n[0] = (int8_t)appm__quant(a, 127.0f);
+    p->n[1] = (int8_t)appm__quant(b, 127.0f);
+    p->segs = (uint8_t)(segs > 255 ? 255 : segs);
+    p->comp = (uint8_t)comp;
+    return 1;
+}
+
+/* The same for a photon of the diffuse component. */
+APPM__UNUSED static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
+                                           appm__v3 gamma, unsigned segs)
+{
+    return appm__store_photon_comp(r, task, sf, wi, gamma, segs, APPM__COMP_DIFFUSE);
+}
+
+/* Whether an eye path can gather at m (section 8.2): diffuse, or glossy with a
+ * lobe it gathers or a diffuse part. */
+static int appm__stores_photons(const appm__material *m)
+{
+    if (m->kind == APPM__MAT_DIFFUSE) return 1;
+    if (m->kind != APPM__MAT_GLOSSY) return 0;
+    return m->ns <= APPM__GATHER_NS || m->color.x > 0.0f || m->color.y > 0.0f || m->color.z > 0.0f;
+}
+
+/* Bit 3 of the photon sampler's mask after a bounce off m (appm__smp_bsdf): the
+ * roulette is asked for when the bounce's weight lowers the path's largest
+ * channel.  The weight of a diffuse or mirror bounce is the colour itself, so
+ * with every channel >= 1 (the white box) it never is, and glass has weight 1.
+ * A hint only: the roulette's number is the same either way. */
+static unsigned appm__photon_rr_dim(const appm__material *m)
+{
+    if (m->kind == APPM__MAT_DIELECTRIC) return 0u;
+    if (m->kind != APPM__MAT_GLOSSY && m->color.x >= 1.0f && m->color.y >= 1.0f && m->color.z >= 1.0f)
+        return 0u;
+    return 8u;
+}
+
+/* Traces photon path `index` (cache: shared by the paths the worker traces in
+ * turn, appm__sampler_photon); returns 0 if the task's region is full. */
+static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
+                             appm__ld_cache *cache)
+{
+    const appm_scene *s = r->scene;
+    appm__sampler smp;
+    appm__photon_start ps;
+    appm__ray ray;
+    appm__v3 gamma;
+    uint32_t skip;
+    unsigned segs = 0, comp = APPM__COMP_DIFFUSE; /* the component of a photon stored next */
+    unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
+    float ue[5];
+    appm__sampler_photon(&smp, r->sobol, cache, r->chains, r->seed, r->pass, r->M, index);
+    appm__smp_emit(&smp, r->emit_dims, ue);
+    if (!appm__emit(s, ue, &ps)) {
+        if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
+        return 1;
+    }
+    ray = ps.ray;
+    gamma = ps.gamma;
+    skip = ps.skip;
+    while (++segs + 1 <= r->max_depth) {
+        appm__hit h;
+        appm__surf sf;
+        const appm__material *m;
+        appm__v3 wi, g2;
+        appm__bsdf_sample bs;
+        float u3[4];
+        unsigned dims;
+        float q;
+        if (!appm__intersect(s, &ray, skip, &h)) break;
+        appm__surface(s, &h, &sf);
+        m = &s->mat[sf.mat];
+        wi = appm__neg(ray.d);
+        if (appm__stores_photons(m) && segs >= first) {
+            if (!appm__finite3(gamma)) {
+                r->dropped[worker]++;
+                break;
+            }
+            if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp)) return 0;
+        }
+        if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
+        dims = appm__bsdf_dims(m) | appm__photon_rr_dim(m);
+        appm__smp_bsdf(&smp, segs - 1, dims, u3);
+        if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs))
+            break;
+        g2 = appm__mul(gamma, bs.weight);
+        q = appm__maxc(gamma) > 0.0f ? appm__maxc(g2) / appm__maxc(gamma) : 0.0f;
+        if (q < 1.0f) {
+            if (!(appm__smp_rr(&smp, segs - 1, dims, u3) < q)) break;
+            g2 = appm__scale(g2, 1.0f / q);
+        }
+        gamma = g2;
+        comp = bs.specular ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE;
+        appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
+        skip = sf.tri;
+    }
+    return 1;
+}
+
+static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    appm__ld_cache cache;
+    uint32_t c;
+    cache.set = 0;
+    r->task_used[task] = 0;
+    r->task_failed[task] = 0;
+    for (c = task; c < r->nchunks; c += r->tasks) {
+        uint64_t i0 = (uint64_t)c * APPM__CHUNK, i1 = i0 + APPM__CHUNK, i;
+        if (i1 > r->M) i1 = r->M;
+        r->chunk[c].start = r->task_used[task];
+        for (i = i0; i < i1; ++i) {
+            if (!appm__photon_path(r, task, i, worker, &cache)) {
+                r->task_failed[task] = 1;
+                return;
+            }
+        }
+        r->chunk[c].count = r->task_used[task] - r->chunk[c].start;
+    }
+}
+
+static appm_status appm__photon_pass(appm_renderer *r)
+{
+    for (;;) {
+        uint32_t t;
+        int failed = 0;
+        size_t ncap;
+        appm__photon *nph;
+        uint32_t *ndest;
+        appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
+        for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
+        if (!failed) return APPM_OK;
+        /* grow every region by half and trace again (rare: the first pass, or a
+         * pass that stores more photons than any before it) */
+        ncap = r->cap + r->cap / 2 + 4096;
+        if (ncap > (size_t)0xFFFFFFF0u / r->tasks)
+            return appm__fail(&r->diag, APPM_ERR_NOMEM, NULL, 0,
+                              "more than 4e9 photons stored in one pass: use fewer photons per pass");
+        nph = (appm__photon *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *nph);
+        ndest = nph ? (uint32_t *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *ndest) : NULL;
+        if (!ndest) {
+            appm__free(&r->mem, nph);
+            return APPM_ERR_NOMEM;
+        }
+        appm__free(&r->mem, r->ph);
+        appm__free(&r->mem, r->dest);
+        r->ph = nph;
+        r->dest = ndest;
+        r->cap = ncap;
+    }
+}
+
+/* Moves the regions' chunks together so that chunk c follows chunk c - 1 (the
+ * chunks of one region are already in order; regions move down one after
+ * another).  chunk[c].start becomes the offset in the compacted array, which
+ * is what the map's build reads.  Returns the number of photons. */
+static size_t appm__store_compact(appm_renderer *r)
+{
+    size_t out = 0;
+    uint32_t t, c;
+    appm__chunk_rec *cr = r->chunk;
+    for (t = 0; t < r->tasks; ++t) {
+        size_t base = (size_t)t * r->cap;
+        for (c = t; c < r->nchunks; c += r->tasks) {
+            if (cr[c].count && base + cr[c].start != out)
+                memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
+            cr[c].start = (uint32_t)out;
+            out += cr[c].count;
+        }
+    }
+    return out;
 }
 
 /* ==== 10. ESTIMATORS ======================================================
@@ -6601,7 +7091,7 @@ static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
     appm__gather_near(g, p, d2, g->R2, g->ih, g->map->side + 4 * (size_t)(p - g->map->ph));
 }
 
-/* Visits every photon within max(R, Rc, 2h) of g->x (section 9's query), with
+/* Visits every photon within max(R, Rc, 2h) of g->x (7.2's query), with
  * the per-pixel constants of the visit computed once. */
 static void appm__gather_query(const appm__pmap *m, appm__gather *g)
 {
@@ -7310,6 +7800,42 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * border, a hidden side).  APPM__CUT (section 10's constants): 0 off, 1 appm,
  * 2 every photon method; ppm and sppm keep their papers' estimators (both
  * measured in 4.19). */
+/* 10.5: whether a 4-neighbour of pixel i sees a surface whose normal is 60
+ * degrees or more from i's (APPM__NORMAL_COS): a corner or an edge passes
+ * between them.  Any line between two pixels also separates two 4-neighbours. */
+static uint8_t appm__edge_flag(const appm_renderer *r, size_t i)
+{
+    const appm__vp *v = &r->vp[i];
+    size_t x = i % r->w, y = i / r->w, w = r->w;
+    const appm__vp *q[4];
+    int k, n = 0;
+    if (!v->segs) return 0;
+    if (x > 0) q[n++] = v - 1;
+    if (x + 1 < w) q[n++] = v + 1;
+    if (y > 0) q[n++] = v - w;
+    if (y + 1 < r->h) q[n++] = v + w;
+    for (k = 0; k < n; ++k)
+        if (q[k]->segs && appm__dot(v->n, q[k]->n) < APPM__NORMAL_COS) return 1;
+    return 0;
+}
+
+/* The edge flags of a row and, in vp.edge, each pixel's distance along the row
+ * to the nearest flagged one (capped at 255): a sweep each way. */
+static void appm__edge_row(appm_renderer *r, uint32_t row)
+{
+    appm__vp *v = &r->vp[(size_t)row * r->w];
+    uint32_t x, d = 255;
+    for (x = 0; x < r->w; ++x) v[x].edge = appm__edge_flag(r, (size_t)row * r->w + x) ? 0 : 255;
+    for (x = 0; x < r->w; ++x) {
+        d = v[x].edge == 0 ? 0 : (d < 255 ? d + 1 : 255);
+        v[x].edge = (uint8_t)d;
+    }
+    for (x = r->w, d = 255; x-- > 0;) {
+        d = v[x].edge == 0 ? 0 : (d < 255 ? d + 1 : 255);
+        if (d < v[x].edge) v[x].edge = (uint8_t)d;
+    }
+}
+
 static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
 {
     const appm__vp *v = &r->vp[i];
@@ -7532,13 +8058,12 @@ static void appm__pt_task(void *arg, uint32_t row, unsigned worker)
     for (x = 0; x < r->w; ++x) appm__pt_pixel(r, x, row, worker);
 }
 
-/* ==== 12. API GLUE ========================================================
+/* ==== 12. RENDERER ======================================================
  *
- * Scene assembly (loader arrays -> an immutable scene with its BVH and light
- * table) and the renderer life cycle: create validates every option and
- * allocates all per-pixel state; each pass runs eye pass -> radii -> photon
- * pass -> grid -> gather; the image and the diagnostic maps are derived from
- * the per-pixel state on request.
+ * The renderer's life cycle: create validates every option and allocates all
+ * per-pixel state; each pass runs eye pass -> radii -> photon pass -> map ->
+ * gather (appm__photon_method_pass); the image and the diagnostic maps are
+ * derived from the per-pixel state on request.
  */
 APPM_API void appm_config_init(appm_config *cfg)
 {
@@ -7552,471 +8077,6 @@ APPM_API void appm_config_init(appm_config *cfg)
     cfg->chains = 1;
 }
 
-static void appm__loader_free(appm__loader *L)
-{
-    appm__array_free(L->mem, &L->pos);
-    appm__array_free(L->mem, &L->vn);
-    appm__array_free(L->mem, &L->nrm);
-    appm__array_free(L->mem, &L->tri);
-    appm__array_free(L->mem, &L->info);
-    appm__array_free(L->mem, &L->mat);
-    appm__array_free(L->mem, &L->names);
-    appm__array_free(L->mem, &L->face);
-    appm__array_free(L->mem, &L->lights);
-}
-
-/* Copies a loader array into an exact-size block owned by the scene. */
-static void *appm__take(appm__mem *m, appm__array *a, int *ok)
-{
-    void *p;
-    if (a->count == 0) return NULL;
-    p = appm__alloc(m, a->count, a->elem);
-    if (!p) {
-        *ok = 0;
-        return NULL;
-    }
-    memcpy(p, a->data, a->count * a->elem);
-    return p;
-}
-
-static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
-{
-    appm__free(m, s->tri);
-    appm__free(m, s->info);
-    appm__free(m, s->normals);
-    appm__free(m, s->mat);
-    appm__free(m, s->light);
-    appm__free(m, s->light_cdf);
-    appm__free(m, s->node);
-    appm__free(m, s->wnode_mem);
-}
-
-static double appm__mean3(const double *v) { return (v[0] + v[1] + v[2]) / 3.0; }
-
-/* The light-choice table: each light picked with its share of the total
- * power (the mean of the three channels), as the cumulative s->light_cdf. */
-static appm_status appm__light_table(appm_scene *s, appm_diag *diag, const char *name)
-{
-    uint32_t i, k = s->nlight;
-    double total = 0.0;
-    for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
-    if (!(total > 0.0) || !(total < HUGE_VAL))
-        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "the lights emit no (or infinite) power");
-    /* Lights are picked by power, so every photon starts with about the total
-     * power in each channel: at most 3 times it (a channel against the mean of
-     * three), 15 times for a spot whose falloff spans its whole cone.  Photon
-     * weights are floats: beyond FLT_MAX / 16 every photon would overflow. */
-    if (total > FLT_MAX / 16.0)
-        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
-                          "the lights emit %g W, more than a photon's single-precision weight can "
-                          "carry (%g W): use larger units or a smaller Ke",
-                          total, FLT_MAX / 16.0);
-    s->light_cdf[0] = 0.0;
-    for (i = 0; i < k; ++i) {
-        s->light[i].pick = appm__mean3(s->light[i].power) / total;
-        s->light_cdf[i + 1] = s->light_cdf[i] + s->light[i].pick;
-    }
-    s->light_cdf[k] = 1.0;
-    return APPM_OK;
-}
-
-/* Builds the light table: one area light per emissive triangle (after the BVH
- * has fixed triangle order), then the point, spot and environment lights.  A
- * bare OBJ in which nothing emits gets a constant white environment of
- * radiance 1 (marked, so that the first light added to the scene replaces it). */
-static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char *name)
-{
-    uint32_t i, n = 0, k = 0, extra = (uint32_t)L->lights.count;
-    for (i = 0; i < s->ntri; ++i) n += s->mat[s->info[i].mat].emissive;
-    if (n + extra == 0 && L->bare_obj && s->ntri > 0) {
-        appm__light *l = (appm__light *)appm__array_push(L->mem, &L->lights);
-        if (!l) return APPM_ERR_NOMEM;
-        l->kind = APPM__LIGHT_ENV;
-        l->value = appm__v(1.0f, 1.0f, 1.0f);
-        extra = 1;
-        s->env_auto = 1;
-    }
-    if (n + extra == 0)
-        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
-                          "the scene has no light (no material with Ke > 0, no light or environment)");
-    s->light = (appm__light *)appm__alloc(&s->mem, (size_t)n + extra, sizeof *s->light);
-    s->light_cdf = (double *)appm__alloc(&s->mem, (size_t)n + extra + 1, sizeof *s->light_cdf);
-    if (!s->light || !s->light_cdf) return APPM_ERR_NOMEM;
-    s->env = -1;
-    for (i = 0; i < s->ntri; ++i) {
-        const appm__material *m = &s->mat[s->info[i].mat];
-        appm__light *l;
-        if (!m->emissive) continue;
-        l = &s->light[k];
-        l->kind = APPM__LIGHT_AREA;
-        l->tri = i;
-        l->value = m->ke;
-        appm__light_power(s, l, l->power);
-        s->info[i].light = (int32_t)k++;
-    }
-    for (i = 0; i < extra; ++i) {
-        appm__light *l = &s->light[k];
-        *l = ((appm__light *)L->lights.data)[i];
-        if (l->kind == APPM__LIGHT_ENV) {
-            if (s->env >= 0)
-                return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
-            s->env = (int)k;
-        }
-        appm__light_power(s, l, l->power);
-        k++;
-    }
-    s->nlight = k;
-    return appm__light_table(s, L->diag, name);
-}
-
-/* Loader arrays -> scene: exact-size copies, bounds, BVH, lights, camera. */
-static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char *name)
-{
-    int ok = 1;
-    uint32_t i;
-    appm__bbox bb;
-    appm_status st;
-    if (L->tri.count == 0 && L->lights.count == 0)
-        return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the scene has no triangles");
-    s->ntri = (uint32_t)L->tri.count;
-    s->nnormals = (uint32_t)L->nrm.count;
-    s->nmat = (uint32_t)L->mat.count;
-    s->tri = (appm__tri *)appm__take(&s->mem, &L->tri, &ok);
-    s->info = (appm__tri_info *)appm__take(&s->mem, &L->info, &ok);
-    s->normals = (appm__v3 *)appm__take(&s->mem, &L->nrm, &ok);
-    s->mat = (appm__material *)appm__take(&s->mem, &L->mat, &ok);
-    if (!ok) return APPM_ERR_NOMEM;
-    s->dropped = L->dropped;
-    appm__bbox_empty(&bb);
-    for (i = 0; i < s->ntri; ++i) {
-        appm__bbox_grow(&bb, s->tri[i].p0);
-        appm__bbox_grow(&bb, s->tri[i].p1);
-        appm__bbox_grow(&bb, s->tri[i].p2);
-    }
-    if (s->ntri == 0) bb.lo = bb.hi = appm__v(0, 0, 0);
-    s->bmin = bb.lo;
-    s->bmax = bb.hi;
-    s->center = appm__scale(appm__add(bb.lo, bb.hi), 0.5f);
-    s->radius = 0.5f * appm__length(appm__sub(bb.hi, bb.lo));
-    if ((st = appm__bvh_build(s, L->diag)) != APPM_OK) return st;
-    if ((st = appm__scene_lights(s, L, name)) != APPM_OK) return st;
-    if (!L->have_camera) { /* frame the bounding sphere, looking along -z */
-        float rad = s->radius > 0.0f ? s->radius : 1.0f;
-        float dist = rad / (float)sin(0.5 * 40.0 * APPM__PI / 180.0) * 1.05f;
-        appm__v3 eye = appm__add(s->center, appm__v(0, 0, dist));
-        L->file = name;
-        if ((st = appm__camera_set(L, 0, eye, s->center, appm__v(0, 1, 0), 40.0)) != APPM_OK) return st;
-        L->cam.framed = 1;
-    }
-    s->cam = L->cam;
-    s->width = L->width ? L->width : 512;
-    s->height = L->height ? L->height : 512;
-    return APPM_OK;
-}
-
-static void appm__loader_init(appm__loader *L, appm__mem *m, const appm_config *cfg, appm_diag *diag)
-{
-    memset(L, 0, sizeof *L);
-    L->mem = m;
-    L->diag = diag;
-    if (cfg) {
-        L->log = cfg->log;
-        L->log_user = cfg->log_user;
-    }
-    appm__array_init(&L->pos, sizeof(appm__v3));
-    appm__array_init(&L->vn, sizeof(appm__v3));
-    appm__array_init(&L->nrm, sizeof(appm__v3));
-    appm__array_init(&L->tri, sizeof(appm__tri));
-    appm__array_init(&L->info, sizeof(appm__tri_info));
-    appm__array_init(&L->mat, sizeof(appm__material));
-    appm__array_init(&L->names, 1);
-    appm__array_init(&L->face, 2 * sizeof(int64_t));
-    appm__array_init(&L->lights, sizeof(appm__light));
-}
-
-/* A loader ready to read `file`, with material 0, the default diffuse, in place. */
-static appm_status appm__loader_begin(appm__loader *L, appm__mem *m, const appm_config *cfg,
-                                      appm_diag *diag, const char *file)
-{
-    appm__material *def;
-    appm__loader_init(L, m, cfg, diag);
-    L->file = file;
-    def = (appm__material *)appm__array_push(m, &L->mat);
-    if (!def || !appm__array_push(m, &L->names)) return APPM_ERR_NOMEM;
-    def->kind = APPM__MAT_DIFFUSE;
-    def->color = appm__v(0.8f, 0.8f, 0.8f);
-    def->ior = 1.5f;
-    return APPM_OK;
-}
-
-enum { APPM__TEXT_NONE = 0, APPM__TEXT_OBJ, APPM__TEXT_SCENE };
-
-/* Common path of the public loaders.  text_kind NONE: read `path` (a .scene or
- * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead.
- * files (SCENE only): the texts its meshes and material libraries name, instead
- * of files on disk (NULL: read from disk). */
-static appm_status appm__scene_load(const char *path, int text_kind, const char *text, size_t text_len,
-                                    const char *mtl, size_t mtl_len, const appm_memory_file *files,
-                                    size_t nfiles, const appm_config *cfg, appm_scene **out, appm_diag *diag)
-{
-    appm__mem m;
-    appm__loader L;
-    appm_scene *s;
-    appm_status st;
-    appm_diag local;
-    if (!diag) diag = &local;
-    appm__diag_clear(diag);
-    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no output pointer");
-    *out = NULL;
-    if (!path) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene path");
-    appm__mem_init(&m, cfg);
-    m.diag = diag;
-    s = (appm_scene *)appm__alloc(&m, 1, sizeof *s);
-    if (!s) return APPM_ERR_NOMEM;
-    st = appm__loader_begin(&L, &m, cfg, diag, path);
-    L.mem_mtl = mtl;
-    L.mem_mtl_len = mtl ? mtl_len : 0;
-    L.files = files;
-    L.nfiles = files ? nfiles : 0;
-    appm__copy_str(s->name, sizeof s->name, path);
-    if (st == APPM_OK) {
-        if (text_kind == APPM__TEXT_OBJ) {
-            L.bare_obj = 1;
-            st = appm__obj_parse(&L, text, text_len, path);
-        } else if (text_kind == APPM__TEXT_SCENE) {
-            st = appm__scene_parse(&L, text, text_len, path);
-        } else if (appm__ends_with(path, ".obj")) {
-            L.file = NULL;
-            L.bare_obj = 1;
-            st = appm__obj_load(&L, path, 0);
-        } else {
-            char *buf;
-            size_t len;
-            st = appm__read_file(&m, path, &buf, &len, diag);
-            if (st == APPM_OK) {
-                st = appm__scene_parse(&L, buf, len, path);
-                appm__free(&m, buf);
-            }
-        }
-        if (st == APPM_OK) {
-            s->mem = m; /* from here on the scene's own counter tracks its blocks */
-            st = appm__scene_finish(s, &L, path);
-            m = s->mem;
-        }
-    }
-    if (st == APPM_ERR_NOMEM) appm__fail(diag, APPM_ERR_NOMEM, path, 0, "out of memory loading the scene");
-    appm__loader_free(&L);
-    if (st != APPM_OK) {
-        appm__scene_free_parts(&m, s);
-        appm__free(&m, s);
-        return st;
-    }
-    m.diag = NULL;
-    s->mem = m;
-    *out = s;
-    return APPM_OK;
-}
-
-APPM_API appm_status appm_scene_load(const char *path, const appm_config *cfg, appm_scene **out,
-                                     appm_diag *diag)
-{
-    return appm__scene_load(path, APPM__TEXT_NONE, NULL, 0, NULL, 0, NULL, 0, cfg, out, diag);
-}
-
-APPM_API appm_status appm_scene_load_obj_memory(const char *obj, size_t obj_len, const char *mtl,
-                                                size_t mtl_len, const char *name,
-                                                const appm_config *cfg, appm_scene **out,
-                                                appm_diag *diag)
-{
-    if (!obj) {
-        appm__diag_clear(diag);
-        if (out) *out = NULL;
-        return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, "no OBJ text");
-    }
-    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_OBJ, obj, obj_len, mtl, mtl_len, NULL, 0, cfg,
-                            out, diag);
-}
-
-APPM_API appm_status appm_scene_load_memory(const char *scene, size_t scene_len, const char *name,
-                                            const appm_memory_file *files, size_t nfiles,
-                                            const appm_config *cfg, appm_scene **out, appm_diag *diag)
-{
-    static const appm_memory_file none = {NULL, NULL, 0};
-    if (!scene || (!files && nfiles)) {
-        appm__diag_clear(diag);
-        if (out) *out = NULL;
-        return appm__fail(diag, APPM_ERR_INVALID_ARG, name, 0, scene ? "no files" : "no scene text");
-    }
-    return appm__scene_load(name ? name : "(memory)", APPM__TEXT_SCENE, scene, scene_len, NULL, 0,
-                            files ? files : &none, files ? nfiles : 0, cfg, out, diag);
-}
-
-APPM_API void appm_scene_destroy(appm_scene *scene)
-{
-    appm__mem m;
-    if (!scene) return;
-    m = scene->mem;
-    appm__scene_free_parts(&m, scene);
-    appm__free(&m, scene);
-}
-
-APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
-{
-    uint32_t i;
-    if (!info) return;
-    memset(info, 0, sizeof *info);
-    if (!s) return;
-    info->triangles = s->ntri;
-    info->dropped_triangles = s->dropped;
-    for (i = 0; i < s->nmat; ++i) {
-        const appm__material *m = &s->mat[i];
-        if (i == 0) { /* the implicit default counts only if some face uses it */
-            uint32_t k;
-            for (k = 0; k < s->ntri && s->info[k].mat != 0; ++k) {
-            }
-            if (k == s->ntri) continue;
-        }
-        info->materials_diffuse += m->kind == APPM__MAT_DIFFUSE;
-        info->materials_mirror += m->kind == APPM__MAT_MIRROR;
-        info->materials_dielectric += m->kind == APPM__MAT_DIELECTRIC;
-        info->materials_glossy += m->kind == APPM__MAT_GLOSSY;
-        info->materials_emissive += m->emissive;
-    }
-    for (i = 0; i < s->nlight; ++i) {
-        const appm__light *l = &s->light[i];
-        double *p = l->kind == APPM__LIGHT_AREA    ? info->power_area
-                    : l->kind == APPM__LIGHT_POINT ? info->power_point
-                    : l->kind == APPM__LIGHT_SPOT  ? info->power_spot
-                                                   : info->power_environment;
-        info->lights_area += l->kind == APPM__LIGHT_AREA;
-        info->lights_point += l->kind == APPM__LIGHT_POINT;
-        info->lights_spot += l->kind == APPM__LIGHT_SPOT;
-        info->lights_environment += l->kind == APPM__LIGHT_ENV;
-        p[0] += l->power[0];
-        p[1] += l->power[1];
-        p[2] += l->power[2];
-    }
-    info->bbox_min[0] = s->bmin.x;
-    info->bbox_min[1] = s->bmin.y;
-    info->bbox_min[2] = s->bmin.z;
-    info->bbox_max[0] = s->bmax.x;
-    info->bbox_max[1] = s->bmax.y;
-    info->bbox_max[2] = s->bmax.z;
-    info->bvh_nodes = s->nwnode; /* the wide tree the renderer traverses */
-    info->bvh_depth = s->wdepth;
-    info->width = s->width;
-    info->height = s->height;
-    info->memory_bytes = s->mem.live;
-    info->peak_bytes = s->mem.peak;
-}
-
-/* Lights added to a loaded scene.  The light arrays are rebuilt one entry
- * larger (or smaller), through the scene's own allocator, and the choice table
- * is recomputed; the arrays are untouched when the call fails.  `drop` is the
- * index of a light to leave out (-1: none), `add` the light to append (NULL:
- * none). */
-static appm_status appm__scene_relight(appm_scene *s, int drop, const appm__light *add, appm_diag *diag)
-{
-    uint32_t n = s->nlight - (drop >= 0) + (add != NULL), i, k = 0;
-    appm__mem *m = &s->mem;
-    appm__light *nl;
-    double *cdf;
-    appm__light *old = s->light;
-    double *old_cdf = s->light_cdf;
-    uint32_t old_n = s->nlight;
-    int old_env = s->env;
-    appm_status st;
-    if (n == 0) return appm__fail(diag, APPM_ERR_INVALID_ARG, s->name, 0, "the scene would have no light");
-    m->diag = diag;
-    nl = (appm__light *)appm__alloc(m, n, sizeof *nl);
-    cdf = (double *)appm__alloc(m, (size_t)n + 1, sizeof *cdf);
-    m->diag = NULL;
-    if (!nl || !cdf) {
-        appm__free(m, nl);
-        appm__free(m, cdf);
-        return APPM_ERR_NOMEM;
-    }
-    s->env = -1;
-    for (i = 0; i < old_n; ++i) {
-        if ((int)i == drop) continue;
-        if (old[i].kind == APPM__LIGHT_ENV) s->env = (int)k;
-        nl[k++] = old[i]; /* area lights come first and are never dropped: triangle indices hold */
-    }
-    if (add) {
-        nl[k] = *add;
-        appm__light_power(s, &nl[k], nl[k].power);
-        if (add->kind == APPM__LIGHT_ENV) s->env = (int)k;
-        k++;
-    }
-    s->light = nl;
-    s->light_cdf = cdf;
-    s->nlight = k;
-    if ((st = appm__light_table(s, diag, s->name)) != APPM_OK) {
-        s->light = old;
-        s->light_cdf = old_cdf;
-        s->nlight = old_n;
-        s->env = old_env;
-        appm__free(m, nl);
-        appm__free(m, cdf);
-        return st;
-    }
-    appm__free(m, old);
-    appm__free(m, old_cdf);
-    return APPM_OK;
-}
-
-static int appm__finite_nonneg3(const double *v)
-{
-    int i;
-    for (i = 0; i < 3; ++i)
-        if (!(v[i] >= 0.0 && v[i] <= FLT_MAX)) return 0;
-    return 1;
-}
-
-APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double position[3],
-                                                const double intensity[3], appm_diag *diag)
-{
-    appm__light l;
-    appm_status st;
-    int i, drop;
-    appm__diag_clear(diag);
-    if (!scene || !position || !intensity)
-        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or light");
-    for (i = 0; i < 3; ++i)
-        if (!(fabs(position[i]) <= FLT_MAX))
-            return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0, "point light: position is not finite");
-    if (!appm__finite_nonneg3(intensity))
-        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
-                          "point light: intensity must be finite and >= 0");
-    memset(&l, 0, sizeof l);
-    l.kind = APPM__LIGHT_POINT;
-    l.pos = appm__v((float)position[0], (float)position[1], (float)position[2]);
-    l.value = appm__v((float)intensity[0], (float)intensity[1], (float)intensity[2]);
-    drop = scene->env_auto ? scene->env : -1;
-    st = appm__scene_relight(scene, drop, &l, diag);
-    if (st == APPM_OK) scene->env_auto = 0;
-    return st;
-}
-
-APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
-                                                appm_diag *diag)
-{
-    appm__light l;
-    appm_status st;
-    appm__diag_clear(diag);
-    if (!scene || !radiance) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or radiance");
-    if (!appm__finite_nonneg3(radiance))
-        return appm__fail(diag, APPM_ERR_INVALID_ARG, scene->name, 0,
-                          "environment: radiance must be finite and >= 0");
-    memset(&l, 0, sizeof l);
-    l.kind = APPM__LIGHT_ENV;
-    l.value = appm__v((float)radiance[0], (float)radiance[1], (float)radiance[2]);
-    st = appm__scene_relight(scene, scene->env, &l, diag); /* replaces the one there, if any */
-    if (st == APPM_OK) scene->env_auto = 0;
-    return st;
-}
-
-/* ---- 12.1 Renderer ----------------------------------------------------------- */
 
 static void appm__renderer_free_parts(appm_renderer *r)
 {
@@ -8200,42 +8260,6 @@ APPM_API const char *appm_renderer_last_error(const appm_renderer *r)
     return r ? r->last_error : "";
 }
 
-/* 10.5: whether a 4-neighbour of pixel i sees a surface whose normal is 60
- * degrees or more from i's (APPM__NORMAL_COS): a corner or an edge passes
- * between them.  Any line between two pixels also separates two 4-neighbours. */
-static uint8_t appm__edge_flag(const appm_renderer *r, size_t i)
-{
-    const appm__vp *v = &r->vp[i];
-    size_t x = i % r->w, y = i / r->w, w = r->w;
-    const appm__vp *q[4];
-    int k, n = 0;
-    if (!v->segs) return 0;
-    if (x > 0) q[n++] = v - 1;
-    if (x + 1 < w) q[n++] = v + 1;
-    if (y > 0) q[n++] = v - w;
-    if (y + 1 < r->h) q[n++] = v + w;
-    for (k = 0; k < n; ++k)
-        if (q[k]->segs && appm__dot(v->n, q[k]->n) < APPM__NORMAL_COS) return 1;
-    return 0;
-}
-
-/* The edge flags of a row and, in vp.edge, each pixel's distance along the row
- * to the nearest flagged one (capped at 255): a sweep each way. */
-static void appm__edge_row(appm_renderer *r, uint32_t row)
-{
-    appm__vp *v = &r->vp[(size_t)row * r->w];
-    uint32_t x, d = 255;
-    for (x = 0; x < r->w; ++x) v[x].edge = appm__edge_flag(r, (size_t)row * r->w + x) ? 0 : 255;
-    for (x = 0; x < r->w; ++x) {
-        d = v[x].edge == 0 ? 0 : (d < 255 ? d + 1 : 255);
-        v[x].edge = (uint8_t)d;
-    }
-    for (x = r->w, d = 255; x-- > 0;) {
-        d = v[x].edge == 0 ? 0 : (d < 255 ? d + 1 : 255);
-        if (d < v[x].edge) v[x].edge = (uint8_t)d;
-    }
-}
-
 /* Every pixel's gather radius of this pass, from its method (10.2). */
 static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
 {
@@ -8271,7 +8295,7 @@ static double appm__default_radius(appm_renderer *r)
 }
 
 /* Median of the gather reaches (the radius, or the Laplacian's 2h) of the
- * pixels that have a visible point: section 9's cell size is a multiple of it. */
+ * pixels that have a visible point: 7.2's cell size is a multiple of it. */
 static float appm__median_gather_radius(appm_renderer *r)
 {
     size_t n = 0, i, npix = (size_t)r->w * r->h;
@@ -8469,7 +8493,7 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
     return APPM_ERR_INVALID_ARG;
 }
 
-/* ---- 12.2 Checkpoints ----------------------------------------------------------
+/* ==== 13. CHECKPOINTS ======================================================
  *
  * A checkpoint is everything the next pass reads that a fresh renderer of the
  * same scene and options does not already have: the pass counter j, the radii
@@ -8514,7 +8538,7 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
 #define APPM__FNV_BASIS 14695981039346656037ull
 #define APPM__FNV_PRIME 1099511628211ull
 
-/* The shared per-pixel state (section 7's appm__pixel), field by field as the
+/* The shared per-pixel state (section 8's appm__pixel), field by field as the
  * estimator table lists each method's: a field added to appm__pixel must be
  * listed here (t_checkpoint checks that the list tiles the struct). */
 static const appm__field appm__pixel_fields[] = {{"ld", offsetof(appm__pixel, ld), 3, 0},

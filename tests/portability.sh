@@ -1,5 +1,6 @@
 #!/bin/sh
-# tests/portability.sh - the compiler matrix of make portability (style.md (c)).
+# tests/portability.sh - the compiler matrix of make portability (docs/CONTRIBUTING.md,
+# "C99 and portability").
 #
 #   gcc, clang      -std=c99 -pedantic -Wall -Wextra -Wshadow -Wvla -Werror, appm.c + main.c;
 #                   tests/t_portable.c built by gcc and run: its furnace means are the

@@ -1,4 +1,4 @@
-/* tests/t_checkpoint.c - checkpoint and resume (appm.c section 12.2).
+/* tests/t_checkpoint.c - checkpoint and resume (appm.c section 13).
  *
  * What is checked, and against what:
  *   1. Resume is exact: for every method and thread counts 1 and 2 (and with

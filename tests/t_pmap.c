@@ -1,4 +1,4 @@
-/* tests/t_pmap.c - the photon map (appm.c section 9) and the photon record.
+/* tests/t_pmap.c - the photon map (appm.c section 7.2) and the photon record.
  *
  * What is checked, and against what:
  *   1. Query == linear scan.  appm__pmap_query must visit exactly the photons

@@ -22,8 +22,8 @@
  *     wall has Ke = Kd = 0.5, so the radiance is 1 everywhere): the image mean
  *     within a tolerance of 1, and of the reference machine's mean when
  *     APPM_PORTABLE_REF holds that machine's "furnace means:" line - never
- *     bit-exact across machines (style.md (c) row 21) - the deterministic integer
- *     statistics, and 1 vs 2 threads byte-identical.
+ *     bit-exact across machines (docs/CONTRIBUTING.md, Determinism) - the
+ *     deterministic integer statistics, and 1 vs 2 threads byte-identical.
  * Run from the repository root; scratch files go to tests/out/. */
 #include "../appm.c"
 #include "check.h"
