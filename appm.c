@@ -6237,8 +6237,8 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 92 
     float R;              /* the radius of this pass (appm: of the diffuse photons) */
     float Rc;             /* appm: the caustic photons' radius of this pass; 0: none */
     uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
-    uint8_t edge;         /* 10.5: how many pixels along the row to the nearest pixel with a
-                           * neighbour on another surface (0: this one; 255: none near) */
+    uint8_t edge_dist;    /* how many pixels along the row to the nearest pixel with a neighbour
+                           * on another surface (0: this one; 255: none near; 10.4, step 6) */
     uint8_t pad[2];
 } appm__vp;
 
@@ -6268,15 +6268,15 @@ struct appm_renderer {
         double R2;       /* r_j^2 of the next gather */
         double R;        /* the radius of the last gather */
     } ppm;               /* Knaus-Zwicker's global radius (section 10) */
-    double lap_h;        /* appm: Laplacian bandwidth h_j of this pass; 0: none this pass */
-    double sj;           /* appm: j^(-1/6) for j = sj_pass, the radius's and its bounds' factor */
-    uint64_t sj_pass;    /* the pass sj was computed for (0: none yet) */
+    double lap_h;        /* Laplacian bandwidth h_j of this pass (the method's bandwidth hook); 0: none */
+    double shrink;       /* j^(-1/6) for j = shrink_pass, by which the adaptive radii and bounds shrink */
+    uint64_t shrink_pass; /* the pass shrink was computed for (0: none yet) */
     unsigned threads, max_depth;
     uint64_t seed, pass;
     appm__sobol_tab *sobol; /* --sampler qmc: appm__sobol_table (section 2.3); NULL: random */
     unsigned nee_dims, emit_dims; /* appm__light_dims of the scene */
     unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
-    int cut;             /* 10.5: the kernel renormalised where the surface ends inside it */
+    int cut;             /* the kernel renormalised where the surface ends inside it (10.4, step 6) */
     double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
@@ -6752,159 +6752,70 @@ static size_t appm__store_compact(appm_renderer *r)
  *
  * Kernels (2-D, on the tangent plane; u = |x - y| / r):
  *   uniform  K = 1/pi                 mu2 = 1/4   R(K) = 1/pi      (ppm, sppm)
- *   biweight K = (3/pi) (1 - u^2)^2   mu2 = 1/8   R(K) = 9/(5 pi)  (appm)
+ *   biweight K = (3/pi) (1 - u^2)^2   mu2 = 1/8   R(K) = 9/(5 pi)  (appm, appm-paper)
  * with k_r(d) = K(|d|/r) / r^2, mu2 the per-axis second moment, R(K) = int K^2.
  * The biweight is smooth (C1), which the finite-difference Laplacian needs.
  *
  * The formulas, their derivations and their sources are in docs/algorithm.md,
  * cited here by section (the papers' own equation numbers could not be
- * checked against the papers, so they are not quoted).
+ * checked against the papers, so they are not quoted).  The subsections:
  *
- * ppm  (Knaus-Zwicker 2011, algorithm.md 2.3): one global radius, r_j^2 = r_1^2
- *      prod_{k<j} (k + alpha) / (k + 1); the pixel is the plain mean over passes of
- *      Ihat_j = (1/M) sum_i k_{r_j}(x_j - y_i) Psi_ji.
- * sppm (Hachisuka-Jensen 2009, algorithm.md 2.2): per pixel N, R, tau; after a pass that found m
- *      photons with flux Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)),
- *      tau' = (tau + Phi) R'^2 / R^2; L = tau / (j M pi R^2).
- * appm (Kaplanyan-Dachsbacher 2013, algorithm.md 4): per pixel and pass, the radius that
- *      minimises the estimated MSE(r) (4.2) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2:
- *         r^6 = c_f R(K) S / (M j mu2^2 dI^2),   c_f = 2/3,
- *      where S is the running mean of s_j = (1/M) sum_i k_r lum(Psi_i)^2 (a
- *      second moment) and dI the running mean of the per-vertex Laplacian,
- *      estimated from the same photons by a 5-point finite difference of kernel
- *      estimates with bandwidth h (algorithm.md 4.6).  c_f = 2/3 is the constant
- *      that is optimal when every pass is averaged with weight 1/j and r_j
- *      shrinks as j^(-1/6) (the plug-in constant would be 2; algorithm.md 4.3
- *      and the toy of 4.9).  Safeguards (4.7): KZ radius r_1 j^(-1/6) while warming up; while a
- *      pixel has seen fewer than 8 photons its radius doubles each pass; the
- *      change per pass limited to [1/2, 2]; r clamped to [0.1 min(r_1, r_auto),
- *      RHI max(r_1, r_auto)] j^(-1/6) (r_auto: the automatic radius; RHI 2 for
- *      the caustic component, 3 for the diffuse one), so the clamps shrink at
- *      the optimal rate.  The Laplacian bandwidth is a fixed
- *      schedule, h = 1.5 r_auto j^(-1/8), estimated on every 8th pass and
- *      averaged with weights h^6 (appm__lap_pass, appm__appm_update); dI^2 is corrected for the
- *      noise of its estimate.
- *      Beyond the paper (algorithm.md 4.10 - 4.12, section 10.3 below): the
- *      photons are split into a caustic and a diffuse component, each with
- *      its own statistics and radius (c_f halved: the minimiser of a bound on
- *      the coupled MSE); dI^2 is pooled over neighbouring pixels; and where
- *      the surface ends inside the kernel the estimate is divided by the
- *      kernel's mass on the surface (10.5, algorithm.md 4.19: the seams of a
- *      box were 8 % dark on average; equal-pass RMSE 0.73x on CornellBox-Original).
+ *   10.1 the gather's sums    what every photon method sums over the photons
+ *                             near x, the kernel's mass on the surface, and the
+ *                             table entry (appm__estimator) a method fills in
+ *   10.2 baselines            ppm (Knaus-Zwicker 2011, algorithm.md 2.3): one
+ *                             global radius r_j^2 = r_1^2 prod (k + alpha)/(k + 1);
+ *                             sppm (Hachisuka-Jensen 2009, 2.2): per pixel N, R, tau
+ *   10.3 the paper's APPM     appm-paper (Kaplanyan-Dachsbacher 2013, 4.1 - 4.8):
+ *                             per pixel and pass the radius that minimises the
+ *                             estimated MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2,
+ *                             r^6 = c_f R(K) S / (M j mu2^2 dI^2); read it beside
+ *                             the pseudocode of algorithm.md 4.8
+ *   10.4 appm                 the default: the paper's selector with six named
+ *                             steps on top, each with its measured reason
+ *   10.5 the estimator table  one entry per method
+ *   10.6 the gather           the per-row task that queries the map and commits
  *
- *      The upper clamp and h were measured at equal time (CornellBox-Sphere,
- *      256x256, 30 s, 2 threads; RMSE against the path-traced reference):
- *      RHI 4, kappa 2: 0.00795 (378 passes); RHI 2: 0.00736 (417); RHI 1.5:
- *      0.00723 (428); RHI 2, kappa 1.5: 0.00708 (435).  A wide radius in flat
- *      regions buys little once other noise dominates, and costs gather time.
- *      Re-measured with the low-discrepancy sampler (algorithm.md 4.13; 64x64,
- *      3 CPU-s, medians of 3 seeds, four scenes): RHI 2 is still the best of
- *      1, 1.5, 2, 4, 8, 32 on three scenes, 5 % behind RHI 1.5 on the sphere
- *      box, and at equal passes RHI 8 is no better than 2: the bias
- *      mu2 r^2 dI / 2 with dI measured at h does not see what a wide kernel
- *      reaches, so where dI_h ~ 0 the formula's radius lies beyond the bound
- *      and the bound decides (clamped= 0.64 - 0.96 after 64 passes).  The bias
- *      at the radius used, (4/3) (I_r - I_{r/2}) from the same gather, was
- *      tried in place of dI_h and lost 4 - 58 %: its noise reads as bias.
- *      Made quiet (algorithm.md 4.15: beta_j = (4/3) (I_R - I_{R/2}) / R^2
- *      averaged with weights (R_j / r_auto)^6, noise-corrected and pooled like
- *      dI^2, then max(dI_h^2, (2 / mu2)^2 beta^2)) it moves most pixels off the
- *      bound (clamped= 0.10 - 0.89 at RHI 2, 0.004 - 0.65 at RHI 4) and still
- *      loses 5 - 53 % at RHI 2 (water-caustic most); made conservative enough
- *      to tie at RHI 2 it loses at RHI 4.  A bandwidth tied to the radius,
- *      h = max(h_j, c R), ties at RHI 2 and loses at 4.  Neither is used.
- *      Edge caps on the bound (algorithm.md 4.17, bench/edgecap.patch): per
- *      pixel and component hi = min(RHI_wide max(r1, r_auto) j^(-1/6), gamma D),
- *      D the world distance to the nearest discontinuity in a 7x7 window of
- *      the running image (no gathering point, another surface, or a second
- *      difference I_q + I_q' - 2 I_i beyond 3 sd of its noise).  They narrow
- *      the edges as the oracle of 4.16 asks (held-out MSE at the edges 0.934
- *      -> 0.918 on the sphere box, 1.115 -> 1.056 on CornellBox-Original, with
- *      gamma 1), and with RHI_wide 4 they widen the smooth pixels (0.995 ->
- *      0.791 on CornellBox-Original).  At equal passes: -1 to -6 % RMSE on the
- *      two boxes, +4 to +13 % on water-caustic with gamma 1, within 1 % on
- *      three scenes (and -2 % on CornellBox-Original) with gamma 1.5 and no
- *      widening; at equal time the wide bound loses 4 - 9 % on the caustic
- *      scenes, and the test costs 6 - 10 % of processor time.  Not used.
- *      The Laplacian of the running image (algorithm.md 4.18: a least-squares
- *      quadratic fitted to the 5x5 neighbours' photon terms on the same
- *      surface, dI^2 = max(pooled dI_h^2, dI_img^2 - k Var); bench/imglap.patch)
- *      was measured and is not used either.  At the pixel scale the
- *      reference's Laplacian at the edges is 2.2 - 2.6x the dI the radius uses
- *      (median; S is not too large), far from the 14x that the oracle of 4.16
- *      implies: what the edges lack is mostly no curvature.  Used, it narrowed
- *      the sphere box's caustic, where appm already beat the oracle (held-out
- *      error 1.26 against 0.95 of the best fixed radius), lost 0.4 - 3 % at
- *      equal passes there, gained 1 - 2.5 % on water-caustic, cost 6 % more
- *      instructions, tied at equal time at RHI 2 and lost 2 - 30 % at RHI 4.
- *      With the seams corrected (10.5), RHI 3 (or 3 for the diffuse
- *      component only) gained 5 - 6 % on CornellBox-Original and lost on the
- *      sphere box at equal time (algorithm.md 4.19).  Re-measured at an equal
- *      instruction count, which no load of the machine changes (algorithm.md
- *      4.20: bench/eqcurve.sh, EQC_COST=instr, 5 seeds, each error curve fitted
- *      by a power of the passes): the diffuse component's bound at 3 gains 6 %
- *      on CornellBox-Original and loses 1 % on the sphere box and caustic-glass,
- *      1 - 2 % on water-caustic; 2.5 gains 5 % and loses 0 - 2 %, 4 loses
- *      everywhere but on CornellBox-Original.  The caustic bound at 1.5 loses
- *      5 - 11 % on the caustic scenes.  So APPM__RHI_DIFFUSE is 3 and APPM__RHI
- *      2: the floor around a caustic takes a kernel twice as wide as the
- *      caustic's (0.45 of it on the sphere box, tests/t_appm.c).
+ * The history of what was measured on the way (the variants that lost
+ * included) is one table in docs/experiments.md.
  */
 #define APPM__MU2 0.125                          /* biweight, per axis */
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
-/* The constants of the adaptive method, measured or derived as the comment
- * above says; fixed at compile time (no build option changes them). */
-#define APPM__CF (2.0 / 3.0)                     /* c_f of the radius formula */
-#define APPM__WARMUP 4                           /* passes on the KZ schedule */
-#define APPM__KMIN 8.0                           /* photons before adapting */
-#define APPM__RLO 0.1                            /* lower clamp, times min(r1, r_auto) j^(-1/6) */
-#define APPM__RHI 2.0                            /* upper clamp, times max(r1, r_auto) j^(-1/6) */
-#define APPM__RHI_DIFFUSE 3.0                    /* the same for the diffuse component (algorithm.md 4.20) */
-#define APPM__CF_SPLIT (APPM__CF / 2.0)          /* c_f of each component (10.3) */
-#define APPM__POOL 1                             /* 10.4: dI^2 pooled over (2 POOL + 1)^2 pixels */
-#define APPM__KAPPA 1.5                          /* h = kappa r_auto j^(-1/8) */
-#define APPM__LAP_EVERY 8                        /* after warm-up, dI on every 8th pass */
-#define APPM__DI_FLOOR (1.0 / 64.0)              /* keep >= 1/64 of dI^2 (r at most 2x) */
-/* 10.5, the kernel cut at a corner: 0 off, 1 appm (the default), 2 every photon method */
-#define APPM__CUT 1
-#define APPM__CUT_MMIN 0.2                       /* the least kernel mass divided by */
-#define APPM__CUT_LINES 4                        /* lines kept per gather (its cut_u, cut_d) */
-#define APPM__CUT_WIN 4                          /* the widest window, (2 W + 1)^2 pixels */
-#define APPM__CUT_LAP 1                          /* the Laplacian's kernels renormalised too */
-#define APPM__CUT_FOOT 2.5                       /* a line counts if a q's foot is this many pixel widths from x's */
-#define APPM__CUT_CAND 24                        /* candidate lines per window */
+/* The constants of the adaptive methods (algorithm.md 4.3 - 4.7 and 4.10 - );
+ * fixed at compile time, no build option changes them. */
+#define APPM__CF (2.0 / 3.0)                     /* c_f: optimal for 1/j weights and r ~ j^(-1/6) (4.3, 4.9) */
+#define APPM__WARMUP 4                           /* passes on the Knaus-Zwicker schedule (4.7) */
+#define APPM__KMIN 8.0                           /* photons seen before the radius adapts (4.7) */
+#define APPM__RLO 0.1                            /* lower bound, times r1 j^(-1/6) (4.7) */
+#define APPM__RHI 2.0                            /* upper bound, times r1 j^(-1/6) (4.7); appm's caustic one */
+#define APPM__KAPPA 1.5                          /* Laplacian bandwidth h = kappa r j^(-1/8) (4.6) */
+/* appm's steps (10.4) */
+#define APPM__CF_SPLIT (APPM__CF / 2.0)          /* step 1: c_f of each of two components */
+#define APPM__LAP_EVERY 8                        /* step 2: after warm-up, dI on every 8th pass */
+#define APPM__DI_FLOOR (1.0 / 64.0)              /* step 3: keep >= 1/64 of dI^2 (r at most 2x) */
+#define APPM__POOL 1                             /* step 3: dI^2 pooled over (2 POOL + 1)^2 pixels */
+#define APPM__RHI_DIFFUSE 3.0                    /* step 5: the diffuse component's upper bound */
+#define APPM__CUT_MMIN 0.2                       /* step 6: the least kernel mass divided by */
+#define APPM__CUT_LINES 4                        /* step 6: lines kept per gather (its cut_u, cut_d) */
+#define APPM__CUT_WIN 4                          /* step 6: the widest window, (2 W + 1)^2 pixels */
+#define APPM__CUT_LAP 1                          /* step 6: the Laplacian's kernels renormalised too */
+#define APPM__CUT_FOOT 2.5                       /* step 6: a line counts if a q's foot is this many pixel widths from x's */
+#define APPM__CUT_CAND 24                        /* step 6: candidate lines per window */
 
-/* Per-pixel state of each method (beside appm__pixel, which all share), named
- * after its paper's symbols as pbrt-v4's SPPMPixel is.  Plain doubles and
- * 64-bit counts only: the estimator table lists them field by field, so they
- * can be written and read back one by one.  A method that splits the photon
- * term into components (caustic, diffuse, ...) with statistics of their own
- * gives its state an array of such records and lists each field. */
-typedef struct appm__ppm_state {
-    double I[3];    /* running mean I_j of the per-pass estimates Ihat_j (photon term) */
-} appm__ppm_state;
-
-typedef struct appm__sppm_state {
-    double tau[3];  /* tau: accumulated flux, rescaled to the current radius */
-    double N;       /* N: accumulated photon count (alpha-weighted, so not whole) */
-    double R;       /* R: radius of the next gather */
-} appm__sppm_state;
-
-typedef struct appm__appm_state { /* the statistics of one photon component */
-    double I[3];    /* running mean I_j of the photon term */
-    double S;       /* running mean of the kernel second moment s_j */
-    double dI;      /* weighted running mean of the per-pass Laplacians */
-    double dI_w;    /* sum of their weights (h_j / r_auto)^6 */
-    double dI_m2;   /* weighted Welford M2 of the per-pass Laplacians (their spread) */
-    double R;       /* radius r_j of the last gather */
-    double R2sum;   /* sum of r_j^2, for the bias estimate */
-    uint64_t N;     /* photons found so far */
-    double dI2p;    /* 10.4: dI^2 pooled over neighbours after the last Laplacian pass (0: none) */
-} appm__appm_state;
-
-typedef struct appm__appm_px { /* appm's per-pixel state: one record per photon component */
-    appm__appm_state k[APPM__NCOMP]; /* [APPM__COMP_DIFFUSE], [APPM__COMP_CAUSTIC] */
-} appm__appm_px;
+/* ---- 10.1 The gather's sums ---------------------------------------------------
+ *
+ * A gather visits the photons within its reach of x (the map's query, 7.2)
+ * and adds each one's share to the sums of its component: one set of sums
+ * for a method with one radius, two (diffuse and caustic photons, each with its
+ * own radius) for appm.  What a method does with the sums after the gather is
+ * its commit hook (10.5). */
+typedef struct appm__sums { /* one photon component's sums over a gather's photons */
+    double e[3];         /* sum of K-weighted gamma (scaled at the end) */
+    double eg[3];        /* glossy: sum of K-weighted lobe(wi) gamma */
+    double s;            /* sum of K lum(Psi)^2 */
+    double dl;           /* sum of D_h lum(Psi) */
+    uint64_t count;      /* photons inside the kernel */
+} appm__sums;
 
 typedef struct appm__gather {
     appm__v3 x, n, t, b; /* visible point, normal, tangent frame */
@@ -6913,7 +6824,7 @@ typedef struct appm__gather {
     float ns;            /* glossy: the exponent */
     int glossy;
     float R;             /* kernel radius */
-    float h;             /* appm: Laplacian bandwidth (0: none) */
+    float h;             /* Laplacian bandwidth (0: none this pass) */
     float R2, Rg2;       /* R^2 and max(R, 2h)^2, set by the query */
     double ih;           /* 1 / h (0: no Laplacian), set by the query */
     double qw[3];        /* off glossy points: the luminance weights times W f, so lum(Psi) =
@@ -6921,28 +6832,23 @@ typedef struct appm__gather {
     const appm__pmap *map; /* the map being queried (its side[] array), set by the query */
     unsigned max_p;      /* longest photon path that still counts */
     int biweight;
-    double e[3];         /* sum of K-weighted gamma (scaled at the end) */
-    double eg[3];        /* glossy: sum of K-weighted lobe(wi) gamma */
-    double s;            /* sum of K lum(Psi)^2 */
-    double dl;           /* sum of D_h lum(Psi) */
-    uint64_t count;      /* photons inside R */
-    /* appm: with Rc > 0 the caustic photons gather with their own radius Rc
-     * into these sums, and the ones above hold the diffuse photons only */
+    /* [APPM__COMP_DIFFUSE]: every photon, or with Rc > 0 the diffuse ones only;
+     * [APPM__COMP_CAUSTIC]: with Rc > 0 the caustic photons, gathered with radius Rc */
+    appm__sums sum[APPM__NCOMP];
     float Rc, Rc2;       /* caustic kernel radius (0: one component) and its square */
-    double ce[3], ceg[3], cs, cdl;
-    uint64_t ccount;
-    /* the kernel cut at a corner (10.5): lines of the tangent plane beyond which the
-     * surface of x does not go; u (in t, b) points from x towards line k, d its distance */
+    /* the kernel cut at a corner (10.4, step 6): lines of the tangent plane beyond which
+     * the surface of x does not go; u (in t, b) points from x towards line k, d its distance */
     int ncut;
     float cut_u[APPM__CUT_LINES][2], cut_d[APPM__CUT_LINES];
     double lw[5]; /* 1 / the mass of the Laplacian's kernels at x + h t, x - h t, x + h b, x - h b
-                   * and x (10.5; 1 without lines), set by the query */
+                   * and x (step 6; 1 without lines), set by the query */
 } appm__gather;
 
-/* 10.5: the part of the kernel K_R (biweight or uniform) beyond a line at distance
+/* The part of the kernel K_R (biweight or uniform) beyond a line at distance
  * u R from its centre.  Biweight: the 1-D marginal is (16 / (5 pi)) (1 - x^2)^(5/2),
  * and with x = sin th its integral from 0 is (16 / (5 pi)) G(th), G = 5 th / 16 +
  * 15 sin 2th / 64 + 3 sin 4th / 64 + sin 6th / 192.  Uniform: the circular segment. */
+
 static double appm__cut_tail(double u, int biweight)
 {
     double th;
@@ -6957,7 +6863,7 @@ static double appm__cut_tail(double u, int biweight)
     }
 }
 
-/* 10.5: the mass m on the surface of x of the kernel K_R centred at x + (sx, sy)
+/* The mass m on the surface of x of the kernel K_R centred at x + (sx, sy)
  * (in t, b), inside every cut line of g: the product of what each line leaves
  * (exact for one line, and by symmetry for two perpendicular lines of which
  * one passes through the centre), floored at APPM__CUT_MMIN.  1 without lines. */
@@ -6973,28 +6879,27 @@ static double appm__cut_mass_at(const appm__gather *g, double R, double sx, doub
 
 static double appm__cut_mass(const appm__gather *g, double R) { return appm__cut_mass_at(g, R, 0.0, 0.0); }
 
-/* One photon's share of a gather's sums (e, eg, s, dl, count: one component's;
- * lobe: the glossy lobe's value at the photon's direction). */
+/* One photon's share of one component's sums (lobe: the glossy lobe's value at
+ * the photon's direction). */
 static inline void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
-                                     double q, float lobe, double *e, double *eg, double *s, double *dl,
-                                     uint64_t *count)
+                                     double q, float lobe, appm__sums *sum)
 {
     if (d2 < R2) {
         double k = 1.0;
         if (g->biweight) {
             double u = 1.0 - (double)d2 / R2;
             k = u * u;
-            *s += k * q * q;
+            sum->s += k * q * q;
         }
-        e[0] += k * p->power[0];
-        e[1] += k * p->power[1];
-        e[2] += k * p->power[2];
+        sum->e[0] += k * p->power[0];
+        sum->e[1] += k * p->power[1];
+        sum->e[2] += k * p->power[2];
         if (g->glossy) {
-            eg[0] += k * lobe * p->power[0];
-            eg[1] += k * lobe * p->power[1];
-            eg[2] += k * lobe * p->power[2];
+            sum->eg[0] += k * lobe * p->power[0];
+            sum->eg[1] += k * lobe * p->power[1];
+            sum->eg[2] += k * lobe * p->power[2];
         }
-        (*count)++;
+        sum->count++;
     }
     if (g->h > 0.0f) {
         /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
@@ -7002,7 +6907,7 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
          * Beyond 2h (a >= 4) every term is 0, since a + 1 - 2 |d.t| / h >= (sqrt(a) - 1)^2 >= 1:
          * such photons (inside a wider R or Rc) are skipped (the power is finite, checked
          * at emission, so 0 * q is 0). */
-        double a = (double)d2 * ih * ih, sum = 0.0;
+        double a = (double)d2 * ih * ih, stencil = 0.0;
         if (a < 4.0) {
             float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
             double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
@@ -7014,9 +6919,9 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             c[2] = a + 1.0 + 2.0 * db;
             c[3] = a + 1.0 - 2.0 * db;
             for (k = 0; k < 4; ++k)
-                if (c[k] < 1.0) sum += g->lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
-            if (a < 1.0) sum -= 4.0 * g->lw[4] * (1.0 - a) * (1.0 - a);
-            *dl += sum * q;
+                if (c[k] < 1.0) stencil += g->lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
+            if (a < 1.0) stencil -= 4.0 * g->lw[4] * (1.0 - a) * (1.0 - a);
+            sum->dl += stencil * q;
         }
     }
 }
@@ -7048,8 +6953,7 @@ static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, 
     { /* one call site, so that the compiler inlines it: the caustic component's
        * radius and sums, or the diffuse (or only) one's */
         int c = p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f;
-        appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, ih, q, lobe, c ? g->ce : g->e, c ? g->ceg : g->eg,
-                          c ? &g->cs : &g->s, c ? &g->cdl : &g->dl, c ? &g->ccount : &g->count);
+        appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, ih, q, lobe, &g->sum[c ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE]);
     }
 }
 
@@ -7105,152 +7009,114 @@ static void appm__gather_query(const appm__pmap *m, appm__gather *g)
     appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
 }
 
-/* Whether pass j estimates the Laplacian.  Its gather reaches 2h (h from
- * appm__lap_h below: 1.5 r_auto j^(-1/8)), several times the area of the radiance
- * kernel, so it is the expensive part of a pass.  For a fixed cost f h^2 (f: the fraction of passes that estimate it),
- * the variance of the running mean dI goes as 1 / (f h^6) = 1 / (cost h^4):
- * a wide bandwidth on a few passes beats a narrow one on every pass.  The price
- * is smoothing bias in dI, of which r only feels the cube root.  Every pass of
- * the warm-up estimates it, then every APPM__LAP_EVERY-th. */
-static int appm__lap_pass(uint64_t j)
-{
-    return j <= APPM__WARMUP || (j - APPM__WARMUP) % APPM__LAP_EVERY == 0;
-}
-
-/* Laplacian passes among the first j. */
-static uint64_t appm__lap_count(uint64_t j)
-{
-    return j <= APPM__WARMUP ? j : APPM__WARMUP + (j - APPM__WARMUP) / APPM__LAP_EVERY;
-}
-
-/* One component's sums (kernel radius R) into its estimates. */
-static void appm__sums_finish(const appm__gather *g, double R, const double *se, const double *seg, double ss,
-                              double sdl, uint64_t count, double invM, double *e, double *s, double *dl)
-{
-    double mass = appm__cut_mass(g, R), norm;
-    norm = (g->biweight ? 3.0 : 1.0) / (APPM__PI * R * R * mass);
-    e[0] = e[1] = e[2] = *s = *dl = 0.0;
-    if (count > 0) {
-        e[0] = g->wf.x * se[0] * norm * invM;
-        e[1] = g->wf.y * se[1] * norm * invM;
-        e[2] = g->wf.z * se[2] * norm * invM;
-        if (g->glossy) {
-            e[0] += g->wg.x * seg[0] * norm * invM;
-            e[1] += g->wg.y * seg[1] * norm * invM;
-            e[2] += g->wg.z * seg[2] * norm * invM;
-        }
-        *s = ss * norm * invM / mass;
-    }
-    if (g->h > 0.0f) *dl = sdl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
-}
-
-/* Turns the sums of a gather into this pass's estimates:
+/* Turns one component's sums (kernel radius R) into this pass's estimates:
  *   e  = (1/M) sum_i k_R(x - y_i) Psi_i          (the photon term of Ihat_j)
  *   s  = (1/M) sum_i k_R(x - y_i) lum(Psi_i)^2   (the second moment s_j)
  *   dl = (1/M) sum_i D_h(x - y_i) lum(Psi_i)     (the Laplacian estimate)
  * with k_R = K(|d|/R)/R^2 and the kernel constants 1/pi (uniform) or 3/pi
- * (biweight) applied here, once, instead of per photon. */
-static void appm__gather_finish(const appm__gather *g, double invM, double *e, double *s, double *dl)
+ * (biweight) applied here, once, instead of per photon; divided by the kernel's
+ * mass on the surface where the gather has cut lines (10.4, step 6). */
+static void appm__sums_finish(const appm__gather *g, double R, const appm__sums *sum, double invM, double *e,
+                              double *s, double *dl)
 {
-    appm__sums_finish(g, g->R, g->e, g->eg, g->s, g->dl, g->count, invM, e, s, dl);
-}
-
-/* The same for the caustic component's sums (radius Rc). */
-static void appm__gather_finish_caustic(const appm__gather *g, double invM, double *e, double *s, double *dl)
-{
-    appm__sums_finish(g, g->Rc, g->ce, g->ceg, g->cs, g->cdl, g->ccount, invM, e, s, dl);
-}
-
-/* ---- 10.1 The adaptive radius (docs/algorithm.md 4.3 - 4.7) ----------------- */
-
-/* The closed-form minimiser of MSE(r) = R(K) S / (M N r^2) + (mu2 r^2 dI / 2)^2
- * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M N mu2^2 dI^2).  Takes dI^2; returns
- * 0 when the formula has no finite positive answer (S or dI^2 zero, NaN, inf). */
-static double appm__r_opt(double S, double dI2, double MN, double cf)
-{
-    double den = MN * APPM__MU2 * APPM__MU2 * dI2, r6;
-    if (!(S > 0.0) || !(den > 0.0) || !(den < HUGE_VAL)) return 0.0;
-    r6 = cf * APPM__RK * S / den;
-    return (r6 > 0.0 && r6 < HUGE_VAL) ? pow(r6, 1.0 / 6.0) : 0.0;
-}
-
-/* dI^2 - Var(dI): an unbiased estimate of the square of the true Laplacian
- * (may be negative); see appm__di2. */
-static double appm__di2_unbiased(const appm__appm_state *p, uint64_t n)
-{
-    double c = p->dI * p->dI;
-    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
-    return c;
-}
-
-/* dI^2 for the radius formula.  The square of a noisy mean overestimates the
- * square of its expectation: E[dI^2] = dI_true^2 + Var(dI).  So the variance of
- * the weighted mean is taken off, keeping at least APPM__DI_FLOOR of dI^2: where
- * the Laplacian is mostly noise, the radius grows (less noise, more bias)
- * instead of collapsing.  With per-pass variances c / w_j, the weighted Welford
- * sum M2 estimates (n - 1) c, and the mean's variance is c / sum(w). */
-static double appm__di2(const appm__appm_state *p, uint64_t n)
-{
-    double d2 = p->dI * p->dI, c = appm__di2_unbiased(p, n);
-    return c > APPM__DI_FLOOR * d2 ? c : APPM__DI_FLOOR * d2;
-}
-
-/* The lower and upper bounds of the radius of pass j: [RLO min(r1, r_auto),
- * rhi max(r1, r_auto)] j^(-1/6), rhi being APPM__RHI or APPM__RHI_DIFFUSE. */
-static void appm__appm_bounds_sj(double r1, double r_auto, double sj, double rhi, double *lo, double *hi)
-{
-    *lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * sj;
-    *hi = rhi * (r1 > r_auto ? r1 : r_auto) * sj;
-}
-
-/* Radius for pass j from one component's statistics after j-1 passes; r1 is
- * the initial radius, r_auto the automatic one, cf the constant of the radius
- * formula, di2 the dI^2 to use (< 0 or NaN: the component's own, appm__di2),
- * rhi the upper bound's factor.  Never NaN, 0 or inf: every path ends inside
- * the bounds of appm__appm_bounds_sj. */
-static double appm__appm_radius_sj(double r1, double r_auto, uint64_t M, uint64_t j, double sj, double rhi,
-                                   const appm__appm_state *p, double cf, double di2)
-{
-    double lo, hi, rad = r1 * sj;
-    appm__appm_bounds_sj(r1, r_auto, sj, rhi, &lo, &hi);
-    if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
-        /* too few photons seen to estimate anything: widen, as a k-nearest-
-         * neighbour radius would, instead of waiting at a radius that may be
-         * the reason so few photons arrive */
-        rad = 2.0 * p->R;
-        return rad > hi ? hi : (rad >= lo ? rad : lo);
-    }
-    if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
-        if (!(di2 >= 0.0)) di2 = appm__di2(p, appm__lap_count(j - 1));
-        rad = appm__r_opt(p->S, di2, (double)M * (double)j, cf);
-        if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
-        if (p->R > 0.0) {
-            if (rad < 0.5 * p->R) rad = 0.5 * p->R;
-            if (rad > 2.0 * p->R) rad = 2.0 * p->R;
+    double mass = appm__cut_mass(g, R), norm;
+    norm = (g->biweight ? 3.0 : 1.0) / (APPM__PI * R * R * mass);
+    e[0] = e[1] = e[2] = *s = *dl = 0.0;
+    if (sum->count > 0) {
+        e[0] = g->wf.x * sum->e[0] * norm * invM;
+        e[1] = g->wf.y * sum->e[1] * norm * invM;
+        e[2] = g->wf.z * sum->e[2] * norm * invM;
+        if (g->glossy) {
+            e[0] += g->wg.x * sum->eg[0] * norm * invM;
+            e[1] += g->wg.y * sum->eg[1] * norm * invM;
+            e[2] += g->wg.z * sum->eg[2] * norm * invM;
         }
+        *s = sum->s * norm * invM / mass;
     }
-    if (!(rad >= lo)) rad = lo; /* also catches NaN */
-    if (rad > hi) rad = hi;
-    return rad;
+    if (g->h > 0.0f) *dl = sum->dl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
 }
 
-/* The same with j^(-1/6) computed here (the renderer's passes use
- * appm__pass_sj). */
-APPM__UNUSED static double appm__appm_radius(double r1, double r_auto, uint64_t M, uint64_t j,
-                                             const appm__appm_state *p, double cf, double di2)
+/* The estimates of component c (APPM__COMP_DIFFUSE: of every photon with one
+ * component) from a gather: the sums of appm__sums_finish with the radius of c. */
+static void appm__gather_finish(const appm__gather *g, int c, double invM, double *e, double *s, double *dl)
 {
-    return appm__appm_radius_sj(r1, r_auto, M, j, pow((double)j, -1.0 / 6.0), APPM__RHI, p, cf, di2);
+    appm__sums_finish(g, c == APPM__COMP_CAUSTIC ? g->Rc : g->R, &g->sum[c], invM, e, s, dl);
 }
 
-/* The Laplacian bandwidth of pass j: h_j = kappa r_auto j^(-1/8), a fixed schedule
- * from the automatic radius r_auto (section 12), shrinking more slowly than
- * r (docs/algorithm.md 4.6).  It deliberately does not follow the pixel's
- * adaptive radius: with h = kappa r, a sharp feature seen through a wide h
- * looks flat (|dI| falls like h^-4), which licenses a wider r, which keeps h
- * wide - a start with a large radius would never come back. */
-static double appm__lap_h(double r_auto, uint64_t j)
+
+/* What a method is and does: its entry in the estimator table (10.5).  The
+ * renderer picks the entry once, in appm_renderer_create, and calls only
+ * through it; a new method is one entry plus its own functions.  Hooks that a
+ * method does not need are NULL.  Per pass j the renderer calls:
+ *   start       once, on pass 1, after r1 is known (initialise state)
+ *   bandwidth   the Laplacian bandwidth h_j of the pass (0: none this pass)
+ *   radius      per pixel: the gather radius of pass j (stored in appm__vp.R)
+ *   radius_c    per pixel: the caustic component's radius (appm__vp.Rc; < 0:
+ *               the same as the radius; without the hook Rc is 0 and every
+ *               photon gathers with R)
+ *   commit      per pixel, after the gather: fold it into the state (the
+ *               direct term is already committed to appm__pixel)
+ *   pass_end    once, after the gather (global schedules)
+ * and on request:
+ *   photon_term the photon part of the pixel value after j passes (0: none)
+ *   bias        the estimated bias of the pixel (luminance), for the error
+ *   aux_value   the RADIUS and LAPLACIAN maps (and the per-component radii) */
+enum {
+    APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
+    APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
+    APPM__CAP_CUT = 4,       /* the kernel cut at a corner (10.4, step 6)            */
+    APPM__CAP_ERROR = 8      /* keeps an error estimate (appm_stats.est_relerr)      */
+};
+
+typedef struct appm__field { /* one field of a method's per-pixel state */
+    const char *name;
+    size_t offset;           /* bytes from the start of the state */
+    unsigned count;          /* values */
+    unsigned is_u64;         /* 1: uint64_t values, 0: doubles */
+} appm__field;
+
+typedef struct appm__estimator {
+    const char *name;        /* appm_method_name */
+    unsigned caps;           /* APPM__CAP_* */
+    unsigned aux;            /* bit (1 << k) for every map k of appm_aux it provides */
+    size_t state_size;       /* bytes of per-pixel state (0: none) */
+    const appm__field *fields;
+    unsigned nfields;
+    void (*start)(appm_renderer *r);
+    double (*bandwidth)(const appm_renderer *r);
+    float (*radius)(const appm_renderer *r, const void *state);
+    float (*radius_c)(const appm_renderer *r, const void *state);
+    void (*commit)(appm_renderer *r, appm__pixel *px, void *state, const appm__vp *vp, const appm__gather *g,
+                   unsigned worker);
+    void (*pass_end)(appm_renderer *r);
+    int (*photon_term)(const appm_renderer *r, const void *state, double j, double *out);
+    double (*bias)(const void *state, double j);
+    double (*aux_value)(const appm_renderer *r, const void *state, appm_aux which);
+} appm__estimator;
+
+/* The method's state of pixel i. */
+static void *appm__state(const appm_renderer *r, size_t i)
 {
-    return APPM__KAPPA * r_auto * pow((double)j, -1.0 / 8.0);
+    return r->state + i * r->est->state_size;
+}
+
+/* This pass's estimates from a gather (appm__gather_finish); a NaN or inf
+ * among them is counted as dropped and the pass contributes 0 instead. */
+static void appm__drop_nonfinite(appm_renderer *r, unsigned worker, double *e, double *s, double *dl)
+{
+    if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && *s - *s == 0.0 &&
+          *dl - *dl == 0.0)) {
+        r->dropped[worker]++;
+        e[0] = e[1] = e[2] = *s = *dl = 0.0;
+    }
+}
+
+/* Component c's estimates of this pass, checked. */
+static void appm__gather_estimates(appm_renderer *r, const appm__gather *g, int c, unsigned worker, double *e,
+                                   double *s, double *dl)
+{
+    appm__gather_finish(g, c, 1.0 / (double)r->M, e, s, dl);
+    appm__drop_nonfinite(r, worker, e, s, dl);
 }
 
 /* Welford update of the per-pass estimate's luminance (for the noise estimate). */
@@ -7308,8 +7174,8 @@ static double appm__mean_var(const appm__pixel *p, const double *sums, unsigned 
     return ss / ((double)(K - 1) * (double)j);
 }
 
-/* The recursive (Yamato) mean of ppm and appm after pass j:
- *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j. */
+/* The recursive (Yamato) mean of ppm and the adaptive methods after pass j:
+ *   I_j = I_{j-1} + (Ihat_j - I_{j-1}) / j   (algorithm.md 1). */
 static void appm__mean_update(double *I, uint64_t pass, const double *e)
 {
     double j = (double)pass;
@@ -7317,123 +7183,42 @@ static void appm__mean_update(double *I, uint64_t pass, const double *e)
     for (c = 0; c < 3; ++c) I[c] += (e[c] - I[c]) / j;
 }
 
-/* appm's statistics after pass j: the mean I and likewise S; dI is the weighted
- * mean over the passes that estimate the Laplacian (weight dl_weight, 0 on the
- * others); plus the photon count and the sum of r_j^2 of the bias estimate. */
-static void appm__appm_update(appm__appm_state *p, uint64_t pass, const double *e, double s, double dl,
-                              double dl_weight, uint64_t count)
+/* Whether a pixel's radius R sits at a bound of [lo, hi] (appm_stats.clamped). */
+static int appm__at_bound(double R, double lo, double hi)
 {
-    double j = (double)pass;
-    appm__mean_update(p->I, pass, e);
-    p->S += (s - p->S) / j;
-    if (dl_weight > 0.0) {
-        /* inverse-variance weighted mean (West 1979): a Laplacian from bandwidth
-         * h has variance ~ 1/h^6, so early passes with a small radius would
-         * otherwise drown the later, better estimates */
-        double d = dl - p->dI;
-        p->dI_w += dl_weight;
-        p->dI += d * (dl_weight / p->dI_w);
-        p->dI_m2 += dl_weight * d * (dl - p->dI);
-    }
-    p->N += count;
-    p->R2sum += p->R * p->R;
+    return R <= lo * (1.0 + 1e-6) || R >= hi * (1.0 - 1e-6);
 }
 
-/* ---- 10.2 The estimator table ------------------------------------------------
+/* ---- 10.2 Baselines: ppm and sppm ----------------------------------------------
  *
- * One entry per appm_method: what the method is (capability flags, the aux
- * maps it provides, its per-pixel state) and what it does (hooks).  The
- * renderer picks its entry once, in appm_renderer_create, and calls only
- * through it; a new method is one entry plus its own functions.  Hooks that a
- * method does not need are NULL.  Per pass j the renderer calls:
- *   start       once, on pass 1, after r1 is known (initialise state)
- *   radius      per pixel: the gather radius of pass j (stored in appm__vp.R)
- *   commit      per pixel, after the gather: fold it into the state (the
- *               direct term is already committed to appm__pixel)
- *   pass_end    once, after the gather (global schedules)
- * and on request:
- *   photon_term the photon part of the pixel value after j passes (0: none)
- *   bias        the estimated bias of the pixel (luminance), for the error
- *   aux_value   the RADIUS and LAPLACIAN maps (and the per-component radii)
- * and, where a method needs them:
- *   radius_c    per pixel: the caustic component's radius (appm__vp.Rc; < 0:
- *               the same as the radius; without the hook rc is 0 and every
- *               photon gathers with r) */
-enum {
-    APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
-    APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
-    APPM__CAP_LAPLACIAN = 4, /* gathers the Laplacian, on the passes appm__lap_pass   */
-    APPM__CAP_ERROR = 8      /* keeps an error estimate (appm_stats.est_relerr)      */
-};
-
-typedef struct appm__field { /* one field of a method's per-pixel state */
-    const char *name;
-    size_t offset;           /* bytes from the start of the state */
-    unsigned count;          /* values */
-    unsigned is_u64;         /* 1: uint64_t values, 0: doubles */
-} appm__field;
-
-typedef struct appm__estimator {
-    const char *name;        /* appm_method_name */
-    unsigned caps;           /* APPM__CAP_* */
-    unsigned aux;            /* bit (1 << k) for every map k of appm_aux it provides */
-    size_t state_size;       /* bytes of per-pixel state (0: none) */
-    const appm__field *fields;
-    unsigned nfields;
-    void (*start)(appm_renderer *r);
-    float (*radius)(const appm_renderer *r, const void *st);
-    void (*commit)(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
-                   unsigned worker);
-    void (*pass_end)(appm_renderer *r);
-    int (*photon_term)(const appm_renderer *r, const void *st, double j, double *out);
-    double (*bias)(const void *st, double j);
-    double (*aux_value)(const appm_renderer *r, const void *st, appm_aux which);
-    float (*radius_c)(const appm_renderer *r, const void *st);
-} appm__estimator;
-
-/* The state of pixel i. */
-static void *appm__state(const appm_renderer *r, size_t i)
-{
-    return r->state + i * r->est->state_size;
-}
-
-/* This pass's estimates from a gather (appm__gather_finish); a NaN or inf
- * among them is counted as dropped and the pass contributes 0 instead. */
-static void appm__drop_nonfinite(appm_renderer *r, unsigned worker, double *e, double *s, double *dl)
-{
-    if (!(e[0] - e[0] == 0.0 && e[1] - e[1] == 0.0 && e[2] - e[2] == 0.0 && *s - *s == 0.0 &&
-          *dl - *dl == 0.0)) {
-        r->dropped[worker]++;
-        e[0] = e[1] = e[2] = *s = *dl = 0.0;
-    }
-}
-
-static void appm__gather_estimates(appm_renderer *r, const appm__gather *g, unsigned worker, double *e, double *s,
-                                   double *dl)
-{
-    appm__gather_finish(g, 1.0 / (double)r->M, e, s, dl);
-    appm__drop_nonfinite(r, worker, e, s, dl);
-}
+ * Per-pixel state of each method (beside appm__pixel, which all share), named
+ * after its paper's symbols as pbrt-v4's SPPMPixel is.  Plain doubles and
+ * 64-bit counts only: the estimator table lists them field by field, so they
+ * can be written and read back one by one (section 13). */
 
 /* -- ppm (Knaus-Zwicker 2011): one global radius, r_{j+1}^2 = r_j^2 (j + alpha) / (j + 1)
- *    (algorithm.md 2.3), the plain mean of the Ihat_j. */
+ *    (algorithm.md 2.3), the pixel the plain mean of the Ihat_j. */
+typedef struct appm__ppm_state {
+    double I[3];    /* running mean I_j of the per-pass estimates Ihat_j (photon term) */
+} appm__ppm_state;
+
 static const appm__field appm__ppm_fields[] = {{"I", offsetof(appm__ppm_state, I), 3, 0}};
 
 static void appm__ppm_start(appm_renderer *r) { r->ppm.R2 = r->r1 * r->r1; }
 
-static float appm__ppm_radius(const appm_renderer *r, const void *st)
+static float appm__ppm_radius(const appm_renderer *r, const void *state)
 {
-    (void)st;
+    (void)state;
     return (float)sqrt(r->ppm.R2);
 }
 
-static void appm__ppm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
-                             unsigned worker)
+static void appm__ppm_commit(appm_renderer *r, appm__pixel *px, void *state, const appm__vp *vp,
+                             const appm__gather *g, unsigned worker)
 {
-    appm__ppm_state *k = (appm__ppm_state *)st;
+    appm__ppm_state *ppm = (appm__ppm_state *)state;
     double e[3], s, dl;
-    appm__gather_estimates(r, g, worker, e, &s, &dl);
-    appm__mean_update(k->I, r->pass, e);
+    appm__gather_estimates(r, g, APPM__COMP_DIFFUSE, worker, e, &s, &dl);
+    appm__mean_update(ppm->I, r->pass, e);
     appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e));
 }
 
@@ -7443,20 +7228,20 @@ static void appm__ppm_pass_end(appm_renderer *r)
     r->ppm.R2 *= ((double)r->pass + r->alpha) / ((double)r->pass + 1.0);
 }
 
-static int appm__ppm_term(const appm_renderer *r, const void *st, double j, double *out)
+static int appm__ppm_term(const appm_renderer *r, const void *state, double j, double *out)
 {
-    const appm__ppm_state *k = (const appm__ppm_state *)st;
+    const appm__ppm_state *ppm = (const appm__ppm_state *)state;
     (void)r;
     (void)j;
-    out[0] = k->I[0];
-    out[1] = k->I[1];
-    out[2] = k->I[2];
+    out[0] = ppm->I[0];
+    out[1] = ppm->I[1];
+    out[2] = ppm->I[2];
     return 1;
 }
 
-static double appm__ppm_aux(const appm_renderer *r, const void *st, appm_aux which)
+static double appm__ppm_aux(const appm_renderer *r, const void *state, appm_aux which)
 {
-    (void)st;
+    (void)state;
     (void)which; /* RADIUS only */
     return r->ppm.R;
 }
@@ -7464,6 +7249,12 @@ static double appm__ppm_aux(const appm_renderer *r, const void *st, appm_aux whi
 /* -- sppm (Hachisuka-Jensen 2009): after a pass that found m photons with flux
  *    Phi: N' = N + alpha m, R' = R sqrt(N' / (N + m)), tau' = (tau + Phi) R'^2 / R^2
  *    (algorithm.md 2.2); L = tau / (j M pi R^2). */
+typedef struct appm__sppm_state {
+    double tau[3];  /* tau: accumulated flux, rescaled to the current radius */
+    double N;       /* N: accumulated photon count (alpha-weighted, so not whole) */
+    double R;       /* R: radius of the next gather */
+} appm__sppm_state;
+
 static const appm__field appm__sppm_fields[] = {{"tau", offsetof(appm__sppm_state, tau), 3, 0},
                                                 {"N", offsetof(appm__sppm_state, N), 1, 0},
                                                 {"R", offsetof(appm__sppm_state, R), 1, 0}};
@@ -7474,147 +7265,338 @@ static void appm__sppm_start(appm_renderer *r)
     for (i = 0; i < npix; ++i) ((appm__sppm_state *)appm__state(r, i))->R = r->r1;
 }
 
-static float appm__sppm_radius(const appm_renderer *r, const void *st)
+static float appm__sppm_radius(const appm_renderer *r, const void *state)
 {
     (void)r;
-    return (float)((const appm__sppm_state *)st)->R;
+    return (float)((const appm__sppm_state *)state)->R;
 }
 
-static void appm__sppm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp,
+static void appm__sppm_commit(appm_renderer *r, appm__pixel *px, void *state, const appm__vp *vp,
                               const appm__gather *g, unsigned worker)
 {
-    appm__sppm_state *k = (appm__sppm_state *)st;
-    double R = k->R, N_new, R_new, ratio, phi[3];
+    appm__sppm_state *sppm = (appm__sppm_state *)state;
+    const appm__sums *sum = &g->sum[APPM__COMP_DIFFUSE];
+    double R = sppm->R, N_new, R_new, ratio, phi[3];
     int c;
     (void)px;
     (void)vp;
-    if (g->count == 0) return;
-    N_new = k->N + r->alpha * (double)g->count;
-    R_new = R * sqrt(N_new / (k->N + (double)g->count));
+    if (sum->count == 0) return;
+    N_new = sppm->N + r->alpha * (double)sum->count;
+    R_new = R * sqrt(N_new / (sppm->N + (double)sum->count));
     ratio = (R_new * R_new) / (R * R);
-    phi[0] = g->wf.x * g->e[0] + g->wg.x * g->eg[0]; /* the lobe's part: 0 off glossy points */
-    phi[1] = g->wf.y * g->e[1] + g->wg.y * g->eg[1];
-    phi[2] = g->wf.z * g->e[2] + g->wg.z * g->eg[2];
-    if (g->ncut > 0) { /* 10.5 (APPM__CUT 2): the flux the whole disc would have had */
-        double m = appm__cut_mass(g, R);
-        for (c = 0; c < 3; ++c) phi[c] /= m;
-    }
+    phi[0] = g->wf.x * sum->e[0] + g->wg.x * sum->eg[0]; /* the lobe's part: 0 off glossy points */
+    phi[1] = g->wf.y * sum->e[1] + g->wg.y * sum->eg[1];
+    phi[2] = g->wf.z * sum->e[2] + g->wg.z * sum->eg[2];
     if (phi[0] - phi[0] == 0.0 && phi[1] - phi[1] == 0.0 && phi[2] - phi[2] == 0.0) {
-        for (c = 0; c < 3; ++c) k->tau[c] = (k->tau[c] + phi[c]) * ratio;
-        k->N = N_new;
-        k->R = R_new;
+        for (c = 0; c < 3; ++c) sppm->tau[c] = (sppm->tau[c] + phi[c]) * ratio;
+        sppm->N = N_new;
+        sppm->R = R_new;
     } else {
         r->dropped[worker]++;
     }
 }
 
-static int appm__sppm_term(const appm_renderer *r, const void *st, double j, double *out)
+static int appm__sppm_term(const appm_renderer *r, const void *state, double j, double *out)
 {
-    const appm__sppm_state *k = (const appm__sppm_state *)st;
+    const appm__sppm_state *sppm = (const appm__sppm_state *)state;
     int c;
-    if (!(k->R > 0.0)) return 0;
-    for (c = 0; c < 3; ++c) out[c] = k->tau[c] / (j * (double)r->M * APPM__PI * k->R * k->R);
+    if (!(sppm->R > 0.0)) return 0;
+    for (c = 0; c < 3; ++c) out[c] = sppm->tau[c] / (j * (double)r->M * APPM__PI * sppm->R * sppm->R);
     return 1;
 }
 
-static double appm__sppm_aux(const appm_renderer *r, const void *st, appm_aux which)
+static double appm__sppm_aux(const appm_renderer *r, const void *state, appm_aux which)
 {
     (void)r;
     (void)which; /* RADIUS only: the radius of the next gather */
-    return ((const appm__sppm_state *)st)->R;
+    return ((const appm__sppm_state *)state)->R;
 }
 
-/* ---- 10.3 Photon components and pooled dI^2 ------------------------------------
- *
- * Components (algorithm.md 4.10).  The pixel's photon term is I = I_c + I_d,
- * caustic and diffuse photons gathered with radii r_c, r_d; independent noise,
- * so MSE = sum_k A_k / r_k^2 + (b_c r_c^2 + b_d r_d^2)^2, A_k = R(K) S_k / (M j),
- * b_k = mu2 dI_k / 2.  The bias terms add before squaring, so the radii are
- * coupled; the joint minimiser diverges where b_c b_d < 0 (the biases cancel)
- * and that sign is what a noisy Laplacian cannot tell.  (a + b)^2 <= 2a^2 + 2b^2
- * bounds the MSE by a separable sum whose minimiser is 4.3's formula per
- * component with c_f / 2 (APPM__CF_SPLIT): exact for equal biases, 5 % of MSE
- * off when one dominates.
- *
- * A price per gathered photon in place of the upper clamp (algorithm.md
- * 4.11) was derived and measured, and lost at equal time on the scenes
- * measured: it is not used.
- *
- * Pooling (algorithm.md 4.12).  dI^2 - Var(dI) averaged over the 3x3
- * neighbours on the same surface within h (appm__pool_di2), then floored;
- * computed after each Laplacian pass and kept in the state (dI2p). */
 
-/* -- appm (Kaplanyan-Dachsbacher 2013) with two photon components (10.3): the
- *    radius of section 10.1 per component, the recursive means of
- *    appm__appm_update per component; the pixel is their sum, and so is its
- *    bias (mu2 / 2) sum_k r_k^2 dI_k. */
+/* ---- 10.3 The paper's APPM (--method appm-paper; algorithm.md 4.1 - 4.8) ------
+ *
+ * Kaplanyan and Dachsbacher's selector as algorithm.md derives it, one photon
+ * component, in the order of the pseudocode of 4.8.  Per pixel and pass j:
+ *   radius (4.3, 4.7)  r_j = [c_f R(K) S / (M j mu2^2 dI^2)]^(1/6), c_f = 2/3:
+ *                      the minimiser of MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2
+ *                      (4.2), after a warm-up on the Knaus-Zwicker schedule
+ *                      r1 j^(-1/6), changing at most 2x per pass, and inside
+ *                      [RLO, RHI] r1 j^(-1/6) so that r shrinks at the optimal rate;
+ *   gather (4.4 - 4.6) within r the kernel estimate e and the second moment s,
+ *                      within 2h the 5-point finite-difference Laplacian dl with
+ *                      bandwidth h_j = kappa r1 j^(-1/8), every pass;
+ *   update             the running means I, S and dI (weight 1/j each).
+ * The image is Ld / j + I; the bias estimate (mu2 / 2) dI mean(r^2). */
+typedef struct appm__paper_state {
+    double I[3];    /* running mean I_j of the photon term */
+    double S;       /* running mean of the kernel's second moment s_j (4.4) */
+    double dI;      /* running mean of the per-vertex Laplacians, DeltaI (4.5) */
+    double R;       /* r_j, the radius of the last gather */
+    double R2sum;   /* sum of r_j^2, for the bias estimate */
+    uint64_t N;     /* photons found so far */
+} appm__paper_state;
+
+static const appm__field appm__paper_fields[] = {
+    {"I", offsetof(appm__paper_state, I), 3, 0},   {"S", offsetof(appm__paper_state, S), 1, 0},
+    {"dI", offsetof(appm__paper_state, dI), 1, 0}, {"R", offsetof(appm__paper_state, R), 1, 0},
+    {"R2sum", offsetof(appm__paper_state, R2sum), 1, 0}, {"N", offsetof(appm__paper_state, N), 1, 1}};
+
+/* 4.3: the closed-form minimiser of MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2
+ * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M j mu2^2 dI^2), for Mj = M j.  Takes
+ * dI^2; returns 0 when the formula has no finite positive answer (S or dI^2
+ * zero, NaN, inf). */
+static double appm__r_opt(double S, double dI2, double Mj, double cf)
+{
+    double den = Mj * APPM__MU2 * APPM__MU2 * dI2, r6;
+    if (!(S > 0.0) || !(den > 0.0) || !(den < HUGE_VAL)) return 0.0;
+    r6 = cf * APPM__RK * S / den;
+    return (r6 > 0.0 && r6 < HUGE_VAL) ? pow(r6, 1.0 / 6.0) : 0.0;
+}
+
+/* j^(-1/6) of the renderer's pass, by which the radius and its bounds shrink:
+ * computed once a pass (pow is most of the radius's cost), or here for a
+ * caller between passes. */
+static double appm__pass_shrink(const appm_renderer *r)
+{
+    return r->shrink_pass == r->pass && r->shrink > 0.0 ? r->shrink : pow((double)r->pass, -1.0 / 6.0);
+}
+
+/* 4.7: the bounds of pass j, [RLO, RHI] r1 j^(-1/6) (shrink = j^(-1/6)). */
+static void appm__paper_bounds(double r1, double shrink, double *lo, double *hi)
+{
+    *lo = APPM__RLO * r1 * shrink;
+    *hi = APPM__RHI * r1 * shrink;
+}
+
+/* 4.8 step 2: the radius of pass j from the statistics after j - 1 passes. */
+static double appm__paper_radius_of(const appm__paper_state *p, double r1, uint64_t M, uint64_t j, double shrink)
+{
+    double lo, hi, rad = r1 * shrink; /* Knaus-Zwicker (alpha = 2/3): the warm-up and the fallback */
+    appm__paper_bounds(r1, shrink, &lo, &hi);
+    if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI - p->dI == 0.0 && p->dI != 0.0) {
+        rad = appm__r_opt(p->S, p->dI * p->dI, (double)M * (double)j, APPM__CF);
+        if (rad == 0.0) rad = hi;                 /* dI^2 so small that r^6 overflows: flat */
+        if (rad < 0.5 * p->R) rad = 0.5 * p->R; /* at most a factor 2 per pass */
+        if (rad > 2.0 * p->R) rad = 2.0 * p->R;
+    }
+    if (!(rad >= lo)) rad = lo; /* also catches NaN */
+    return rad > hi ? hi : rad;
+}
+
+static float appm__paper_radius(const appm_renderer *r, const void *state)
+{
+    return (float)appm__paper_radius_of((const appm__paper_state *)state, r->r1, r->M, r->pass,
+                                        appm__pass_shrink(r));
+}
+
+/* 4.6: the Laplacian's bandwidth h_j = kappa r1 j^(-1/8), every pass. */
+static double appm__paper_bandwidth(const appm_renderer *r)
+{
+    return APPM__KAPPA * r->r1 * pow((double)r->pass, -1.0 / 8.0);
+}
+
+/* 4.8 step 4: this pass's e, s and dl (divided by M) into the running means. */
+static void appm__paper_commit(appm_renderer *r, appm__pixel *px, void *state, const appm__vp *vp,
+                               const appm__gather *g, unsigned worker)
+{
+    appm__paper_state *p = (appm__paper_state *)state;
+    double j = (double)r->pass, e[3], s, dl;
+    appm__gather_estimates(r, g, APPM__COMP_DIFFUSE, worker, e, &s, &dl);
+    appm__mean_update(p->I, r->pass, e);
+    p->S += (s - p->S) / j;
+    p->dI += (dl - p->dI) / j;
+    p->N += g->sum[APPM__COMP_DIFFUSE].count;
+    p->R = vp->R;
+    p->R2sum += p->R * p->R;
+    appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e));
+}
+
+/* appm_stats.clamped: the fraction of this pass's gathering pixels whose
+ * radius sits at a bound. */
+static void appm__paper_pass_end(appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    uint64_t n = 0, at = 0;
+    double lo, hi;
+    appm__paper_bounds(r->r1, appm__pass_shrink(r), &lo, &hi);
+    for (i = 0; i < npix; ++i) {
+        if (r->vp[i].segs == 0 || r->vp[i].segs >= r->max_depth) continue;
+        n++;
+        at += (uint64_t)appm__at_bound(((const appm__paper_state *)appm__state(r, i))->R, lo, hi);
+    }
+    r->stats.clamped = n ? (double)at / (double)n : 0.0;
+}
+
+static int appm__paper_term(const appm_renderer *r, const void *state, double j, double *out)
+{
+    const appm__paper_state *p = (const appm__paper_state *)state;
+    (void)r;
+    (void)j;
+    out[0] = p->I[0];
+    out[1] = p->I[1];
+    out[2] = p->I[2];
+    return 1;
+}
+
+/* 4.2: the bias (mu2 / 2) dI r^2, with r^2 the mean over the passes. */
+static double appm__paper_bias(const void *state, double j)
+{
+    const appm__paper_state *p = (const appm__paper_state *)state;
+    return 0.5 * APPM__MU2 * p->dI * (p->R2sum / j);
+}
+
+static double appm__paper_aux(const appm_renderer *r, const void *state, appm_aux which)
+{
+    const appm__paper_state *p = (const appm__paper_state *)state;
+    (void)r;
+    return which == APPM_AUX_LAPLACIAN ? p->dI : p->R;
+}
+
+
+/* ---- 10.4 appm: the paper's selector and six steps on top (the default) --------
+ *
+ * appm is 10.3 with these steps, each named where the code takes it and each
+ * kept for the reason measured (docs/algorithm.md 5.1 - 5.6, the figures
+ * in docs/experiments.md):
+ *   step 1  two photon components, caustic (the last bounce specular) and
+ *           diffuse, each with its own statistics and radius, c_f halved:
+ *           a caustic over a smooth floor no longer shares the floor's wide
+ *           kernel (toy of 5.1: RMSE at the caustic 0.052 -> 0.024);
+ *   step 2  the Laplacian on the warm-up passes and then every 8th, with
+ *           h = kappa r_auto j^(-1/8) from the automatic radius, averaged with
+ *           inverse-variance weights h^6: a wide bandwidth on a few passes
+ *           beats a narrow one on every pass at the same cost (5.2);
+ *   step 3  dI^2 corrected for its noise and pooled over the 3x3 neighbours
+ *           on the same surface: a noisy dI^2 otherwise narrows the radius
+ *           where photons are sparse (5.3);
+ *   step 4  a pixel that has seen fewer than KMIN photons doubles its radius
+ *           each pass (a k-nearest-neighbour radius) instead of waiting, and
+ *           the caustic radius follows the diffuse one until it has seen KMIN
+ *           caustic photons (5.4);
+ *   step 5  bounds from both r1 and r_auto, the diffuse component's upper one
+ *           3 (not 2): 0.94x the RMSE on CornellBox-Original at an equal
+ *           instruction count, at most 2.2 % worse on three other scenes (5.5);
+ *   step 6  the kernel cut at a corner: where the surface ends inside the
+ *           kernel, the estimate is divided by the kernel's mass on it: the
+ *           seams of a box were 8 % dark; equal-pass RMSE 0.73x on
+ *           CornellBox-Original (5.6).
+ * The pixel's photon term is the sum of the components', and so is its bias
+ * (mu2 / 2) sum_c r_c^2 dI_c (the biases add before they are squared). */
+typedef struct appm__adaptive_stats { /* the statistics of one photon component */
+    double I[3];    /* running mean I_j of the photon term */
+    double S;       /* running mean of the kernel second moment s_j */
+    double dI;      /* weighted running mean of the per-pass Laplacians (step 2) */
+    double dI_w;    /* sum of their weights (h_j / r_auto)^6 */
+    double dI_m2;   /* weighted Welford M2 of the per-pass Laplacians (their spread, step 3) */
+    double R;       /* radius r_j of the last gather */
+    double R2sum;   /* sum of r_j^2, for the bias estimate */
+    uint64_t N;     /* photons found so far */
+    double dI2p;    /* step 3: dI^2 pooled over neighbours after the last Laplacian pass (0: none) */
+} appm__adaptive_stats;
+
+typedef struct appm__adaptive_px { /* appm's per-pixel state: one record per photon component (step 1) */
+    appm__adaptive_stats comp[APPM__NCOMP]; /* [APPM__COMP_DIFFUSE], [APPM__COMP_CAUSTIC] */
+} appm__adaptive_px;
+
 #define APPM__KOFF(c, f) \
-    (offsetof(appm__appm_px, k) + (c) * sizeof(appm__appm_state) + offsetof(appm__appm_state, f))
+    (offsetof(appm__adaptive_px, comp) + (c) * sizeof(appm__adaptive_stats) + offsetof(appm__adaptive_stats, f))
 #define APPM__KFIELDS(c, x) \
     {"I" x, APPM__KOFF(c, I), 3, 0}, {"S" x, APPM__KOFF(c, S), 1, 0}, {"dI" x, APPM__KOFF(c, dI), 1, 0}, \
         {"dI_w" x, APPM__KOFF(c, dI_w), 1, 0}, {"dI_m2" x, APPM__KOFF(c, dI_m2), 1, 0}, \
         {"R" x, APPM__KOFF(c, R), 1, 0}, {"R2sum" x, APPM__KOFF(c, R2sum), 1, 0}, {"N" x, APPM__KOFF(c, N), 1, 1}, \
         {"dI2p" x, APPM__KOFF(c, dI2p), 1, 0}
-static const appm__field appm__appm_fields[] = {APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"),
-                                                APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c")};
+static const appm__field appm__adaptive_fields[] = {APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"),
+                                                    APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c")};
 
-/* j^(-1/6) of the renderer's pass: computed once a pass (pow is most of the
- * radius's cost), or here for a caller between passes. */
-static double appm__pass_sj(const appm_renderer *r)
+/* -- Step 1: two components.  I = I_c + I_d, the caustic and diffuse photons
+ * gathered with radii r_c, r_d; independent noise, so MSE = sum_k A_k / r_k^2 +
+ * (b_c r_c^2 + b_d r_d^2)^2, A_k = R(K) S_k / (M j), b_k = mu2 dI_k / 2.  The
+ * bias terms add before squaring, so the radii are coupled; the joint
+ * minimiser diverges where b_c b_d < 0 (the biases cancel), and that sign is
+ * what a noisy Laplacian cannot tell.  (a + b)^2 <= 2a^2 + 2b^2 bounds the MSE by
+ * a separable sum whose minimiser is 4.3's formula per component with c_f / 2
+ * (APPM__CF_SPLIT): exact for equal biases, 5 % of MSE off when one dominates
+ * (algorithm.md 5.1). */
+
+/* -- Step 2: the Laplacian's schedule.  Whether pass j estimates the Laplacian.
+ * Its gather reaches 2h, several times the area of the radiance kernel, so it
+ * is the expensive part of a pass.  For a fixed cost f h^2 (f: the fraction of
+ * passes that estimate it), the variance of the running mean dI goes as
+ * 1 / (f h^6) = 1 / (cost h^4): a wide bandwidth on a few passes beats a narrow
+ * one on every pass.  The price is smoothing bias in dI, of which r only feels
+ * the cube root.  Every pass of the warm-up estimates it, then every
+ * APPM__LAP_EVERY-th. */
+static int appm__lap_pass(uint64_t j)
 {
-    return r->sj_pass == r->pass && r->sj > 0.0 ? r->sj : pow((double)r->pass, -1.0 / 6.0);
+    return j <= APPM__WARMUP || (j - APPM__WARMUP) % APPM__LAP_EVERY == 0;
 }
 
-/* Each component's upper bound: APPM__RHI_DIFFUSE or APPM__RHI. */
-static double appm__comp_rhi(int c) { return c == APPM__COMP_DIFFUSE ? APPM__RHI_DIFFUSE : APPM__RHI; }
-
-static double appm__appm_comp_radius(const appm_renderer *r, const appm__appm_px *a, int c)
+/* Laplacian passes among the first j. */
+static uint64_t appm__lap_count(uint64_t j)
 {
-    const appm__appm_state *p = &a->k[c];
-    return appm__appm_radius_sj(r->r1, r->r_auto, r->M, r->pass, appm__pass_sj(r), appm__comp_rhi(c), p,
-                                APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
+    return j <= APPM__WARMUP ? j : APPM__WARMUP + (j - APPM__WARMUP) / APPM__LAP_EVERY;
 }
 
-static float appm__appm_radius_hook(const appm_renderer *r, const void *st)
+/* The bandwidth of pass j: h_j = kappa r_auto j^(-1/8), from the automatic
+ * radius r_auto (section 12) rather than r1, shrinking more slowly than r
+ * (docs/algorithm.md 4.6).  It deliberately does not follow the pixel's
+ * adaptive radius: with h = kappa r, a sharp feature seen through a wide h
+ * looks flat (|dI| falls like h^-4), which licenses a wider r, which keeps h
+ * wide - a start with a large radius would never come back. */
+static double appm__lap_h(double r_auto, uint64_t j)
 {
-    return (float)appm__appm_comp_radius(r, (const appm__appm_px *)st, APPM__COMP_DIFFUSE);
+    return APPM__KAPPA * r_auto * pow((double)j, -1.0 / 8.0);
 }
 
-/* The caustic radius; until the pixel has seen APPM__KMIN caustic photons it
- * is the diffuse one (returned as -1: "the same"): widening in search of
- * caustic light that may not exist would widen every gather of a scene
- * without any. */
-static float appm__appm_radius_caustic(const appm_renderer *r, const void *st)
+static double appm__adaptive_bandwidth(const appm_renderer *r)
 {
-    const appm__appm_px *a = (const appm__appm_px *)st;
-    if (a->k[APPM__COMP_CAUSTIC].N < APPM__KMIN) return -1.0f;
-    return (float)appm__appm_comp_radius(r, a, APPM__COMP_CAUSTIC);
+    return appm__lap_pass(r->pass) ? appm__lap_h(r->r_auto, r->pass) : 0.0;
 }
 
-/* The component with the larger photon term (ties: diffuse): the one whose
- * radius the RADIUS map shows and clamped= counts. */
-static int appm__appm_dominant(const appm__appm_px *a)
+/* The statistics after pass j: the mean I and likewise S, as in 10.3; dI the
+ * weighted mean over the passes that estimate the Laplacian (weight dl_weight,
+ * 0 on the others); the photon count and the sum of r_j^2 of the bias estimate. */
+static void appm__adaptive_update(appm__adaptive_stats *p, uint64_t pass, const double *e, double s, double dl,
+                                  double dl_weight, uint64_t count)
 {
-    return appm__lumd(a->k[APPM__COMP_CAUSTIC].I) > appm__lumd(a->k[APPM__COMP_DIFFUSE].I) ? APPM__COMP_CAUSTIC
-                                                                                          : APPM__COMP_DIFFUSE;
+    double j = (double)pass;
+    appm__mean_update(p->I, pass, e);
+    p->S += (s - p->S) / j;
+    if (dl_weight > 0.0) {
+        /* inverse-variance weighted mean (West 1979): a Laplacian from bandwidth
+         * h has variance ~ 1/h^6, and h shrinks with j, so equal weights would
+         * let the later, noisier estimates dominate */
+        double d = dl - p->dI;
+        p->dI_w += dl_weight;
+        p->dI += d * (dl_weight / p->dI_w);
+        p->dI_m2 += dl_weight * d * (dl - p->dI);
+    }
+    p->N += count;
+    p->R2sum += p->R * p->R;
 }
 
-static void appm__appm_commit(appm_renderer *r, appm__pixel *px, void *st, const appm__vp *vp, const appm__gather *g,
-                              unsigned worker)
+/* -- Step 3: dI^2 without its noise, pooled.  dI^2 - Var(dI): an unbiased
+ * estimate of the square of the true Laplacian (may be negative). */
+static double appm__di2_unbiased(const appm__adaptive_stats *p, uint64_t n)
 {
-    appm__appm_px *a = (appm__appm_px *)st;
-    double e[3], s, dl, ec[3], sc, dlc, hr = g->h / r->r_auto, w = g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0;
-    a->k[APPM__COMP_DIFFUSE].R = vp->R;
-    a->k[APPM__COMP_CAUSTIC].R = vp->Rc;
-    appm__gather_estimates(r, g, worker, e, &s, &dl);
-    appm__gather_finish_caustic(g, 1.0 / (double)r->M, ec, &sc, &dlc);
-    appm__drop_nonfinite(r, worker, ec, &sc, &dlc);
-    appm__appm_update(&a->k[APPM__COMP_DIFFUSE], r->pass, e, s, dl, w, g->count);
-    appm__appm_update(&a->k[APPM__COMP_CAUSTIC], r->pass, ec, sc, dlc, w, g->ccount);
-    appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e) + appm__lumd(ec));
+    double c = p->dI * p->dI;
+    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
+    return c;
 }
 
-/* 10.4: dI^2 of each component of pixel i (into out) pooled over the pixels of the
+/* dI^2 for the radius formula.  The square of a noisy mean overestimates the
+ * square of its expectation: E[dI^2] = dI_true^2 + Var(dI).  So the variance of
+ * the weighted mean is taken off, keeping at least APPM__DI_FLOOR of dI^2: where
+ * the Laplacian is mostly noise, the radius grows (less noise, more bias)
+ * instead of collapsing.  With per-pass variances c / w_j, the weighted Welford
+ * sum M2 estimates (n - 1) c, and the mean's variance is c / sum(w). */
+static double appm__di2(const appm__adaptive_stats *p, uint64_t n)
+{
+    double d2 = p->dI * p->dI, c = appm__di2_unbiased(p, n);
+    return c > APPM__DI_FLOOR * d2 ? c : APPM__DI_FLOOR * d2;
+}
+
+/* dI^2 of each component of pixel i (into out) pooled over the pixels of the
  * (2 APPM__POOL + 1)^2 window whose visible points this pass lie within h of
  * its own on the same surface (normals within 25 degrees) and that have seen
  * APPM__KMIN photons of the component: the mean of their unbiased estimates
@@ -7629,17 +7611,17 @@ static void appm__pool_di2(const appm_renderer *r, size_t i, uint64_t n, double 
         for (dx = -APPM__POOL; dx <= APPM__POOL; ++dx) {
             int64_t x = x0 + dx, y = y0 + dy;
             size_t q;
-            const appm__appm_px *a;
+            const appm__adaptive_px *a;
             appm__v3 d;
             if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
             q = (size_t)(y * (int64_t)r->w + x);
-            a = (const appm__appm_px *)appm__state(r, q);
+            a = (const appm__adaptive_px *)appm__state(r, q);
             d = appm__sub(r->vp[q].x, v->x);
             if (q != i && (r->vp[q].segs == 0 || !((double)appm__dot(d, d) < h * h) ||
                            !(appm__dot(r->vp[q].n, v->n) > 0.9f)))
                 continue;
             for (c = 0; c < APPM__NCOMP; ++c) {
-                const appm__appm_state *p = &a->k[c];
+                const appm__adaptive_stats *p = &a->comp[c];
                 if (q != i && p->N < APPM__KMIN) continue;
                 sum[c] += appm__di2_unbiased(p, n);
                 sq[c] += p->dI * p->dI;
@@ -7652,7 +7634,7 @@ static void appm__pool_di2(const appm_renderer *r, size_t i, uint64_t n, double 
     }
 }
 
-/* After a Laplacian pass j, each pixel's pooled dI^2 (appm__appm_state.dI2p)
+/* After a Laplacian pass j, each pixel's pooled dI^2 (appm__adaptive_stats.dI2p)
  * from the state after j passes and this pass's visible points; read by the
  * radii of the passes up to the next Laplacian pass.  Each pixel writes only
  * its own dI2p, which no pixel reads here. */
@@ -7665,94 +7647,168 @@ static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
     (void)worker;
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
-        appm__appm_px *a = (appm__appm_px *)appm__state(r, i);
+        appm__adaptive_px *a = (appm__adaptive_px *)appm__state(r, i);
         int c;
-        if (!r->vp[i].segs || (a->k[0].N < APPM__KMIN && a->k[1].N < APPM__KMIN)) continue;
+        if (!r->vp[i].segs || (a->comp[0].N < APPM__KMIN && a->comp[1].N < APPM__KMIN)) continue;
         appm__pool_di2(r, i, n, h, out);
-        for (c = 0; c < APPM__NCOMP; ++c) a->k[c].dI2p = out[c];
+        for (c = 0; c < APPM__NCOMP; ++c) a->comp[c].dI2p = out[c];
     }
 }
 
+/* -- Steps 4 and 5: the radius.  The bounds of pass j: [RLO min(r1, r_auto),
+ * rhi max(r1, r_auto)] j^(-1/6), rhi being APPM__RHI or APPM__RHI_DIFFUSE
+ * (shrink = j^(-1/6)). */
+static void appm__adaptive_bounds(double r1, double r_auto, double shrink, double rhi, double *lo, double *hi)
+{
+    *lo = APPM__RLO * (r1 < r_auto ? r1 : r_auto) * shrink;
+    *hi = rhi * (r1 > r_auto ? r1 : r_auto) * shrink;
+}
+
+/* Radius for pass j from one component's statistics after j-1 passes: 10.3's
+ * radius with steps 3 - 5.  r1 is the initial radius, r_auto the automatic
+ * one, cf the constant of the radius formula, di2 the dI^2 to use (< 0 or NaN:
+ * the component's own, appm__di2), rhi the upper bound's factor.  Never NaN, 0
+ * or inf: every path ends inside the bounds of appm__adaptive_bounds. */
+static double appm__adaptive_radius(double r1, double r_auto, uint64_t M, uint64_t j, double shrink, double rhi,
+                                    const appm__adaptive_stats *p, double cf, double di2)
+{
+    double lo, hi, rad = r1 * shrink;
+    appm__adaptive_bounds(r1, r_auto, shrink, rhi, &lo, &hi);
+    if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
+        /* step 4: too few photons seen to estimate anything: widen, as a k-nearest-
+         * neighbour radius would, instead of waiting at a radius that may be
+         * the reason so few photons arrive */
+        rad = 2.0 * p->R;
+        return rad > hi ? hi : (rad >= lo ? rad : lo);
+    }
+    if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
+        if (!(di2 >= 0.0)) di2 = appm__di2(p, appm__lap_count(j - 1));
+        rad = appm__r_opt(p->S, di2, (double)M * (double)j, cf);
+        if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
+        if (p->R > 0.0) {
+            if (rad < 0.5 * p->R) rad = 0.5 * p->R;
+            if (rad > 2.0 * p->R) rad = 2.0 * p->R;
+        }
+    }
+    if (!(rad >= lo)) rad = lo; /* also catches NaN */
+    if (rad > hi) rad = hi;
+    return rad;
+}
+
+/* The same with j^(-1/6) computed here and the caustic bound (the tests' entry). */
+APPM__UNUSED static double appm__adaptive_radius_at(double r1, double r_auto, uint64_t M, uint64_t j,
+                                                    const appm__adaptive_stats *p, double cf, double di2)
+{
+    return appm__adaptive_radius(r1, r_auto, M, j, pow((double)j, -1.0 / 6.0), APPM__RHI, p, cf, di2);
+}
+
+/* Step 5: each component's upper bound, APPM__RHI_DIFFUSE or APPM__RHI. */
+static double appm__comp_rhi(int c) { return c == APPM__COMP_DIFFUSE ? APPM__RHI_DIFFUSE : APPM__RHI; }
+
+static double appm__adaptive_comp_radius(const appm_renderer *r, const appm__adaptive_px *a, int c)
+{
+    const appm__adaptive_stats *p = &a->comp[c];
+    return appm__adaptive_radius(r->r1, r->r_auto, r->M, r->pass, appm__pass_shrink(r), appm__comp_rhi(c), p,
+                                 APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
+}
+
+static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *state)
+{
+    return (float)appm__adaptive_comp_radius(r, (const appm__adaptive_px *)state, APPM__COMP_DIFFUSE);
+}
+
+/* Step 4: the caustic radius; until the pixel has seen APPM__KMIN caustic
+ * photons it is the diffuse one (returned as -1: "the same"): widening in
+ * search of caustic light that may not exist would widen every gather of a
+ * scene without any. */
+static float appm__adaptive_radius_caustic(const appm_renderer *r, const void *state)
+{
+    const appm__adaptive_px *a = (const appm__adaptive_px *)state;
+    if (a->comp[APPM__COMP_CAUSTIC].N < APPM__KMIN) return -1.0f;
+    return (float)appm__adaptive_comp_radius(r, a, APPM__COMP_CAUSTIC);
+}
+
+/* The component with the larger photon term (ties: diffuse): the one whose
+ * radius the RADIUS map shows and clamped= counts. */
+static int appm__adaptive_dominant(const appm__adaptive_px *a)
+{
+    return appm__lumd(a->comp[APPM__COMP_CAUSTIC].I) > appm__lumd(a->comp[APPM__COMP_DIFFUSE].I)
+               ? APPM__COMP_CAUSTIC
+               : APPM__COMP_DIFFUSE;
+}
+
+static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state, const appm__vp *vp,
+                                  const appm__gather *g, unsigned worker)
+{
+    appm__adaptive_px *a = (appm__adaptive_px *)state;
+    double e[APPM__NCOMP][3], s[APPM__NCOMP], dl[APPM__NCOMP], hr = g->h / r->r_auto;
+    double w = g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0; /* step 2's weight (h / r_auto)^6 */
+    int c;
+    a->comp[APPM__COMP_DIFFUSE].R = vp->R;
+    a->comp[APPM__COMP_CAUSTIC].R = vp->Rc;
+    for (c = 0; c < APPM__NCOMP; ++c) appm__gather_estimates(r, g, c, worker, e[c], &s[c], &dl[c]);
+    for (c = 0; c < APPM__NCOMP; ++c)
+        appm__adaptive_update(&a->comp[c], r->pass, e[c], s[c], dl[c], w, g->sum[c].count);
+    appm__pass_value(r, px,
+                     (double)appm__lum(vp->ld) + appm__lumd(e[APPM__COMP_DIFFUSE]) +
+                         appm__lumd(e[APPM__COMP_CAUSTIC]));
+}
+
 /* appm_stats.clamped: the fraction of this pass's gathering pixels whose
- * dominant component's radius sits at a bound of its own (appm__appm_bounds_sj); after a
- * Laplacian pass, also the pooled dI^2 (10.4). */
-static void appm__appm_pass_end(appm_renderer *r)
+ * dominant component's radius sits at a bound of its own (appm__adaptive_bounds);
+ * after a Laplacian pass, also the pooled dI^2 (step 3). */
+static void appm__adaptive_pass_end(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     uint64_t n = 0, at = 0;
-    double lo, hi[APPM__NCOMP], sj = appm__pass_sj(r);
+    double lo, hi[APPM__NCOMP], shrink = appm__pass_shrink(r);
     int c;
     if (r->lap_h > 0.0 && r->pass >= APPM__WARMUP) appm__parallel_for(r->threads, r->h, appm__pool_task, r);
-    for (c = 0; c < APPM__NCOMP; ++c) appm__appm_bounds_sj(r->r1, r->r_auto, sj, appm__comp_rhi(c), &lo, &hi[c]);
+    for (c = 0; c < APPM__NCOMP; ++c)
+        appm__adaptive_bounds(r->r1, r->r_auto, shrink, appm__comp_rhi(c), &lo, &hi[c]);
     for (i = 0; i < npix; ++i) {
-        const appm__appm_px *a = (const appm__appm_px *)appm__state(r, i);
-        double R;
+        const appm__adaptive_px *a = (const appm__adaptive_px *)appm__state(r, i);
         if (r->vp[i].segs == 0 || r->vp[i].segs >= r->max_depth) continue;
-        c = appm__appm_dominant(a);
-        R = a->k[c].R;
+        c = appm__adaptive_dominant(a);
         n++;
-        at += (R <= lo * (1.0 + 1e-6) || R >= hi[c] * (1.0 - 1e-6)) ? 1u : 0u;
+        at += (uint64_t)appm__at_bound(a->comp[c].R, lo, hi[c]);
     }
     r->stats.clamped = n ? (double)at / (double)n : 0.0;
 }
 
-static int appm__appm_term(const appm_renderer *r, const void *st, double j, double *out)
+static int appm__adaptive_term(const appm_renderer *r, const void *state, double j, double *out)
 {
-    const appm__appm_px *a = (const appm__appm_px *)st;
+    const appm__adaptive_px *a = (const appm__adaptive_px *)state;
     int c;
     (void)r;
     (void)j;
-    for (c = 0; c < 3; ++c) out[c] = a->k[APPM__COMP_DIFFUSE].I[c] + a->k[APPM__COMP_CAUSTIC].I[c];
+    for (c = 0; c < 3; ++c) out[c] = a->comp[APPM__COMP_DIFFUSE].I[c] + a->comp[APPM__COMP_CAUSTIC].I[c];
     return 1;
 }
 
-/* The bias terms of the components add (before any squaring: 10.3). */
-static double appm__appm_bias(const void *st, double j)
+/* The bias terms of the components add (before any squaring: step 1). */
+static double appm__adaptive_bias(const void *state, double j)
 {
-    const appm__appm_px *a = (const appm__appm_px *)st;
+    const appm__adaptive_px *a = (const appm__adaptive_px *)state;
     double b = 0.0;
     int c;
-    for (c = 0; c < APPM__NCOMP; ++c) b += 0.5 * APPM__MU2 * a->k[c].dI * (a->k[c].R2sum / j);
+    for (c = 0; c < APPM__NCOMP; ++c) b += 0.5 * APPM__MU2 * a->comp[c].dI * (a->comp[c].R2sum / j);
     return b;
 }
 
-static double appm__appm_aux(const appm_renderer *r, const void *st, appm_aux which)
+static double appm__adaptive_aux(const appm_renderer *r, const void *state, appm_aux which)
 {
-    const appm__appm_px *a = (const appm__appm_px *)st;
+    const appm__adaptive_px *a = (const appm__adaptive_px *)state;
     (void)r;
     switch (which) {
-    case APPM_AUX_LAPLACIAN: return a->k[APPM__COMP_DIFFUSE].dI + a->k[APPM__COMP_CAUSTIC].dI;
-    case APPM_AUX_RADIUS_CAUSTIC: return a->k[APPM__COMP_CAUSTIC].R;
-    case APPM_AUX_RADIUS_DIFFUSE: return a->k[APPM__COMP_DIFFUSE].R;
-    default: return a->k[appm__appm_dominant(a)].R;
+    case APPM_AUX_LAPLACIAN: return a->comp[APPM__COMP_DIFFUSE].dI + a->comp[APPM__COMP_CAUSTIC].dI;
+    case APPM_AUX_RADIUS_CAUSTIC: return a->comp[APPM__COMP_CAUSTIC].R;
+    case APPM_AUX_RADIUS_DIFFUSE: return a->comp[APPM__COMP_DIFFUSE].R;
+    default: return a->comp[appm__adaptive_dominant(a)].R;
     }
 }
 
-#define APPM__AUX_BIT(k) (1u << (k))
-
-static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
-    /* APPM_METHOD_APPM */
-    {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_LAPLACIAN | APPM__CAP_ERROR,
-     APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_LAPLACIAN) |
-         APPM__AUX_BIT(APPM_AUX_ERROR) | APPM__AUX_BIT(APPM_AUX_RADIUS_CAUSTIC) |
-         APPM__AUX_BIT(APPM_AUX_RADIUS_DIFFUSE),
-     sizeof(appm__appm_px), appm__appm_fields, sizeof appm__appm_fields / sizeof appm__appm_fields[0], NULL,
-     appm__appm_radius_hook, appm__appm_commit, appm__appm_pass_end, appm__appm_term, appm__appm_bias,
-     appm__appm_aux, appm__appm_radius_caustic},
-    /* APPM_METHOD_PPM */
-    {"ppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE),
-     sizeof(appm__ppm_state), appm__ppm_fields, sizeof appm__ppm_fields / sizeof appm__ppm_fields[0],
-     appm__ppm_start, appm__ppm_radius, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL, appm__ppm_aux,
-     NULL},
-    /* APPM_METHOD_SPPM */
-    {"sppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS), sizeof(appm__sppm_state), appm__sppm_fields,
-     sizeof appm__sppm_fields / sizeof appm__sppm_fields[0], appm__sppm_start, appm__sppm_radius,
-     appm__sppm_commit, NULL, appm__sppm_term, NULL, appm__sppm_aux, NULL},
-    /* APPM_METHOD_PT: section 11; its whole path sum is the "direct" term */
-    {"pt", APPM__CAP_ERROR, APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_ERROR), 0, NULL, 0, NULL,
-     NULL, NULL, NULL, NULL, NULL, NULL, NULL}};
-
-/* ---- 10.5 The kernel cut at a corner (docs/algorithm.md 4.19) --------------
+/* -- Step 6: the kernel cut at a corner (docs/algorithm.md 5.6).
  *
  * Where x's surface ends inside the kernel - a wall meeting the floor, the edge
  * of a box's top - the same-surface test keeps the other surface's photons out,
@@ -7780,12 +7836,12 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * meet x's, does not count), only if one of them has its foot on the line
  * within APPM__CUT_FOOT pixel widths of x's (the other surface meets x's only
  * where its pixels show it: beyond the end of a box's face, its plane extended
- * would cut a floor that goes on; measured against ray-cast masses, 4.19) and
+ * would cut a floor that goes on; measured against ray-cast masses) and
  * only within reach of x (the largest radius of
  * the gather, or 2h on the passes that estimate the Laplacian).  The
  * candidates are the pixels of the (2W+1)^2 window, W = reach / (pixel width)
  * + 1 (at most APPM__CUT_WIN), that
- * have a 4-neighbour on another surface (vp.edge, set with the radii): a
+ * have a 4-neighbour on another surface (vp.edge_dist, set with the radii): a
  * line between two pixels separates two 4-neighbours.  Several lines (the
  * APPM__CUT_LINES nearest): the product of what each leaves (exact for one, and for two perpendicular lines
  * of which one passes through x).  m is floored at APPM__CUT_MMIN.
@@ -7797,10 +7853,9 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * the lines sought within 2h on the passes that estimate it.  Not corrected:
  * the first-order remainder R grad L . c (c the centroid of the kept part),
  * and a surface that ends where no pixel sees its neighbour (the image's
- * border, a hidden side).  APPM__CUT (section 10's constants): 0 off, 1 appm,
- * 2 every photon method; ppm and sppm keep their papers' estimators (both
- * measured in 4.19). */
-/* 10.5: whether a 4-neighbour of pixel i sees a surface whose normal is 60
+ * border, a hidden side).  Only appm cuts (APPM__CAP_CUT): ppm, sppm and
+ * appm-paper keep their papers' estimators. */
+/* Whether a 4-neighbour of pixel i sees a surface whose normal is 60
  * degrees or more from i's (APPM__NORMAL_COS): a corner or an edge passes
  * between them.  Any line between two pixels also separates two 4-neighbours. */
 static uint8_t appm__edge_flag(const appm_renderer *r, size_t i)
@@ -7819,20 +7874,20 @@ static uint8_t appm__edge_flag(const appm_renderer *r, size_t i)
     return 0;
 }
 
-/* The edge flags of a row and, in vp.edge, each pixel's distance along the row
+/* The edge flags of a row and, in vp.edge_dist, each pixel's distance along the row
  * to the nearest flagged one (capped at 255): a sweep each way. */
 static void appm__edge_row(appm_renderer *r, uint32_t row)
 {
     appm__vp *v = &r->vp[(size_t)row * r->w];
     uint32_t x, d = 255;
-    for (x = 0; x < r->w; ++x) v[x].edge = appm__edge_flag(r, (size_t)row * r->w + x) ? 0 : 255;
+    for (x = 0; x < r->w; ++x) v[x].edge_dist = appm__edge_flag(r, (size_t)row * r->w + x) ? 0 : 255;
     for (x = 0; x < r->w; ++x) {
-        d = v[x].edge == 0 ? 0 : (d < 255 ? d + 1 : 255);
-        v[x].edge = (uint8_t)d;
+        d = v[x].edge_dist == 0 ? 0 : (d < 255 ? d + 1 : 255);
+        v[x].edge_dist = (uint8_t)d;
     }
     for (x = r->w, d = 255; x-- > 0;) {
-        d = v[x].edge == 0 ? 0 : (d < 255 ? d + 1 : 255);
-        if (d < v[x].edge) v[x].edge = (uint8_t)d;
+        d = v[x].edge_dist == 0 ? 0 : (d < 255 ? d + 1 : 255);
+        if (d < v[x].edge_dist) v[x].edge_dist = (uint8_t)d;
     }
 }
 
@@ -7854,15 +7909,15 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     xa = x0 - W < 0 ? 0 : x0 - W;
     xb = x0 + W >= (int64_t)r->w ? (int64_t)r->w - 1 : x0 + W;
     for (y = ya; y <= yb; ++y) {
-        /* vp.edge of (x0, y): the distance to the nearest flagged pixel of row y; beyond W
+        /* vp.edge_dist of (x0, y): the distance to the nearest flagged pixel of row y; beyond W
          * this row's part of the window has no candidate */
-        if (r->vp[(size_t)(y * (int64_t)r->w + x0)].edge > W) continue;
+        if (r->vp[(size_t)(y * (int64_t)r->w + x0)].edge_dist > W) continue;
         for (x = xa; x <= xb; ++x) {
             const appm__vp *q;
             float c, at, ab, al, g0, d, hq, ux, uy, sq;
             appm__v3 xq;
             q = &r->vp[(size_t)(y * (int64_t)r->w + x)];
-            if (q->edge != 0 || q == v) continue; /* a plane's pixels next to the line give it */
+            if (q->edge_dist != 0 || q == v) continue; /* a plane's pixels next to the line give it */
             c = appm__dot(v->n, q->n);
             if (c >= APPM__NORMAL_COS) continue; /* the same surface for the gather */
             at = appm__dot(q->n, g->t);
@@ -7907,6 +7962,51 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
         ls[best] = 0;
     }
 }
+
+
+
+/* ---- 10.5 The estimator table --------------------------------------------------
+ *
+ * One entry per appm_method (10.1 says what the fields and hooks are). */
+#define APPM__AUX_BIT(k) (1u << (k))
+
+static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
+    [APPM_METHOD_PPM] = {"ppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE),
+                         sizeof(appm__ppm_state), appm__ppm_fields,
+                         sizeof appm__ppm_fields / sizeof appm__ppm_fields[0], appm__ppm_start, NULL,
+                         appm__ppm_radius, NULL, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL,
+                         appm__ppm_aux},
+    [APPM_METHOD_SPPM] = {"sppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS), sizeof(appm__sppm_state),
+                          appm__sppm_fields, sizeof appm__sppm_fields / sizeof appm__sppm_fields[0],
+                          appm__sppm_start, NULL, appm__sppm_radius, NULL, appm__sppm_commit, NULL,
+                          appm__sppm_term, NULL, appm__sppm_aux},
+    [APPM_METHOD_APPM_PAPER] = {"appm-paper", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_ERROR,
+                                APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) |
+                                    APPM__AUX_BIT(APPM_AUX_LAPLACIAN) | APPM__AUX_BIT(APPM_AUX_ERROR),
+                                sizeof(appm__paper_state), appm__paper_fields,
+                                sizeof appm__paper_fields / sizeof appm__paper_fields[0], NULL,
+                                appm__paper_bandwidth, appm__paper_radius, NULL, appm__paper_commit,
+                                appm__paper_pass_end, appm__paper_term, appm__paper_bias, appm__paper_aux},
+    [APPM_METHOD_APPM] = {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_CUT | APPM__CAP_ERROR,
+                          APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) |
+                              APPM__AUX_BIT(APPM_AUX_LAPLACIAN) | APPM__AUX_BIT(APPM_AUX_ERROR) |
+                              APPM__AUX_BIT(APPM_AUX_RADIUS_CAUSTIC) | APPM__AUX_BIT(APPM_AUX_RADIUS_DIFFUSE),
+                          sizeof(appm__adaptive_px), appm__adaptive_fields,
+                          sizeof appm__adaptive_fields / sizeof appm__adaptive_fields[0], NULL,
+                          appm__adaptive_bandwidth, appm__adaptive_radius_diffuse, appm__adaptive_radius_caustic,
+                          appm__adaptive_commit, appm__adaptive_pass_end, appm__adaptive_term,
+                          appm__adaptive_bias, appm__adaptive_aux},
+    /* section 11; its whole path sum is the "direct" term */
+    [APPM_METHOD_PT] = {"pt", APPM__CAP_ERROR, APPM__AUX_BIT(APPM_AUX_VARIANCE) | APPM__AUX_BIT(APPM_AUX_ERROR), 0,
+                        NULL, 0, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL, NULL}};
+
+/* ---- 10.6 The gather --------------------------------------------------------------
+ *
+ * Per row of pixels, after the photon map of the pass is built: commit the
+ * pass's direct term, gather the photons near the visible point (with the
+ * kernel cut's lines where the method cuts), and hand the sums to the
+ * method's commit.  A pixel without a visible point commits an empty gather:
+ * its pass contributes 0. */
 
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
@@ -8201,8 +8301,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->mem.diag = diag;
     r->scene = scene;
     r->est = &appm__estimators[c.method];
-    r->cut = (r->est->caps & APPM__CAP_PHOTONS) &&
-             (APPM__CUT == 2 || (APPM__CUT == 1 && (r->est->caps & APPM__CAP_BIWEIGHT)));
+    r->cut = (r->est->caps & APPM__CAP_CUT) != 0;
     r->direct = c.direct;
     r->w = c.width;
     r->h = c.height;
@@ -8260,7 +8359,7 @@ APPM_API const char *appm_renderer_last_error(const appm_renderer *r)
     return r ? r->last_error : "";
 }
 
-/* Every pixel's gather radius of this pass, from its method (10.2). */
+/* Every pixel's gather radius of this pass, from its method (10.5). */
 static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
@@ -8354,10 +8453,9 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
         if (r->r1_auto) r->r1 = r->r_auto;
         if (est->start) est->start(r);
     }
-    r->lap_h = (est->caps & APPM__CAP_LAPLACIAN) && appm__lap_pass(r->pass) ? appm__lap_h(r->r_auto, r->pass)
-                                                                             : 0.0;
-    r->sj = pow((double)r->pass, -1.0 / 6.0);
-    r->sj_pass = r->pass;
+    r->lap_h = est->bandwidth ? est->bandwidth(r) : 0.0;
+    r->shrink = pow((double)r->pass, -1.0 / 6.0);
+    r->shrink_pass = r->pass;
     appm__parallel_for(r->threads, r->h, appm__radius_task, r);
     cell = appm__median_gather_radius(r);
     t[0] = appm__seconds();

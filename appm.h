@@ -194,19 +194,28 @@ typedef void (*appm_log_fn)(void *user, const char *file, unsigned line, const c
 
 /* ---- Configuration --------------------------------------------------------- */
 
-/* appm also renormalises its kernel where the surface ends inside it (a wall
- * meeting the floor, a box's edge), found from the neighbouring pixels' planes:
- * without it every seam is dark by the kernel's missing part (docs/algorithm.md
- * 4.19).  ppm and sppm keep their papers' estimators. */
+/* The methods.  appm-paper is Kaplanyan and Dachsbacher's adaptive radius as
+ * its derivation gives it (docs/algorithm.md 4.1 - 4.8: one photon component,
+ * the recursive finite-difference Laplacian on every pass, the closed-form
+ * radius and its safeguards), for teaching and comparison.  appm, the default,
+ * is that selector with six measured steps on top (docs/algorithm.md 5): two
+ * photon components (caustic and diffuse) with their own radii, a Laplacian
+ * on fewer passes with a wider bandwidth, its square corrected for noise and
+ * pooled over neighbouring pixels, a k-nearest-neighbour widening where photons
+ * are sparse, per-component bounds, and the kernel renormalised where the
+ * surface ends inside it (a wall meeting the floor, a box's edge: without it
+ * every seam is dark by the kernel's missing part).  ppm and sppm keep their
+ * papers' estimators. */
 typedef enum appm_method {
-    APPM_METHOD_APPM = 0, /* adaptive bandwidth, per pixel and pass (default)       */
-    APPM_METHOD_PPM,      /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */
-    APPM_METHOD_SPPM,     /* per-pixel N, tau, R statistics (Hachisuka-Jensen)       */
-    APPM_METHOD_PT,       /* unbiased path tracer with NEE + MIS, for references    */
+    APPM_METHOD_APPM = 0,   /* adaptive bandwidth, per pixel and pass (default)       */
+    APPM_METHOD_PPM,        /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */
+    APPM_METHOD_SPPM,       /* per-pixel N, tau, R statistics (Hachisuka-Jensen)       */
+    APPM_METHOD_PT,         /* unbiased path tracer with NEE + MIS, for references    */
+    APPM_METHOD_APPM_PAPER, /* the paper's adaptive bandwidth, one photon component   */
     APPM_METHOD_COUNT
 } appm_method;
 
-/* "appm", "ppm", "sppm", "pt"; NULL for a value that is not a method. */
+/* "appm", "ppm", "sppm", "pt", "appm-paper"; NULL for a value that is not a method. */
 APPM_API const char *appm_method_name(appm_method m);
 
 /* The method called `name` (as appm_method_name spells it) into *out;

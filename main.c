@@ -108,12 +108,15 @@ static const char *const RENDER_HELP =
     "  --light point X Y Z R G B    add a point light (intensity W/sr per channel); repeatable\n"
     "                        (a bare .obj that emits nothing and gets neither is lit by a\n"
     "                        white environment of radiance 1, with a warning)\n"
-    "  --method M            appm (adaptive radius, default) | ppm (global radius schedule,\n"
-    "                        Knaus-Zwicker) | sppm (per-pixel statistics, Hachisuka-Jensen)\n"
-    "                        | pt (unbiased path tracer, for references)\n"
+    "  --method M            appm (adaptive radius, default) | appm-paper (the adaptive radius\n"
+    "                        as Kaplanyan-Dachsbacher derive it: one photon component) | ppm\n"
+    "                        (global radius schedule, Knaus-Zwicker) | sppm (per-pixel\n"
+    "                        statistics, Hachisuka-Jensen) | pt (unbiased path tracer, for\n"
+    "                        references)\n"
     "  --time SECONDS        stop after this wall time (the pass in flight finishes)\n"
     "  --passes N            stop after N passes (with neither: 60 s)\n"
-    "  --until-error E       stop when the estimated relative error falls below E (appm, pt)\n"
+    "  --until-error E       stop when the estimated relative error falls below E (appm,\n"
+    "                        appm-paper, pt)\n"
     "  --photons N           photon paths emitted per pass [width * height]\n"
     "  --radius R            initial radius in scene units [2 pixel widths at the visible points]\n"
     "  --alpha A             radius shrinkage for ppm/sppm, 0 < A <= 1 (1: fixed radius) [2/3]\n"
@@ -138,7 +141,7 @@ static const char *const RENDER_HELP =
     "                        --threads); --passes counts the whole render, --time this run\n"
     "  -q, --quiet           no progress output and no warnings\n";
 
-/* "appm, ppm, sppm or pt": the library's method names, for messages. */
+/* "appm, ppm, sppm, pt or appm-paper": the library's method names, for messages. */
 static const char *method_list(char *buf, size_t size)
 {
     size_t len = 0;

@@ -113,7 +113,7 @@ done
 
 # ---- render: every method to every format -------------------------------------
 
-for method in appm ppm sppm pt; do
+for method in appm appm-paper ppm sppm pt; do
     for ext in png ppm pfm; do
         out=$T/r-$method.$ext
         small "$SCENE" --method "$method" -o "$out"
@@ -419,7 +419,7 @@ done
 # a checkpoint of other options or another scene, or a damaged one, is refused.
 
 CK="--size 16x12 --photons 2000 --threads 2 -q"
-for m in appm ppm sppm pt; do
+for m in appm appm-paper ppm sppm pt; do
     # shellcheck disable=SC2086 # $CK is a word list
     run "$APPM" render "$SCENE" $CK --method $m --passes 6 -o "$T/ck-whole-$m.pfm"
     # shellcheck disable=SC2086

@@ -471,6 +471,7 @@ int main(void)
         test_renderer(scene, APPM_METHOD_SPPM, "sppm");
         test_renderer(scene, APPM_METHOD_PPM, "ppm");
         test_renderer(scene, APPM_METHOD_PT, "pt");
+        test_renderer(scene, APPM_METHOD_APPM_PAPER, "appm-paper");
         test_checkpoint(scene);
     }
     appm_scene_destroy(scene);

@@ -7,8 +7,8 @@
  *      L(0) = 0.25,   Delta L = (1/4) 50 (2 + 2) = 50,   S = rho E[Psi^2] = 1/3.
  * Every test drives the renderer's own functions: appm__gather_photon (the
  * per-photon kernel and finite-difference sums), appm__gather_finish (the
- * normalisation), appm__r_opt / appm__appm_radius (the selector) and
- * appm__appm_update (the recursive means).
+ * normalisation), appm__r_opt / appm__adaptive_radius_at (the selector) and
+ * appm__adaptive_update (the recursive means).
  */
 #include "../appm.c"
 #include "check.h"
@@ -59,9 +59,9 @@ static void toy_pass(appm__rng *rng, unsigned M, float R, float h, int biweight,
         appm__photon p = toy_photon(rng, flat);
         appm__gather_photon(&g, &p, R * R, Rg * Rg);
     }
-    appm__gather_finish(&g, 1.0 / M, ev, s, dl);
+    appm__gather_finish(&g, APPM__COMP_DIFFUSE, 1.0 / M, ev, s, dl);
     *e = ev[1];
-    if (count) *count = g.count;
+    if (count) *count = g.sum[APPM__COMP_DIFFUSE].count;
 }
 
 /* Kernel normalisation: on a flat field (Psi = 1) both kernels must return
@@ -158,7 +158,7 @@ static void test_glossy_laplacian(void)
             p.wi[1] = (int16_t)appm__quant(b, 32767.0f);
             appm__gather_photon(&g, &p, R * R, 4.0f * h * h);
         }
-        appm__gather_finish(&g, 1.0 / M, ev, &sv, &dl);
+        appm__gather_finish(&g, APPM__COMP_DIFFUSE, 1.0 / M, ev, &sv, &dl);
         sum += dl;
         sum2 += dl * dl;
         esum += ev[1];
@@ -223,7 +223,7 @@ static void test_optimal_radius(void)
         }
         for (i = 0; i < NR; ++i) {
             double e[3], s, dl;
-            appm__gather_finish(&g[i], 1.0 / M, e, &s, &dl);
+            appm__gather_finish(&g[i], APPM__COMP_DIFFUSE, 1.0 / M, e, &s, &dl);
             mse[i] += (e[1] - TOY_L0) * (e[1] - TOY_L0) / T;
         }
     }
@@ -258,7 +258,7 @@ static void test_selector_guards(void)
     for (j = 1; j <= 1000; j *= 10)
         for (a = 0; a < sizeof vals / sizeof vals[0]; ++a)
             for (b = 0; b < sizeof vals / sizeof vals[0]; ++b) {
-                appm__appm_state p;
+                appm__adaptive_stats p;
                 double n_values[3] = {0.0, 1.0, 1e9}, rk = r1 * pow((double)j, -1.0 / 6.0);
                 int k;
                 for (k = 0; k < 3; ++k) {
@@ -268,7 +268,7 @@ static void test_selector_guards(void)
                     p.dI = vals[b];
                     p.N = (uint64_t)n_values[k];
                     p.R = k == 2 ? 0.02 : 0.0;
-                    r = appm__appm_radius(r1, r1, 1000, j + 5, &p, APPM__CF, -1.0);
+                    r = appm__adaptive_radius_at(r1, r1, 1000, j + 5, &p, APPM__CF, -1.0);
                     rk = r1 * pow((double)(j + 5), -1.0 / 6.0);
                     if (!(r > 0.0) || !(r < HUGE_VAL) || r < APPM__RLO * rk * (1 - 1e-12) ||
                         r > APPM__RHI * rk * (1 + 1e-12))
@@ -277,12 +277,12 @@ static void test_selector_guards(void)
             }
     CHECK_MSG(bad == 0, "%d degenerate inputs gave a radius outside the clamps", bad);
     {
-        appm__appm_state p;
+        appm__adaptive_stats p;
         memset(&p, 0, sizeof p);
         p.S = 1.0;
         p.dI = (double)NAN;
         p.N = 100;
-        CHECK(appm__appm_radius(r1, r1, 1000, 10, &p, APPM__CF, -1.0) == r1 * pow(10.0, -1.0 / 6.0));
+        CHECK(appm__adaptive_radius_at(r1, r1, 1000, 10, &p, APPM__CF, -1.0) == r1 * pow(10.0, -1.0 / 6.0));
         CHECK(appm__r_opt(0.0, 50.0, 1e4, 2.0) == 0.0);
         CHECK(appm__r_opt(1.0, 0.0, 1e4, 2.0) == 0.0);
         CHECK(appm__r_opt(1.0, (double)NAN, 1e4, 2.0) == 0.0);
@@ -290,15 +290,15 @@ static void test_selector_guards(void)
     /* flat lighting (dI -> 0) must give the largest radius, a strong curvature
      * a small one: the direction of the adaptation */
     {
-        appm__appm_state p;
+        appm__adaptive_stats p;
         double rk = r1 * pow(10.0, -1.0 / 6.0);
         memset(&p, 0, sizeof p);
         p.S = 1.0;
         p.N = 100;
         p.dI = 1e-12;
-        CHECK_NEAR(appm__appm_radius(r1, r1, 1000, 10, &p, APPM__CF, -1.0), APPM__RHI * rk, 1e-15);
+        CHECK_NEAR(appm__adaptive_radius_at(r1, r1, 1000, 10, &p, APPM__CF, -1.0), APPM__RHI * rk, 1e-15);
         p.dI = 1e12;
-        CHECK_NEAR(appm__appm_radius(r1, r1, 1000, 10, &p, APPM__CF, -1.0), APPM__RLO * rk, 1e-15);
+        CHECK_NEAR(appm__adaptive_radius_at(r1, r1, 1000, 10, &p, APPM__CF, -1.0), APPM__RLO * rk, 1e-15);
     }
 }
 
@@ -312,7 +312,7 @@ static void test_component_guards(void)
     static const double pooled[] = {-1.0, 0.0, 1e-300, 1.0, 1e300, HUGE_VAL, (double)NAN};
     static appm_renderer fr;
     const size_t nv = sizeof vals / sizeof vals[0];
-    appm__appm_px a;
+    appm__adaptive_px a;
     size_t x, y, k, pd, calls = 0;
     uint64_t j;
     int bad = 0;
@@ -328,24 +328,24 @@ static void test_component_guards(void)
                         double lo, hi[2], r[2];
                         int c, same;
                         memset(&a, 0, sizeof a);
-                        a.k[0].S = vals[x];
-                        a.k[0].dI = vals[y];
-                        a.k[1].S = vals[y];
-                        a.k[1].dI = vals[(x + k) % nv];
-                        a.k[0].N = k == 0 ? 0u : (k == 1 ? 7u : 1000000000u);
-                        a.k[1].N = k == 2 ? 0u : 1000000000u;
-                        a.k[0].R = k == 2 ? 0.02 : 0.0;
-                        a.k[1].R = vals[(y + k) % nv] > 0.0 ? 0.03 : 0.0;
-                        a.k[0].dI_m2 = vals[(y + 3) % nv];
-                        a.k[0].dI_w = vals[(x + 5) % nv];
-                        a.k[0].dI2p = pooled[pd];
-                        a.k[1].dI2p = pooled[(pd + k) % (sizeof pooled / sizeof pooled[0])];
+                        a.comp[0].S = vals[x];
+                        a.comp[0].dI = vals[y];
+                        a.comp[1].S = vals[y];
+                        a.comp[1].dI = vals[(x + k) % nv];
+                        a.comp[0].N = k == 0 ? 0u : (k == 1 ? 7u : 1000000000u);
+                        a.comp[1].N = k == 2 ? 0u : 1000000000u;
+                        a.comp[0].R = k == 2 ? 0.02 : 0.0;
+                        a.comp[1].R = vals[(y + k) % nv] > 0.0 ? 0.03 : 0.0;
+                        a.comp[0].dI_m2 = vals[(y + 3) % nv];
+                        a.comp[0].dI_w = vals[(x + 5) % nv];
+                        a.comp[0].dI2p = pooled[pd];
+                        a.comp[1].dI2p = pooled[(pd + k) % (sizeof pooled / sizeof pooled[0])];
                         fr.pass = j + 5;
                         for (c = 0; c < 2; ++c) /* each component's own upper bound */
-                            appm__appm_bounds_sj(fr.r1, fr.r_auto, pow((double)fr.pass, -1.0 / 6.0),
+                            appm__adaptive_bounds(fr.r1, fr.r_auto, pow((double)fr.pass, -1.0 / 6.0),
                                                  appm__comp_rhi(c), &lo, &hi[c]);
-                        r[0] = appm__appm_radius_hook(&fr, &a);
-                        r[1] = appm__appm_radius_caustic(&fr, &a);
+                        r[0] = appm__adaptive_radius_diffuse(&fr, &a);
+                        r[1] = appm__adaptive_radius_caustic(&fr, &a);
                         same = r[1] == -1.0;
                         if (same) r[1] = r[0]; /* "the same as the diffuse one", within its bounds */
                         for (c = 0; c < 2; ++c)
@@ -358,15 +358,15 @@ static void test_component_guards(void)
               (unsigned long)calls);
     /* with no caustic photons the caustic radius is the diffuse one (no wider gather) */
     memset(&a, 0, sizeof a);
-    a.k[0].S = 1.0;
-    a.k[0].dI = 5000.0; /* r_opt = 0.017, inside the clamps [0.0006, 0.024] */
-    a.k[0].N = 100;
+    a.comp[0].S = 1.0;
+    a.comp[0].dI = 5000.0; /* r_opt = 0.017, inside the clamps [0.0006, 0.024] */
+    a.comp[0].N = 100;
     fr.pass = 20;
-    CHECK(appm__appm_radius_caustic(&fr, &a) == -1.0f);
+    CHECK(appm__adaptive_radius_caustic(&fr, &a) == -1.0f);
     /* a pooled dI^2 is what the radius uses: 64 times the own one, half the radius */
-    a.k[0].dI2p = 64.0 * appm__di2(&a.k[0], 0);
-    CHECK_NEAR(appm__appm_radius_hook(&fr, &a),
-               0.5 * appm__appm_radius(fr.r1, fr.r_auto, fr.M, fr.pass, &a.k[0], APPM__CF_SPLIT, -1.0), 1e-6);
+    a.comp[0].dI2p = 64.0 * appm__di2(&a.comp[0], 0);
+    CHECK_NEAR(appm__adaptive_radius_diffuse(&fr, &a),
+               0.5 * appm__adaptive_radius_at(fr.r1, fr.r_auto, fr.M, fr.pass, &a.comp[0], APPM__CF_SPLIT, -1.0), 1e-6);
 }
 
 /* The full progressive loop on the toy (M = 1000 photons a pass): APPM must be
@@ -380,7 +380,7 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
     double se = 0.0;
     int run;
     for (run = 0; run < runs; ++run) {
-        appm__appm_state p;
+        appm__adaptive_stats p;
         appm__ppm_state kz;
         appm__rng rng;
         int j;
@@ -391,13 +391,13 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
             double e[3], s, dl, ev;
             uint64_t count;
             float h;
-            p.R = adaptive ? appm__appm_radius(r1, TOY_RB, 1000, (uint64_t)j, &p, APPM__CF, -1.0)
+            p.R = adaptive ? appm__adaptive_radius_at(r1, TOY_RB, 1000, (uint64_t)j, &p, APPM__CF, -1.0)
                            : r1 * pow((double)j, -1.0 / 6.0); /* KZ with alpha = 2/3 */
             h = adaptive && appm__lap_pass((uint64_t)j) ? (float)appm__lap_h(TOY_RB, (uint64_t)j) : 0.0f;
             toy_pass(&rng, 1000, (float)p.R, h, adaptive, 0, &ev, &s, &dl, &count);
             e[0] = e[1] = e[2] = ev;
             if (adaptive)
-                appm__appm_update(&p, (uint64_t)j, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0, count);
+                appm__adaptive_update(&p, (uint64_t)j, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0, count);
             else
                 appm__mean_update(kz.I, (uint64_t)j, e);
         }
@@ -425,6 +425,67 @@ static void test_progressive_toy(void)
     CHECK_MSG(amax < 1.5 * amin, "appm not insensitive to r1: %.4f .. %.4f", amin, amax);
     CHECK_MSG(a1 < p1 && a3 < p3, "appm (%.4f, %.4f) not better than badly tuned KZ (%.4f, %.4f)", a1,
               a3, p1, p3);
+}
+
+/* The same loop through the paper's own method (--method appm-paper,
+ * docs/algorithm.md 4.8): its radius and bandwidth hooks and its commit on a
+ * renderer struct holding what they read.  Its bounds follow r1 alone, so r1 =
+ * 0.03 caps the radius at 2 r1 j^(-1/6), below the optimum: insensitivity is
+ * asked of r1 = 0.1 and 0.3, and the radius of r1 = 0.1 must come near the
+ * optimum of 4.3, r = (c_f R(K) S / (M j mu2^2 DeltaI^2))^(1/6). */
+static double toy_paper(double r1, int passes, int runs, uint64_t seed, double *rmean)
+{
+    static appm_renderer fr;
+    double se = 0.0, rs = 0.0;
+    int run;
+    memset(&fr, 0, sizeof fr);
+    fr.M = 1000;
+    fr.r1 = r1;
+    for (run = 0; run < runs; ++run) {
+        appm__paper_state p;
+        appm__pixel px;
+        appm__rng rng;
+        int j;
+        memset(&p, 0, sizeof p);
+        memset(&px, 0, sizeof px);
+        appm__rng_seed(&rng, seed, (uint64_t)run, APPM__DOMAIN_TEST, 11);
+        for (j = 1; j <= passes; ++j) {
+            appm__vp vp;
+            appm__gather g;
+            unsigned i;
+            float h, reach;
+            fr.pass = (uint64_t)j;
+            memset(&vp, 0, sizeof vp);
+            vp.R = appm__paper_radius(&fr, &p);
+            h = (float)appm__paper_bandwidth(&fr);
+            toy_gather_init(&g, vp.R, h, 1);
+            reach = vp.R > 2.0f * h ? vp.R : 2.0f * h;
+            for (i = 0; i < 1000; ++i) {
+                appm__photon ph = toy_photon(&rng, 0);
+                appm__gather_photon(&g, &ph, vp.R * vp.R, reach * reach);
+            }
+            appm__paper_commit(&fr, &px, &p, &vp, &g, 0);
+        }
+        se += (p.I[1] - TOY_L0) * (p.I[1] - TOY_L0);
+        rs += p.R;
+    }
+    *rmean = rs / runs;
+    return sqrt(se / runs);
+}
+
+static void test_paper_toy(void)
+{
+    int passes = 500, runs = check_quick() ? 24 : 48;
+    double r[3], a1 = toy_paper(0.1, passes, runs, 23, &r[0]), a3 = toy_paper(0.3, passes, runs, 23, &r[1]);
+    double p3 = toy_progressive(0.3, 0, passes, runs, 23);
+    double ropt = appm__r_opt(TOY_S, TOY_LAPLACIAN * TOY_LAPLACIAN, 1000.0 * passes, APPM__CF);
+    printf("toy, appm-paper after %d passes: RMSE %.4f (r1 0.1), %.4f (r1 0.3); kz 0.3: %.4f; mean r %.4f, "
+           "%.4f against the optimum %.4f\n",
+           passes, a1, a3, p3, r[0], r[1], ropt);
+    CHECK_MSG(a1 < 1.5 * a3 && a3 < 1.5 * a1, "appm-paper not insensitive to r1: %.4f, %.4f", a1, a3);
+    CHECK_MSG(a3 < p3, "appm-paper (%.4f) not better than badly tuned KZ (%.4f)", a3, p3);
+    CHECK_MSG(fabs(r[0] / ropt - 1.0) < 0.25 && fabs(r[1] / ropt - 1.0) < 0.25,
+              "appm-paper's radius %.4f / %.4f is not within 25 %% of the optimum %.4f", r[0], r[1], ropt);
 }
 
 /* ---- Two photon components (docs/algorithm.md 4.10) ----------------------------
@@ -478,7 +539,7 @@ static double toy2_progressive(int split, int passes, int runs, uint64_t seed, d
     fr.M = 1000;
     fr.r1 = fr.r_auto = TOY_RB;
     for (run = 0; run < runs; ++run) {
-        appm__appm_px a;
+        appm__adaptive_px a;
         appm__pixel px;
         appm__rng rng;
         int j;
@@ -492,8 +553,8 @@ static double toy2_progressive(int split, int passes, int runs, uint64_t seed, d
             float h, reach;
             fr.pass = (uint64_t)j;
             memset(&vp, 0, sizeof vp);
-            vp.R = appm__appm_radius_hook(&fr, &a);
-            vp.Rc = appm__appm_radius_caustic(&fr, &a);
+            vp.R = appm__adaptive_radius_diffuse(&fr, &a);
+            vp.Rc = appm__adaptive_radius_caustic(&fr, &a);
             if (vp.Rc < 0.0f) vp.Rc = vp.R;
             h = appm__lap_pass((uint64_t)j) ? (float)appm__lap_h(TOY_RB, (uint64_t)j) : 0.0f;
             toy_gather_init(&g, vp.R, h, 1);
@@ -505,15 +566,15 @@ static double toy2_progressive(int split, int passes, int runs, uint64_t seed, d
                 appm__photon p = toy2_photon(&rng, split);
                 appm__gather_photon(&g, &p, vp.R * vp.R, reach * reach);
             }
-            appm__appm_commit(&fr, &px, &a, &vp, &g, 0);
+            appm__adaptive_commit(&fr, &px, &a, &vp, &g, 0);
         }
         {
             double t[3];
-            appm__appm_term(&fr, &a, (double)passes, t);
+            appm__adaptive_term(&fr, &a, (double)passes, t);
             se += (t[1] - TOY2_L) * (t[1] - TOY2_L);
         }
-        rr[0] = a.k[APPM__COMP_DIFFUSE].R;
-        rr[1] = a.k[APPM__COMP_CAUSTIC].R;
+        rr[0] = a.comp[APPM__COMP_DIFFUSE].R;
+        rr[1] = a.comp[APPM__COMP_CAUSTIC].R;
     }
     return sqrt(se / runs);
 }
@@ -662,11 +723,11 @@ static double caustic_radius_ratio(const appm_scene *s, uint64_t seed, double *c
     if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) return -1.0;
     for (i = 0; i < 64; ++i) appm_renderer_pass(r);
     for (k = 0; k < (size_t)64 * 64; ++k) {
-        const appm__appm_px *a = (const appm__appm_px *)appm__state(r, k);
+        const appm__adaptive_px *a = (const appm__adaptive_px *)appm__state(r, k);
         const appm__vp *vp = &r->vp[k];
         if (vp->segs == 0 || !(vp->n.y > 0.9f) || vp->x.y > 0.05f) continue;
-        lc[n] = appm__lumd(a->k[APPM__COMP_CAUSTIC].I);
-        rad[n++] = a->k[appm__appm_dominant(a)].R;
+        lc[n] = appm__lumd(a->comp[APPM__COMP_CAUSTIC].I);
+        rad[n++] = a->comp[appm__adaptive_dominant(a)].R;
     }
     *clamped = r->stats.clamped;
     appm_renderer_destroy(r);
@@ -750,7 +811,7 @@ static void test_components_deterministic(void)
         { /* past the Laplacian pass 12: pooled dI^2 in the state */
             size_t q, pooled = 0;
             for (q = 0; q < (size_t)24 * 24; ++q)
-                pooled += ((const appm__appm_px *)appm__state(r, q))->k[APPM__COMP_DIFFUSE].dI2p > 0.0;
+                pooled += ((const appm__adaptive_px *)appm__state(r, q))->comp[APPM__COMP_DIFFUSE].dI2p > 0.0;
             CHECK_MSG(pooled > 100, "%lu pixels with a pooled dI^2", (unsigned long)pooled);
         }
         appm_renderer_destroy(r);
@@ -890,7 +951,7 @@ static void test_cut_laplacian(void)
                 appm__photon p = toy_photon(&rng, 1);
                 if (p.x < 0.04f) appm__gather_photon(&g, &p, 0.01f, 0.01f);
             }
-            appm__gather_finish(&g, 1.0 / 4000, ev, &s, &dl);
+            appm__gather_finish(&g, APPM__COMP_DIFFUSE, 1.0 / 4000, ev, &s, &dl);
             se += ev[1];
             se2 += ev[1] * ev[1];
             sd += dl;
@@ -943,10 +1004,10 @@ static void test_cut_lines(void)
         } else if (kind < 4) {
             CHECK_MSG(g.ncut == 0, "kind %d: %d lines, not 0", kind, g.ncut);
         }
-        if (kind < 4) CHECK(vp[i].edge == 0 && vp[3 * 10 + 1].edge == 3 && vp[3 * 10 + 5].edge == 0);
+        if (kind < 4) CHECK(vp[i].edge_dist == 0 && vp[3 * 10 + 1].edge_dist == 3 && vp[3 * 10 + 5].edge_dist == 0);
         if (kind == 4) { /* beyond the wall's end (its nearest pixel 3 rows off): no line; at its foot: one */
             size_t j = 1 * 10 + 4;
-            CHECK(vp[i].edge != 0 && vp[1 * 10 + 6].edge == 0);
+            CHECK(vp[i].edge_dist != 0 && vp[1 * 10 + 6].edge_dist == 0);
             cut_lines_at(&r, j, &g);
             CHECK_MSG(g.ncut == 1, "kind 4, row 1: %d lines, not 1", g.ncut);
             cut_lines_at(&r, 4 * 10 + 4, &g);
@@ -995,7 +1056,7 @@ static void test_corner_bias(void)
         appm_renderer_image(r, &im);
         memcpy(t == 2 ? ref : img[t], im.rgb, sizeof ref);
         if (t == 0)
-            for (i = 0; i < 32 * 32; ++i) edge[i] = r->vp[i].segs && r->vp[i].edge == 0;
+            for (i = 0; i < 32 * 32; ++i) edge[i] = r->vp[i].segs && r->vp[i].edge_dist == 0;
         appm_renderer_destroy(r);
     }
     for (i = 0; i < 32 * 32; ++i) {
@@ -1026,6 +1087,7 @@ int main(void)
     test_selector_guards();
     test_component_guards();
     test_progressive_toy();
+    test_paper_toy();
     test_two_components_toy();
     test_scene_insensitivity();
     test_caustic_radii();

@@ -1,4 +1,4 @@
-/* tests/t_estimator.c - the method seam (appm.c section 10.2).
+/* tests/t_estimator.c - the method seam (appm.c section 10.5).
  *
  * What is checked, and against what:
  *   1. Names: appm_method_parse(appm_method_name(m)) == m for every method;
@@ -12,6 +12,9 @@
  *      entry is swapped for a copy (another name, the same hooks) renders the
  *      same image bit for bit, and one whose radius hook is replaced renders
  *      with that radius (the RADIUS map shows it).
+ *   5. appm-paper (the paper's selector, 10.3): its radius case by case
+ *      against the pseudocode of docs/algorithm.md 4.8, and in a render its
+ *      bandwidth on every pass, its bounds, no kernel cut, its RADIUS map.
  */
 #include "../appm.c"
 #include "check.h"
@@ -28,6 +31,7 @@ static void test_names(void)
     }
     CHECK(strcmp(appm_method_name(APPM_METHOD_APPM), "appm") == 0);
     CHECK(strcmp(appm_method_name(APPM_METHOD_PT), "pt") == 0);
+    CHECK(strcmp(appm_method_name(APPM_METHOD_APPM_PAPER), "appm-paper") == 0);
     CHECK(appm_method_name(APPM_METHOD_COUNT) == NULL);
     CHECK(appm_method_name((appm_method)-1) == NULL);
     out = APPM_METHOD_PPM;
@@ -58,7 +62,7 @@ static void test_entries(void)
         if (e->caps & APPM__CAP_PHOTONS) CHECK_MSG(e->radius && e->commit, "%s: a photon method without hooks", e->name);
         if (e->aux & (APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_LAPLACIAN)))
             CHECK_MSG(e->aux_value != NULL, "%s: declares a RADIUS or LAPLACIAN map without aux_value", e->name);
-        if (e->caps & APPM__CAP_LAPLACIAN)
+        if (e->bandwidth)
             CHECK_MSG(e->caps & APPM__CAP_BIWEIGHT, "%s: a Laplacian needs the smooth kernel", e->name);
     }
 }
@@ -140,15 +144,87 @@ static void test_seam(appm_scene *s)
     appm_renderer_destroy(b);
 }
 
+/* appm-paper's radius (appm.c 10.3) case by case against the pseudocode of
+ * docs/algorithm.md 4.8: the Knaus-Zwicker radius r1 j^(-1/6) during the
+ * warm-up, with too few photons, and with no usable Laplacian; the closed form
+ * where it applies; at most 2x per pass; inside [0.1, 2] r1 j^(-1/6). */
+static void test_paper_radius(void)
+{
+    const double r1 = 0.01, sh = pow(10.0, -1.0 / 6.0), kz = r1 * sh, lo = APPM__RLO * kz, hi = APPM__RHI * kz;
+    appm__paper_state p;
+    double ropt;
+    memset(&p, 0, sizeof p);
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 3, pow(3.0, -1.0 / 6.0)) == r1 * pow(3.0, -1.0 / 6.0));
+    p.S = 1.0;
+    p.dI = 1.35e5;
+    p.N = 7; /* one photon short of KMIN */
+    p.R = kz;
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == kz);
+    p.N = 8;
+    ropt = appm__r_opt(1.0, 1.35e5 * 1.35e5, 1000.0 * 10.0, APPM__CF);
+    CHECK_MSG(ropt > lo && ropt < hi && ropt > 0.5 * kz && ropt < 2.0 * kz, "the case needs r_opt %g inside", ropt);
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == ropt);
+    CHECK_NEAR(ropt, pow((2.0 / 3.0) * (9.0 / (5.0 * APPM__PI)) / (1e4 * 0.125 * 0.125 * 1.8225e10), 1.0 / 6.0), 1e-15);
+    p.R = 0.3 * ropt; /* the closed form would jump more than 2x */
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == 2.0 * p.R);
+    p.R = 2.5 * ropt;
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == 0.5 * p.R);
+    p.R = hi;
+    p.dI = 1e-200; /* r^6 overflows: flat, the upper bound */
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == hi);
+    p.dI = 1e12; /* far below the lower bound */
+    p.R = lo;
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == lo);
+    p.dI = 0.0;
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == kz);
+    p.dI = (double)NAN;
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) == kz);
+    p.dI = 1.35e5;
+    p.S = (double)INFINITY;
+    CHECK(appm__paper_radius_of(&p, r1, 1000, 10, sh) >= lo && appm__paper_radius_of(&p, r1, 1000, 10, sh) <= hi);
+}
+
+/* appm-paper in a render: the bandwidth h_j = 1.5 r1 j^(-1/8) on every pass (appm
+ * estimates it on some passes only), no kernel cut, every gathering pixel's
+ * radius inside its bounds and kept in its state, and the RADIUS map that
+ * radius. */
+static void test_paper_render(appm_scene *s)
+{
+    appm_renderer *r = render(s, APPM_METHOD_APPM_PAPER, 0);
+    int j, inside = 1, kept = 1, map = 1;
+    if (!r) return;
+    CHECK(r->cut == 0);
+    for (j = 1; j <= 6 && check_passes(r, 1); ++j) {
+        size_t i, n = (size_t)r->w * r->h;
+        double lo, hi;
+        const float *rad = appm_renderer_aux(r, APPM_AUX_RADIUS);
+        CHECK_MSG(r->lap_h == 1.5 * r->r1 * pow((double)j, -1.0 / 8.0), "pass %d: h %g", j, r->lap_h);
+        appm__paper_bounds(r->r1, pow((double)j, -1.0 / 6.0), &lo, &hi);
+        for (i = 0; i < n; ++i) {
+            const appm__paper_state *p = (const appm__paper_state *)appm__state(r, i);
+            if (r->vp[i].segs) inside &= r->vp[i].R >= (float)lo * 0.999999f && r->vp[i].R <= (float)hi * 1.000001f;
+            kept &= p->R == (double)r->vp[i].R;
+            map &= rad && rad[i] == (float)p->R;
+        }
+    }
+    CHECK_MSG(inside, "appm-paper: a radius outside [0.1, 2] r1 j^(-1/6)");
+    CHECK_MSG(kept, "appm-paper: the state's radius is not the gather's");
+    CHECK_MSG(map, "appm-paper: the RADIUS map is not the state's radius");
+    CHECK(r->stats.clamped >= 0.0 && r->stats.clamped <= 1.0 && r->stats.est_relerr > 0.0);
+    appm_renderer_destroy(r);
+}
+
 int main(void)
 {
     appm_scene *s;
     test_names();
     test_entries();
+    test_paper_radius();
     s = check_load_scene("scenes/cornell-original.scene");
     if (s) {
         test_aux(s);
         test_seam(s);
+        test_paper_render(s);
     }
     appm_scene_destroy(s);
     return check_finish();

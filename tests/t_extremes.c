@@ -544,7 +544,7 @@ static void test_photon_counts(void)
  * photons is kept where adding one more still changes it, and a running mean
  * of a constant stays that constant.
  *
- * (1) appm__appm_update and appm__welford, 1e7 passes of the same per-pass values: the
+ * (1) appm__adaptive_update and appm__welford, 1e7 passes of the same per-pass values: the
  *     recursive mean I += (x - I) / j reproduces x exactly after the first
  *     pass (x - I is then exactly 0), so acc, S, dI and the Welford mean are
  *     bitwise x, and the Welford M2 and the Laplacian's spread stay 0; the
@@ -565,7 +565,7 @@ static void test_accumulators(void)
     const double e[3] = {0.1, 0.3, 0.7}, e2[3] = {0.2, 0.6, 1.4};
     const double s_in = 0.0123, dl_in = -2.5, ld_lum = 0.2;
     const uint64_t passes = 10000000u;
-    appm__appm_state px;
+    appm__adaptive_stats px;
     appm__pixel pw;
     uint64_t j;
     int c, exact = 1;
@@ -574,7 +574,7 @@ static void test_accumulators(void)
     memset(&pw, 0, sizeof pw);
     px.R = 0.5;
     for (j = 1; j <= passes; ++j) {
-        appm__appm_update(&px, j, e, s_in, dl_in, 1.0, 1000);
+        appm__adaptive_update(&px, j, e, s_in, dl_in, 1.0, 1000);
         appm__welford(&pw, j, ld_lum + appm__lumd(e));
     }
     for (c = 0; c < 3; ++c) exact &= px.I[c] == e[c];
@@ -586,7 +586,7 @@ static void test_accumulators(void)
     CHECK(pw.wmean == v && pw.wm2 == 0.0);
     CHECK_MSG(px.N == 10000000000u, "photon count %.17g, expected 1e10", (double)px.N);
     CHECK(px.R2sum == 0.25 * (double)passes);
-    appm__appm_update(&px, passes + 1, e2, s_in, dl_in, 1.0, 1);
+    appm__adaptive_update(&px, passes + 1, e2, s_in, dl_in, 1.0, 1);
     for (c = 0; c < 3; ++c)
         CHECK_NEAR(px.I[c], e[c] + (e2[c] - e[c]) / (double)(passes + 1), 1e-15 * e[c]);
     CHECK(px.I[0] != e[0] && px.N == 10000000001u);
@@ -594,7 +594,7 @@ static void test_accumulators(void)
     /* (2) */
     memset(&px, 0, sizeof px);
     px.N = (uint64_t)1 << 40;
-    appm__appm_update(&px, 2, e, s_in, dl_in, 0.0, 1);
+    appm__adaptive_update(&px, 2, e, s_in, dl_in, 0.0, 1);
     CHECK(px.N == ((uint64_t)1 << 40) + 1);
 
     /* (3) sppm at N = 2^40 */

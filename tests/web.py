@@ -48,7 +48,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "build", "web")
 SCENE = "CornellBox-Sphere"
 SIZE, PASSES, SEED = 128, 32, 7
-SETTINGS = (("appm", "qmc"), ("ppm", "random"))  # method and sampler of the two sides
+SETTINGS = (("appm", "qmc"), ("ppm", "random"), ("appm-paper", "qmc"))  # method and sampler of the sides
 NOISE_FRACTION = 1 / 200.0  # of the seed-to-seed RMS difference
 REL_TOL, REL_QUANTILE = 1e-3, 0.99
 
@@ -288,12 +288,12 @@ def check_side(side, ref, noise):
           % (m, 100 * REL_QUANTILE, REL_TOL, REL_QUANTILE, rel))
     check(side["image_colours"] > 500, "%s: the image has %d colours" % (m, side["image_colours"]))
     radius, variance, laplacian = side["map_colours"]
-    if m == "appm":
+    if m in ("appm", "appm-paper"):
         check(radius > 16 and variance > 16 and laplacian > 16,
-              "appm: radius, variance and Laplacian maps drawn (%d, %d, %d colours)"
-              % (radius, variance, laplacian))
+              "%s: radius, variance and Laplacian maps drawn (%d, %d, %d colours)"
+              % (m, radius, variance, laplacian))
         check(side["history"] == PASSES - 1,
-              "appm: estimated error plotted for passes 2..%d (%d points)" % (PASSES, side["history"]))
+              "%s: estimated error plotted for passes 2..%d (%d points)" % (m, PASSES, side["history"]))
     else:
         check(radius >= 1 and variance > 16 and laplacian == 0,
               "ppm: one global radius, a variance map, no Laplacian (%d, %d, %d colours)"
@@ -311,7 +311,7 @@ def run_test(browser, base):
     t0 = time.time()
     sid = open_page(browser, url)
     result = wait_result(browser, sid, 100)
-    if not check(result is not None, "the page finished %d passes of appm and ppm (%.1f s)"
+    if not check(result is not None, "the page finished %d passes of appm, ppm and appm-paper (%.1f s)"
                  % (PASSES, time.time() - t0)):
         return
     if not check("error" not in result, "the page reported no error (%s)" % result.get("error", "")):

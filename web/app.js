@@ -16,7 +16,7 @@
 
 var SCENES = ['CornellBox-Sphere', 'CornellBox-Original', 'CornellBox-Mirror', 'CornellBox-Glossy',
               'CornellBox-Empty-RG', 'CornellBox-Empty-White'];
-var METHODS = ['appm', 'ppm', 'sppm', 'pt'];
+var METHODS = ['appm', 'appm-paper', 'ppm', 'sppm', 'pt'];
 var RADII = [['0.25', '¼ ×'], ['0.5', '½ ×'], ['1', '1 ×'], ['2', '2 ×'], ['4', '4 ×']];
 var COLOURS = ['#0057b8', '#d55e00', '#007a4d']; // blue, vermilion, green: distinct for colour-blind eyes
 var MAP_NAMES = ['radius', 'variance', 'Laplacian'];
@@ -30,6 +30,8 @@ var PRESETS = [
     sides: [{ method: 'appm' }, { method: 'ppm' }, { method: 'sppm' }] },
   { name: 'ppm with α = 1 (fixed radius, never converges) against α = 2/3', count: 2, equal: 'passes',
     sides: [{ method: 'ppm', alpha: '1' }, { method: 'ppm', alpha: '0.6667' }] },
+  { name: 'the paper\'s adaptive radius (appm-paper) against appm with its extensions', count: 2, equal: 'passes',
+    sides: [{ method: 'appm-paper' }, { method: 'appm' }] },
   { name: 'appm with the random sampler against the qmc (Sobol\') sampler', count: 2, equal: 'passes',
     sides: [{ method: 'appm', sampler: 'random' }, { method: 'appm', sampler: 'qmc' }] },
 ];

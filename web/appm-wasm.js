@@ -40,7 +40,7 @@ var AppmWasm = (function () {
       self.memory = inst.exports.memory;
       // A WASI reactor: _initialize runs the C library's start-up once.
       if (self.x._initialize) self.x._initialize();
-      self.methods = {}; // the library's names: appm, ppm, sppm, pt
+      self.methods = {}; // the library's names: appm, ppm, sppm, pt, appm-paper
       for (var m = 0; m < self.x.web_method_count(); ++m) self.methods[self.cstring(self.x.web_method_name(m))] = m;
       return self;
     });
