@@ -8,7 +8,6 @@
 #                     make bench-glossy: CornellBox-Glossy alone
 #                     make bench-sampler: --sampler qmc against random on every scene
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
-#   make bench-corner the kernel cut at a seam, with and without, at equal passes (bench/corner.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 #   make web          web/appm.wasm and the scenes of the classroom page (clang, lld, wasi-libc)
@@ -25,7 +24,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-bounds bench-corner fuzz web \
+.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler fuzz web \
         test-web clean
 
 all: appm
@@ -85,12 +84,6 @@ bench-bvh:
 
 bench-sampler: appm
 	sh bench/sampler.sh
-
-bench-bounds: appm
-	sh bench/bounds.sh
-
-bench-corner: appm
-	sh bench/corner.sh
 
 fuzz:
 	sh tests/fuzz/run.sh

@@ -5,7 +5,7 @@
 # Equal-time comparisons at one budget are noisy on this kind of machine, and
 # with the low-discrepancy sampler the error of a pass count is not a smooth
 # function of it: between seeds and runs, appm / ppm on the sphere box ran from
-# 0.82 to 1.22 at 3 CPU-seconds (docs/algorithm.md 4.19).  So each run renders
+# 0.82 to 1.22 at 3 CPU-seconds (docs/experiments.md).  So each run renders
 # a fixed number of passes and prints its error and processor time every K
 # passes (bench/eqcpu with EQCPU_CURVE=K); the runs of a seed are interleaved.
 # For each seed, each budget t of EQC_BUDGETS (processor seconds, 2 threads)
@@ -15,10 +15,11 @@
 # a load that changes during a run still shows; the pass costs are printed
 # so that they can be checked against an instruction count.
 #
-#   EQC_SCENES   scenes (default: the four of bench/bounds.sh, and water-caustic against the
-#                reference made with the kernel cut, water-cutref); any other scene of scenes/
-#                with a bench/ref/SCENE-64.cmd is compared with its path-traced pair (built
-#                once, 20 s each; docs/algorithm.md 4.21 ran the other eight)
+#   EQC_SCENES   scenes (default: cornell-sphere, cornell-original, caustic-glass and
+#                water-caustic, and water-caustic against the reference made with the kernel
+#                cut, water-cutref); any other scene of scenes/ is compared with its path-traced
+#                pair, the one bench/ref/SCENE-64.cmd records (built once, 20 s each; the
+#                all-scenes row of docs/experiments.md ran the other eight)
 #   EQC_SEEDS    seeds (default 1 2 3)
 #   EQC_BUDGETS  budgets in CPU-seconds (default 1.5 2 2.5 3)
 #   EQC_VARIANTS "name:MACRO=VALUE,MACRO=VALUE name2:..." appm built with
@@ -38,7 +39,13 @@
 #                point (lowest median) against appm at equal instructions, paired.  The
 #                default point itself comes out within a few percent of 1: that is the
 #                noise of this comparison (some 10 minutes for the five scenes, 3 seeds)
-# References and masks as bench/bounds.sh (bench/refs.sh builds them once).
+# References (64x64, built once by bench/refs.sh, then reused): the committed sphere box
+# reference; two path-traced halves of 4096 passes for every other scene a path tracer can
+# reach; two ppm halves for caustic-glass and water-caustic (16384 photons x 3000 and x 600
+# passes; a path tracer cannot reach their spot or tiny light through glass or water; these
+# lean toward ppm's kernel), and for water-cutref water-caustic's halves rendered again by the
+# build of commit 547f20b with APPM__CUT 2 (ppm with the kernel cut).  The masked RMSE leaves out the pixels
+# whose reference luminance is at least 1 (10 for water-caustic): the light seen directly.
 set -u
 CC=${CC:-cc}
 seeds=${EQC_SEEDS:-"1 2 3"}
@@ -49,9 +56,30 @@ out=${EQC_OUT:-bench/out/eqcurve}
 mkdir -p "$out"
 [ -x ./appm ] || { echo "bench: build ./appm first (make)"; exit 1; }
 R=bench/ref
+APPM=./appm threads=2 REF_HALVES=1 # the commands bench/ref/SCENE-64.cmd records
 . bench/refs.sh
-refs
-refs_pt $scenes
+for sc in $scenes; do
+    case $sc in
+    cornell-sphere) ;; # committed, with its .mse
+    caustic-glass | water-caustic)
+        p=3000; [ $sc = water-caustic ] && p=600
+        reference $sc-64 scenes/$sc.scene 64x64 $p ppm " --sampler random --photons 16384" ;;
+    water-cutref) # water-caustic's pair again, by a build that gives ppm the kernel cut
+        APPM=$out/appm-cut
+        set -- water-caustic-64-cut scenes/water-caustic.scene 64x64 600 ppm " --sampler random --photons 16384"
+        # the library no longer cuts ppm's kernel: the build is that of commit 547f20b, whose
+        # APPM__CUT 2 gave every photon method the cut (docs/experiments.md)
+        ref_cached "$@" || { mkdir -p "$out/cut" && for f in appm.c appm.h main.c; do
+                git show 547f20b:$f > "$out/cut/$f" || exit 1; done &&
+            sed -i 's/^#define APPM__CUT [0-9]*/#define APPM__CUT 2/' "$out/cut/appm.c" &&
+            grep -q '^#define APPM__CUT 2' "$out/cut/appm.c" &&
+            $CC -std=c99 -O2 "$out/cut/appm.c" "$out/cut/main.c" -o "$APPM" -lm -pthread; } ||
+            { echo "bench: the build of 547f20b with APPM__CUT 2 failed"; exit 1; }
+        reference "$@"
+        APPM=./appm ;;
+    *) reference $sc-64 scenes/$sc.scene 64x64 4096 pt " --sampler random" ;;
+    esac
+done
 $CC -std=c99 -O2 -I. bench/eqcpu.c appm.c -o "$out/eqcpu-appm" -lm -pthread || exit 1
 names="appm"
 for v in $variants; do
@@ -71,19 +99,21 @@ passes() { # enough passes for every method to pass the largest budget on a load
     *) echo 600 ;;
     esac
 }
-# water-cutref: water-caustic against the reference pair made with the kernel cut (bench/corner.sh
-# builds it; docs/algorithm.md 4.19)
+# water-cutref: water-caustic against the reference pair made with the kernel cut
 scene() { case $1 in water-cutref) echo water-caustic ;; *) echo $1 ;; esac; }
+# bench/eqcpu's REF_A REF_B MASK REF_MSE for a scene
 refargs() {
     case $1 in
+    cornell-sphere) echo "$R/cornell-sphere-64.pfm $R/cornell-sphere-64.pfm 1.0 $(sed 's/ref_mse=//' \
+        $R/cornell-sphere-64.mse)" ;;
+    water-caustic) echo "$R/water-caustic-64-a.pfm $R/water-caustic-64-b.pfm 10.0 0" ;;
     water-cutref) echo "$R/water-caustic-64-cut-a.pfm $R/water-caustic-64-cut-b.pfm 10.0 0" ;;
-    *) args $1 ;;
+    *) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 1.0 0" ;;
     esac
 }
 for s in $seeds; do
     for sc in $scenes; do
         n=$(passes $sc)
-        [ $sc != water-cutref ] || [ -f $R/water-caustic-64-cut-b.pfm ] || { echo "bench: run bench/corner.sh first"; exit 1; }
         EQCPU_CURVE=10 "$out/eqcpu-appm" scenes/$(scene $sc).scene ppm $s -$n 0 0 $(refargs $sc) > "$out/$sc-ppm-s$s.txt" ||
             exit 1
         for v in $names; do

@@ -1,44 +1,42 @@
-# bench/refs.sh - sourced by bench/bounds.sh, bench/imglap.sh, bench/edgecap.sh,
-# bench/eqcurve.sh and bench/lapdiag.sh: the 64x64 references of docs/algorithm.md 4.13 and the
-# reference arguments of bench/eqcpu for each scene.  Needs R (the
-# reference folder).
+# bench/refs.sh - the references, built in one place: sourced by bench/run.sh, bench/sampler.sh
+# and bench/eqcurve.sh, which set APPM (the command line tool) and threads (its --threads).
 #
-# The committed sphere box reference; two path-traced halves for
-# CornellBox-Original; two ppm halves for caustic-glass and water-caustic (a
-# path tracer cannot reach their spot or tiny light through glass or water;
-# these lean toward ppm's kernel).  Built once, then reused.
-ref() { # name scene method passes extra...
-    n=$1 sc=$2 m=$3 p=$4
-    shift 4
-    for s in a b; do
-        seed=1000003; [ $s = b ] && seed=1000004
-        [ -f $R/$n-$s.pfm ] || ./appm render scenes/$sc.scene --method $m --size 64x64 --passes $p --threads 2 -q \
-            --sampler random --seed $seed "$@" -o $R/$n-$s.pfm > /dev/null || exit 1
-    done
+# reference NAME SCENE SIZE PASSES [METHOD [EXTRA]]: bench/ref/NAME.pfm, the mean of two
+# independent renders (seeds 1000003 and 1000004) of PASSES passes each with METHOD (default pt)
+# and the options EXTRA (one string that starts with a space, e.g. " --sampler random"), cached
+# with the commands that made it in bench/ref/NAME.cmd: it is rendered again only when they
+# change.  refmix also measures the reference's own noise, ref_mse = E[(A - B)^2] / 4, in
+# bench/ref/NAME.mse, which is subtracted from every measured MSE: a method's error and the
+# reference's are independent, so they add.  The two halves, bench/ref/NAME-a.pfm and -b.pfm,
+# are removed, or kept with REF_HALVES=1 (bench/eqcpu takes them and subtracts the noise
+# itself).
+#
+# A scene whose light a path tracer cannot reach (a spot light seen through glass, a tiny light
+# under water) gets ppm halves instead, which lean toward ppm's kernel.
+
+# ref_cached NAME SCENE SIZE PASSES [METHOD [EXTRA]]: whether bench/ref/NAME is there, made by
+# these commands (sets ref, cmd and want for reference)
+ref_cached() {
+    ref=bench/ref/$1.pfm
+    cmd="$APPM render $2 --method ${5:-pt} --size $3 --passes $4 --threads $threads -q${6:-}"
+    want="$cmd --seed 1000003 -o bench/ref/$1-a.pfm; $cmd --seed 1000004 -o bench/ref/$1-b.pfm; bench/refmix bench/ref/$1-a.pfm bench/ref/$1-b.pfm $ref"
+    [ -f "$ref" ] && [ -f "bench/ref/$1.mse" ] && [ -f "bench/ref/$1.cmd" ] &&
+        [ "$(cat "bench/ref/$1.cmd")" = "$want" ] &&
+        { [ "${REF_HALVES:-0}" != 1 ] || { [ -f "bench/ref/$1-a.pfm" ] && [ -f "bench/ref/$1-b.pfm" ]; }; }
 }
-refs() {
-    ref cornell-original-64 cornell-original pt 4096
-    ref caustic-glass-64 caustic-glass ppm 3000 --photons 16384
-    ref water-caustic-64 water-caustic ppm 600 --photons 16384
-}
-# refs_pt SCENE...: for the scenes refs() leaves out, the two path-traced halves of 4096 passes
-# that bench/ref/SCENE-64.cmd records; a light reached only through glass or water would need
-# ppm halves instead, as for the two above
-refs_pt() {
-    for sc; do
-        case $sc in
-        cornell-sphere | cornell-original | caustic-glass | water-*) ;;
-        *) ref $sc-64 $sc pt 4096 ;;
-        esac
-    done
-}
-# bench/eqcpu's REF_A REF_B MASK REF_MSE for a scene; the mask leaves out the
-# pixels whose reference luminance is at least 1 (10 for water-caustic): the
-# light seen directly
-args() {
-    case $1 in
-    cornell-sphere) echo "$R/cornell-sphere-64.pfm $R/cornell-sphere-64.pfm 1.0 $(sed 's/ref_mse=//' $R/cornell-sphere-64.mse)" ;;
-    water-caustic) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 10.0 0" ;;
-    *) echo "$R/$1-64-a.pfm $R/$1-64-b.pfm 1.0 0" ;;
-    esac
+
+reference() {
+    if ref_cached "$@"; then
+        echo "reference $ref (cached, $(cat "bench/ref/$1.mse"))"
+        return 0
+    fi
+    echo "reference $ref: $want"
+    mkdir -p bench/ref
+    [ -x bench/refmix ] || ${CC:-cc} -std=c99 -O2 bench/refmix.c appm.c -o bench/refmix -lm -pthread || exit 1
+    $cmd --seed 1000003 -o "bench/ref/$1-a.pfm" > /dev/null &&
+        $cmd --seed 1000004 -o "bench/ref/$1-b.pfm" > /dev/null &&
+        bench/refmix "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm" "$ref" > "bench/ref/$1.mse" ||
+        { echo "bench: reference failed"; exit 1; }
+    [ "${REF_HALVES:-0}" = 1 ] || rm -f "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm"
+    printf '%s\n' "$want" > "bench/ref/$1.cmd"
 }

@@ -33,28 +33,9 @@ $CC -std=c99 -O2 bench/refmix.c appm.c -o bench/refmix -lm -pthread || exit 1
 # value of key=... in a summary line
 kv() { printf '%s\n' "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
 
-# reference NAME SCENE SIZE PASSES: the mean of two independent path-traced
-# renders (seeds 1000003 and 1000004) of PASSES passes each, cached with the
-# commands that made it.  refmix also measures the reference's own noise,
-# ref_mse = E[(A - B)^2] / 4, which is subtracted from every measured MSE:
-# a method's error and the reference's are independent, so they add.
-reference() {
-    ref=bench/ref/$1.pfm
-    cmd="$APPM render $2 --method pt --size $3 --passes $4 --threads $threads -q"
-    want="$cmd --seed 1000003 -o bench/ref/$1-a.pfm; $cmd --seed 1000004 -o bench/ref/$1-b.pfm; bench/refmix bench/ref/$1-a.pfm bench/ref/$1-b.pfm $ref"
-    if [ -f "$ref" ] && [ -f "bench/ref/$1.mse" ] && [ -f "bench/ref/$1.cmd" ] &&
-        [ "$(cat "bench/ref/$1.cmd")" = "$want" ]; then
-        echo "reference $ref (cached, $(cat "bench/ref/$1.mse"))"
-        return 0
-    fi
-    echo "reference $ref: $want"
-    $cmd --seed 1000003 -o "bench/ref/$1-a.pfm" > /dev/null &&
-        $cmd --seed 1000004 -o "bench/ref/$1-b.pfm" > /dev/null &&
-        bench/refmix "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm" "$ref" > "bench/ref/$1.mse" ||
-        { echo "bench: reference failed"; exit 1; }
-    rm -f "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm"
-    printf '%s\n' "$want" > "bench/ref/$1.cmd"
-}
+# reference NAME SCENE SIZE PASSES: two independent path-traced renders of PASSES passes,
+# their mean and its own noise, cached with the commands that made them (bench/refs.sh)
+. bench/refs.sh
 
 # run NAME SCENE SIZE SECONDS METHOD CONFIG-LABEL [extra options...]
 run() {

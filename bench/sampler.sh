@@ -48,23 +48,8 @@ $CC -std=c99 -O2 bench/regions.c appm.c -o "$out/regions" -lm -pthread || exit 1
 
 kv() { printf '%s\n' "$1" | tr ' ' '\n' | sed -n "s/^$2=//p"; }
 
-# reference NAME SCENE SIZE PASSES METHOD [EXTRA]: cached with its command, as in run.sh
-reference() {
-    ref=bench/ref/$1.pfm
-    cmd="$APPM render $2 --method $5 --size $3 --passes $4 --threads $threads -q${6:-}"
-    want="$cmd --seed 1000003 -o bench/ref/$1-a.pfm; $cmd --seed 1000004 -o bench/ref/$1-b.pfm; bench/refmix bench/ref/$1-a.pfm bench/ref/$1-b.pfm $ref"
-    if [ -f "$ref" ] && [ -f "bench/ref/$1.mse" ] && [ -f "bench/ref/$1.cmd" ] &&
-        [ "$(cat "bench/ref/$1.cmd")" = "$want" ]; then
-        return 0
-    fi
-    echo "reference $ref: $want"
-    $cmd --seed 1000003 -o "bench/ref/$1-a.pfm" > /dev/null &&
-        $cmd --seed 1000004 -o "bench/ref/$1-b.pfm" > /dev/null &&
-        bench/refmix "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm" "$ref" > "bench/ref/$1.mse" ||
-        { echo "bench: reference failed"; exit 1; }
-    rm -f "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm"
-    printf '%s\n' "$want" > "bench/ref/$1.cmd"
-}
+# reference NAME SCENE SIZE PASSES METHOD [EXTRA]: cached with its command (bench/refs.sh)
+. bench/refs.sh
 
 # one NAME SCENE SIZE LABEL SEED BINARY OPTIONS...: one render, its log, one csv row
 one() {
