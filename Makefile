@@ -58,7 +58,8 @@ build/embed: examples/embed.c appm.c appm.h
 test: appm build/embed build/appm-pattern build/quickstart $(TESTS) $(STESTS)
 	@mkdir -p tests/out
 	@sh tests/run.sh $(TESTS) $(foreach t,$(STESTS),"APPM_TEST_QUICK=1 $(t)") "APPM_PATTERN=build/appm-pattern sh tests/cli.sh ./appm build/embed" \
-		"sh tests/alone.sh build/t_image build/t_loader" "sh tests/quickstart.sh build/quickstart"
+		"sh tests/alone.sh build/t_image build/t_loader" "sh tests/quickstart.sh build/quickstart" \
+		"sh tests/layout.sh"
 
 test-long: $(TESTS)
 	@mkdir -p tests/out

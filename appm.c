@@ -2744,103 +2744,159 @@ static appm_status appm__mtl_ns(appm__loader *L, const char **s, const char *e, 
     return APPM_OK;
 }
 
+/* What the open material block has said so far; appm__mtl_finish makes the
+ * material of it when the block ends. */
+typedef struct appm__mtl_block {
+    appm__material *cur; /* the block's material; NULL before the first newmtl */
+    int illum, have_ks, have_ns;
+    appm__v3 ks, kd;
+    unsigned line; /* of its newmtl */
+} appm__mtl_block;
+
+/* MTL's defaults for the statements of a block: illum 2, no Ks, no Ns, Kd 0.8. */
+static void appm__mtl_block_reset(appm__mtl_block *b)
+{
+    b->illum = 2;
+    b->have_ks = 0;
+    b->have_ns = 0;
+    b->ks = appm__v(0, 0, 0);
+    b->kd = appm__v(0.8f, 0.8f, 0.8f);
+}
+
+/* Ends the open block, if there is one (appm__mtl_finish). */
+static void appm__mtl_close(appm__loader *L, const appm__mtl_block *b)
+{
+    if (b->cur) appm__mtl_finish(L, b->cur, b->illum, b->have_ks, b->ks, b->kd, b->have_ns, b->line);
+}
+
+/* newmtl: ends the open block and opens one for a new material named by the
+ * rest of the line s..e (a NUL byte in the name becomes '?'), IOR 1.5, Ns 1. */
+static appm_status appm__mtl_newmtl(appm__loader *L, appm__mtl_block *b, const char *s, const char *e,
+                                    unsigned line)
+{
+    const char *ns, *ne;
+    char *name;
+    size_t off = L->names.count, k;
+    appm__mtl_close(L, b);
+    if (!appm__rest(s, e, &ns, &ne))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "newmtl without a name");
+    if (!appm__array_reserve(L->mem, &L->names, off + (size_t)(ne - ns) + 1))
+        return APPM_ERR_NOMEM;
+    name = (char *)L->names.data + off;
+    for (k = 0; k < (size_t)(ne - ns); ++k) name[k] = ns[k] ? ns[k] : '?';
+    name[ne - ns] = 0;
+    L->names.count += (size_t)(ne - ns) + 1;
+    b->cur = (appm__material *)appm__array_push(L->mem, &L->mat);
+    if (!b->cur) return APPM_ERR_NOMEM;
+    b->cur->name = (uint32_t)off;
+    b->cur->ior = 1.5f;
+    b->cur->ns = 1.0f;
+    appm__mtl_block_reset(b);
+    b->line = line;
+    return APPM_OK;
+}
+
+/* Kd, Ks or Ke (`which` is 'd', 's' or 'e'): three numbers; Ke must be >= 0
+ * and finite as floats. */
+static appm_status appm__mtl_color(appm__loader *L, appm__mtl_block *b, char which, const char **s, const char *e,
+                                   unsigned line)
+{
+    double v[3];
+    appm_status st;
+    if ((st = appm__numbers(L, s, e, line, which == 'd' ? "Kd" : which == 's' ? "Ks" : "Ke", v, 3)) != APPM_OK)
+        return st;
+    if (which == 'd') b->kd = appm__v((float)v[0], (float)v[1], (float)v[2]);
+    else if (which == 's') {
+        b->ks = appm__v((float)v[0], (float)v[1], (float)v[2]);
+        b->have_ks = 1;
+    } else {
+        if (v[0] < 0 || v[1] < 0 || v[2] < 0)
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "negative Ke");
+        b->cur->ke = appm__v((float)v[0], (float)v[1], (float)v[2]);
+        if (!appm__finite3(b->cur->ke))
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "Ke overflows a float");
+    }
+    return APPM_OK;
+}
+
+/* Ni: the index of refraction, in (0, 100]. */
+static appm_status appm__mtl_ni(appm__loader *L, const char **s, const char *e, unsigned line, appm__material *m)
+{
+    double v;
+    appm_status st = appm__numbers(L, s, e, line, "Ni", &v, 1);
+    if (st != APPM_OK) return st;
+    if (!(v > 0.0) || v > 100.0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "index of refraction Ni %g is not in (0, 100]", v);
+    m->ior = (float)v;
+    return APPM_OK;
+}
+
+/* illum: an integer 0..10, into *illum. */
+static appm_status appm__mtl_illum(appm__loader *L, const char **s, const char *e, unsigned line, int *illum)
+{
+    double v;
+    appm_status st = appm__numbers(L, s, e, line, "illum", &v, 1);
+    if (st != APPM_OK) return st;
+    if (v < 0 || v > 10 || v != floor(v))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "illum must be an integer 0..10");
+    *illum = (int)v;
+    return APPM_OK;
+}
+
+/* Statement ts..te, not one this renderer models: a texture map, another known
+ * MTL statement, or an unknown one.  Warns (each kind once per file). */
+static void appm__mtl_ignored(appm__loader *L, const char *ts, const char *te, unsigned line)
+{
+    static const char *const ignored[] = {"Ka", "Tf", "d", "Tr", "sharpness", "Pr", "Pm",
+                                          "Ps", "Pc", "Pcr", "aniso", "anisor", "norm", "bump",
+                                          "disp", "decal", "refl"};
+    size_t k, n = sizeof ignored / sizeof ignored[0];
+    if (te - ts > 4 && memcmp(ts, "map_", 4) == 0) {
+        appm__warn(L, (uint64_t)1 << 9, line, "texture maps are not modelled: '%.*s' ignored",
+                   (int)(te - ts > 30 ? 30 : te - ts), ts);
+        return;
+    }
+    for (k = 0; k < n; ++k)
+        if (appm__token_is(ts, te, ignored[k])) break;
+    if (k < n)
+        appm__warn(L, (uint64_t)1 << (10 + k), line, "MTL statement '%s' is not modelled, ignored", ignored[k]);
+    else
+        appm__warn(L, (uint64_t)1 << 63, line, "unknown MTL statement '%.*s' ignored",
+                   (int)(te - ts > 30 ? 30 : te - ts), ts);
+}
+
 static appm_status appm__mtl_parse(appm__loader *L, const char *buf, size_t len)
 {
     appm__lines it;
     const char *s, *e;
-    appm__material *cur = NULL;
-    int illum = 2, have_ks = 0, have_ns = 0;
-    appm__v3 ks = appm__v(0, 0, 0), kd = appm__v(0.8f, 0.8f, 0.8f);
-    appm_status st;
-    unsigned cur_line = 0;
-    static const char *const ignored[] = {"Ka", "Tf", "d", "Tr", "sharpness", "Pr", "Pm",
-                                          "Ps", "Pc", "Pcr", "aniso", "anisor", "norm", "bump",
-                                          "disp", "decal", "refl"};
+    appm__mtl_block b;
+    appm_status st = APPM_OK;
+    b.cur = NULL;
+    b.line = 0;
+    appm__mtl_block_reset(&b);
     it.p = buf;
     it.end = buf + len;
     it.line = 0;
     while (appm__next_line(&it, &s, &e)) {
         const char *ts, *te;
-        double v[3];
         if (!appm__token(&s, e, &ts, &te)) continue;
-        if (appm__token_is(ts, te, "newmtl")) {
-            const char *ns, *ne;
-            char *name;
-            size_t off = L->names.count, k;
-            if (cur) appm__mtl_finish(L, cur, illum, have_ks, ks, kd, have_ns, cur_line);
-            if (!appm__rest(s, e, &ns, &ne))
-                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "newmtl without a name");
-            if (!appm__array_reserve(L->mem, &L->names, off + (size_t)(ne - ns) + 1))
-                return APPM_ERR_NOMEM;
-            name = (char *)L->names.data + off;
-            for (k = 0; k < (size_t)(ne - ns); ++k) name[k] = ns[k] ? ns[k] : '?';
-            name[ne - ns] = 0;
-            L->names.count += (size_t)(ne - ns) + 1;
-            cur = (appm__material *)appm__array_push(L->mem, &L->mat);
-            if (!cur) return APPM_ERR_NOMEM;
-            cur->name = (uint32_t)off;
-            cur->ior = 1.5f;
-            cur->ns = 1.0f;
-            illum = 2;
-            have_ks = 0;
-            have_ns = 0;
-            ks = appm__v(0, 0, 0);
-            kd = appm__v(0.8f, 0.8f, 0.8f);
-            cur_line = it.line;
-            continue;
-        }
-        if (!cur) {
+        if (appm__token_is(ts, te, "newmtl"))
+            st = appm__mtl_newmtl(L, &b, s, e, it.line);
+        else if (!b.cur)
             appm__warn(L, APPM__W_BEFORE_NEWMTL, it.line, "statement before any newmtl ignored");
-            continue;
-        }
-        if (appm__token_is(ts, te, "Kd") || appm__token_is(ts, te, "Ks") ||
-            appm__token_is(ts, te, "Ke")) {
-            char which = ts[1];
-            if ((st = appm__numbers(L, &s, e, it.line, which == 'd' ? "Kd" : which == 's' ? "Ks" : "Ke",
-                                    v, 3)) != APPM_OK)
-                return st;
-            if (which == 'd') kd = appm__v((float)v[0], (float)v[1], (float)v[2]);
-            else if (which == 's') {
-                ks = appm__v((float)v[0], (float)v[1], (float)v[2]);
-                have_ks = 1;
-            } else {
-                if (v[0] < 0 || v[1] < 0 || v[2] < 0)
-                    return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "negative Ke");
-                cur->ke = appm__v((float)v[0], (float)v[1], (float)v[2]);
-                if (!appm__finite3(cur->ke))
-                    return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "Ke overflows a float");
-            }
-        } else if (appm__token_is(ts, te, "Ni")) {
-            if ((st = appm__numbers(L, &s, e, it.line, "Ni", v, 1)) != APPM_OK) return st;
-            if (!(v[0] > 0.0) || v[0] > 100.0)
-                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line,
-                                  "index of refraction Ni %g is not in (0, 100]", v[0]);
-            cur->ior = (float)v[0];
-        } else if (appm__token_is(ts, te, "Ns")) {
-            if ((st = appm__mtl_ns(L, &s, e, it.line, cur)) != APPM_OK) return st;
-            have_ns = 1;
-        } else if (appm__token_is(ts, te, "illum")) {
-            if ((st = appm__numbers(L, &s, e, it.line, "illum", v, 1)) != APPM_OK) return st;
-            if (v[0] < 0 || v[0] > 10 || v[0] != floor(v[0]))
-                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line,
-                                  "illum must be an integer 0..10");
-            illum = (int)v[0];
-        } else if (te - ts > 4 && memcmp(ts, "map_", 4) == 0) {
-            appm__warn(L, (uint64_t)1 << 9, it.line, "texture maps are not modelled: '%.*s' ignored",
-                       (int)(te - ts > 30 ? 30 : te - ts), ts);
-        } else {
-            size_t k, n = sizeof ignored / sizeof ignored[0];
-            for (k = 0; k < n; ++k)
-                if (appm__token_is(ts, te, ignored[k])) break;
-            if (k < n)
-                appm__warn(L, (uint64_t)1 << (10 + k), it.line, "MTL statement '%s' is not modelled, ignored",
-                           ignored[k]);
-            else
-                appm__warn(L, (uint64_t)1 << 63, it.line, "unknown MTL statement '%.*s' ignored",
-                           (int)(te - ts > 30 ? 30 : te - ts), ts);
-        }
+        else if (appm__token_is(ts, te, "Kd") || appm__token_is(ts, te, "Ks") || appm__token_is(ts, te, "Ke"))
+            st = appm__mtl_color(L, &b, ts[1], &s, e, it.line);
+        else if (appm__token_is(ts, te, "Ni"))
+            st = appm__mtl_ni(L, &s, e, it.line, b.cur);
+        else if (appm__token_is(ts, te, "Ns")) {
+            if ((st = appm__mtl_ns(L, &s, e, it.line, b.cur)) == APPM_OK) b.have_ns = 1;
+        } else if (appm__token_is(ts, te, "illum"))
+            st = appm__mtl_illum(L, &s, e, it.line, &b.illum);
+        else
+            appm__mtl_ignored(L, ts, te, it.line);
+        if (st != APPM_OK) return st;
     }
-    if (cur) appm__mtl_finish(L, cur, illum, have_ks, ks, kd, have_ns, cur_line);
+    appm__mtl_close(L, &b);
     return APPM_OK;
 }
 
@@ -2924,39 +2980,125 @@ static uint64_t appm__vn_hash(uint64_t h, appm__v3 n)
     return h;
 }
 
+/* One vertex reference "v", "v/vt", "v//vn" or "v/vt/vn" of a face, ts..te:
+ * *vi the position's index into L->pos and *ni the normal's into L->vn (-1:
+ * none).  The texture index is checked and dropped. */
+static appm_status appm__obj_corner(appm__loader *L, const char *ts, const char *te, unsigned line, int64_t *vi,
+                                    int64_t *ni)
+{
+    const char *slash1 = ts, *slash2;
+    int ok;
+    *ni = -1;
+    while (slash1 < te && *slash1 != '/') slash1++;
+    *vi = appm__obj_index(ts, slash1, L->pos.count, &ok);
+    if (*vi < 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
+                          ok ? "vertex index '%.*s' out of range (%.0f vertices so far)"
+                             : "malformed vertex index '%.*s'",
+                          (int)(slash1 - ts > 30 ? 30 : slash1 - ts), ts, (double)L->pos.count);
+    if (slash1 < te) {
+        slash2 = slash1 + 1;
+        while (slash2 < te && *slash2 != '/') slash2++;
+        if (slash2 > slash1 + 1 && appm__obj_index(slash1 + 1, slash2, L->nvt, &ok) < 0)
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
+                              ok ? "texture index out of range" : "malformed texture index");
+        if (slash2 < te) {
+            *ni = appm__obj_index(slash2 + 1, te, L->vn.count, &ok);
+            if (*ni < 0)
+                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
+                                  ok ? "normal index '%.*s' out of range" : "malformed normal index '%.*s'",
+                                  (int)(te - slash2 - 1 > 30 ? 30 : te - slash2 - 1), slash2 + 1);
+        }
+    }
+    return APPM_OK;
+}
+
+/* The shading normals of triangle `in`, from L->vn[idx[0..2]]: normalised into
+ * three new entries of L->nrm (in->n0 the first), their hash as written into
+ * in->nhash. */
+static appm_status appm__obj_tri_normals(appm__loader *L, appm__tri_info *in, const int64_t idx[3])
+{
+    size_t base = L->nrm.count, j;
+    uint64_t h = 0;
+    if (!appm__array_reserve(L->mem, &L->nrm, base + 3)) return APPM_ERR_NOMEM;
+    for (j = 0; j < 3; ++j) {
+        appm__v3 vn = ((appm__v3 *)L->vn.data)[idx[j]];
+        ((appm__v3 *)L->nrm.data)[base + j] = appm__normalize(vn);
+        h = appm__vn_hash(h, vn);
+    }
+    L->nrm.count += 3;
+    in->n0 = (int32_t)base;
+    in->nhash = (uint32_t)(h >> 32) | 1u;
+    return APPM_OK;
+}
+
+/* One triangle of a face, its corners c0, c1, c2 (pairs: index into L->pos, into
+ * L->vn or -1), of material `mat`: appended to L->tri and L->info, with shading
+ * normals when all three corners have one.  A triangle whose area is zero as a
+ * float is dropped instead (L->dropped, a warning). */
+static appm_status appm__obj_tri(appm__loader *L, const int64_t *c0, const int64_t *c1, const int64_t *c2,
+                                 uint32_t mat, unsigned line)
+{
+    const appm__v3 *P = (const appm__v3 *)L->pos.data;
+    appm__v3 a = P[c0[0]], b = P[c1[0]], c = P[c2[0]];
+    /* The normal in double: in float, the cross product of a needle's edges
+     * can point 1e-3 rad off (epsilon / angle), and a ray leaving the
+     * surface within that angle of its plane would be offset to the wrong
+     * side (appm__offset chooses the side by ng) and hit it again. */
+    double e1[3], e2[3], cr[3], area2;
+    appm__tri *t;
+    appm__tri_info *in;
+    e1[0] = (double)b.x - a.x;
+    e1[1] = (double)b.y - a.y;
+    e1[2] = (double)b.z - a.z;
+    e2[0] = (double)c.x - a.x;
+    e2[1] = (double)c.y - a.y;
+    e2[2] = (double)c.z - a.z;
+    cr[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    cr[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    cr[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    area2 = sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]);
+    /* degenerate as stored: the area must survive the conversion to float */
+    if (!((float)(0.5 * area2) > 0.0f) || !(area2 < FLT_MAX)) {
+        L->dropped++;
+        appm__warn(L, APPM__W_DEGENERATE, line, "degenerate (zero-area) triangles dropped");
+        return APPM_OK;
+    }
+    t = (appm__tri *)appm__array_push(L->mem, &L->tri);
+    in = (appm__tri_info *)appm__array_push(L->mem, &L->info);
+    if (!t || !in) return APPM_ERR_NOMEM;
+    if (L->info.count > 0x7FFFFFF0u)
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "too many triangles");
+    t->p0 = a;
+    t->p1 = b;
+    t->p2 = c;
+    in->ng = appm__v((float)(cr[0] / area2), (float)(cr[1] / area2), (float)(cr[2] / area2));
+    in->area = (float)(0.5 * area2);
+    in->mat = mat;
+    in->light = -1;
+    in->n0 = -1;
+    if (c0[1] >= 0 && c1[1] >= 0 && c2[1] >= 0) {
+        /* shading normals are stored per triangle corner, three in a row */
+        const int64_t idx[3] = {c0[1], c1[1], c2[1]};
+        return appm__obj_tri_normals(L, in, idx);
+    }
+    return APPM_OK;
+}
+
+/* f: the face's vertex references into L->face (pairs: position, normal or
+ * -1), then its triangles as a fan (0, k, k+1).  A face of fewer than three
+ * vertices is skipped with a warning. */
 static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e, unsigned line,
                                   uint32_t mat)
 {
     const char *ts, *te;
     int64_t *f;
     size_t k, n;
+    appm_status st;
     L->face.count = 0;
     while (appm__token(s, e, &ts, &te)) {
-        const char *slash1 = ts, *slash2;
-        int64_t vi, ni = -1;
-        int ok;
-        int64_t *pair;
-        while (slash1 < te && *slash1 != '/') slash1++;
-        vi = appm__obj_index(ts, slash1, L->pos.count, &ok);
-        if (vi < 0)
-            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
-                              ok ? "vertex index '%.*s' out of range (%.0f vertices so far)"
-                                 : "malformed vertex index '%.*s'",
-                              (int)(slash1 - ts > 30 ? 30 : slash1 - ts), ts, (double)L->pos.count);
-        if (slash1 < te) {
-            slash2 = slash1 + 1;
-            while (slash2 < te && *slash2 != '/') slash2++;
-            if (slash2 > slash1 + 1 && appm__obj_index(slash1 + 1, slash2, L->nvt, &ok) < 0)
-                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
-                                  ok ? "texture index out of range" : "malformed texture index");
-            if (slash2 < te) {
-                ni = appm__obj_index(slash2 + 1, te, L->vn.count, &ok);
-                if (ni < 0)
-                    return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
-                                      ok ? "normal index '%.*s' out of range" : "malformed normal index '%.*s'",
-                                      (int)(te - slash2 - 1 > 30 ? 30 : te - slash2 - 1), slash2 + 1);
-            }
-        }
+        int64_t vi, ni, *pair;
+        if ((st = appm__obj_corner(L, ts, te, line, &vi, &ni)) != APPM_OK) return st;
         if (!appm__array_reserve(L->mem, &L->face, L->face.count + 1)) return APPM_ERR_NOMEM;
         pair = (int64_t *)L->face.data + 2 * L->face.count++;
         pair[0] = vi;
@@ -2968,61 +3110,89 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
         return APPM_OK;
     }
     f = (int64_t *)L->face.data;
-    for (k = 1; k + 1 < n; ++k) { /* fan: (0, k, k+1) */
-        const appm__v3 *P = (const appm__v3 *)L->pos.data;
-        appm__v3 a = P[f[0]], b = P[f[2 * k]], c = P[f[2 * k + 2]];
-        /* The normal in double: in float, the cross product of a needle's edges
-         * can point 1e-3 rad off (epsilon / angle), and a ray leaving the
-         * surface within that angle of its plane would be offset to the wrong
-         * side (appm__offset chooses the side by ng) and hit it again. */
-        double e1[3], e2[3], cr[3], area2;
-        appm__tri *t;
-        appm__tri_info *in;
-        e1[0] = (double)b.x - a.x;
-        e1[1] = (double)b.y - a.y;
-        e1[2] = (double)b.z - a.z;
-        e2[0] = (double)c.x - a.x;
-        e2[1] = (double)c.y - a.y;
-        e2[2] = (double)c.z - a.z;
-        cr[0] = e1[1] * e2[2] - e1[2] * e2[1];
-        cr[1] = e1[2] * e2[0] - e1[0] * e2[2];
-        cr[2] = e1[0] * e2[1] - e1[1] * e2[0];
-        area2 = sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]);
-        /* degenerate as stored: the area must survive the conversion to float */
-        if (!((float)(0.5 * area2) > 0.0f) || !(area2 < FLT_MAX)) {
-            L->dropped++;
-            appm__warn(L, APPM__W_DEGENERATE, line, "degenerate (zero-area) triangles dropped");
-            continue;
-        }
-        t = (appm__tri *)appm__array_push(L->mem, &L->tri);
-        in = (appm__tri_info *)appm__array_push(L->mem, &L->info);
-        if (!t || !in) return APPM_ERR_NOMEM;
-        if (L->info.count > 0x7FFFFFF0u)
-            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "too many triangles");
-        t->p0 = a;
-        t->p1 = b;
-        t->p2 = c;
-        in->ng = appm__v((float)(cr[0] / area2), (float)(cr[1] / area2), (float)(cr[2] / area2));
-        in->area = (float)(0.5 * area2);
-        in->mat = mat;
-        in->light = -1;
-        in->n0 = -1;
-        if (f[1] >= 0 && f[2 * k + 1] >= 0 && f[2 * k + 3] >= 0) {
-            /* shading normals are stored per triangle corner, three in a row */
-            size_t base = L->nrm.count, j;
-            const int64_t idx[3] = {f[1], f[2 * k + 1], f[2 * k + 3]};
-            uint64_t h = 0;
-            if (!appm__array_reserve(L->mem, &L->nrm, base + 3)) return APPM_ERR_NOMEM;
-            for (j = 0; j < 3; ++j) {
-                appm__v3 vn = ((appm__v3 *)L->vn.data)[idx[j]];
-                ((appm__v3 *)L->nrm.data)[base + j] = appm__normalize(vn);
-                h = appm__vn_hash(h, vn);
-            }
-            L->nrm.count += 3;
-            in->n0 = (int32_t)base;
-            in->nhash = (uint32_t)(h >> 32) | 1u;
+    for (k = 1; k + 1 < n; ++k) /* fan: (0, k, k+1) */
+        if ((st = appm__obj_tri(L, f, f + 2 * k, f + 2 * k + 2, mat, line)) != APPM_OK) return st;
+    return APPM_OK;
+}
+
+/* v: a position, three numbers into L->pos (more components are ignored with
+ * a warning). */
+static appm_status appm__obj_v(appm__loader *L, const char **s, const char *e, unsigned line)
+{
+    const char *ts, *te;
+    double v[3];
+    appm__v3 *p;
+    appm_status st;
+    if ((st = appm__numbers(L, s, e, line, "v", v, 3)) != APPM_OK) return st;
+    if (appm__token(s, e, &ts, &te))
+        appm__warn(L, APPM__W_EXTRA, line, "extra vertex components (w, colours) ignored");
+    p = (appm__v3 *)appm__array_push(L->mem, &L->pos);
+    if (!p) return APPM_ERR_NOMEM;
+    *p = appm__v((float)v[0], (float)v[1], (float)v[2]);
+    return APPM_OK;
+}
+
+/* vn: a normal, three numbers into L->vn as written; one of zero length (after
+ * normalisation in float) is an error. */
+static appm_status appm__obj_vn(appm__loader *L, const char **s, const char *e, unsigned line)
+{
+    double v[3];
+    appm__v3 *p, n;
+    appm_status st;
+    if ((st = appm__numbers(L, s, e, line, "vn", v, 3)) != APPM_OK) return st;
+    p = (appm__v3 *)appm__array_push(L->mem, &L->vn);
+    if (!p) return APPM_ERR_NOMEM;
+    *p = appm__v((float)v[0], (float)v[1], (float)v[2]);
+    n = appm__normalize(*p);
+    if (!(appm__dot(n, n) > 0.5f))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "zero-length normal");
+    return APPM_OK;
+}
+
+/* usemtl, the name the rest of the line s..e: *mat becomes the last material
+ * of that name read since this OBJ began (L->mat_base), else 0, the default
+ * diffuse (with a warning when a name was given). */
+static void appm__obj_usemtl(appm__loader *L, const char *s, const char *e, unsigned line, uint32_t *mat)
+{
+    const char *ns, *ne;
+    size_t k;
+    *mat = 0;
+    if (!appm__rest(s, e, &ns, &ne)) return;
+    for (k = L->mat.count; k-- > L->mat_base;) {
+        const char *name = appm__mat_name(L, (appm__material *)L->mat.data + k);
+        if (strlen(name) == (size_t)(ne - ns) && memcmp(name, ns, (size_t)(ne - ns)) == 0) {
+            *mat = (uint32_t)k;
+            break;
         }
     }
+    if (*mat == 0)
+        appm__warn(L, APPM__W_UNKNOWN_MAT, line, "unknown material '%.*s': default diffuse used",
+                   (int)(ne - ns > 60 ? 60 : ne - ns), ns);
+}
+
+/* Statement ts..te, not one this renderer models: a warning (each kind once
+ * per file) if it is a word (a letter or '_', then also digits), else an error. */
+static appm_status appm__obj_ignored(appm__loader *L, const char *ts, const char *te, unsigned line)
+{
+    static const char *const ignored[] = {"vp", "l", "p", "cstype", "deg", "bmat", "step",
+                                          "curv", "curv2", "surf", "parm", "trim", "hole",
+                                          "scrv", "sp", "end", "con", "mg", "lod", "usemap",
+                                          "maplib", "shadow_obj", "trace_obj", "ctech", "stech",
+                                          "bevel", "c_interp", "d_interp", "call", "csh"};
+    size_t k, n = sizeof ignored / sizeof ignored[0];
+    int word = 1;
+    const char *c;
+    for (c = ts; c < te; ++c)
+        if (!((*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || *c == '_' ||
+              (c > ts && *c >= '0' && *c <= '9')))
+            word = 0;
+    if (!word)
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "'%.*s' is not an OBJ statement",
+                          (int)(te - ts > 30 ? 30 : te - ts), ts);
+    for (k = 0; k < n; ++k)
+        if (appm__token_is(ts, te, ignored[k])) break;
+    appm__warn(L, k < n ? (uint64_t)1 << (8 + k) : (uint64_t)1 << 63, line,
+               "OBJ statement '%.*s' is not modelled, ignored", (int)(te - ts > 30 ? 30 : te - ts), ts);
     return APPM_OK;
 }
 
@@ -3031,13 +3201,8 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
     appm__lines it;
     const char *s, *e;
     uint32_t mat = 0;
-    appm_status st;
+    appm_status st = APPM_OK;
     size_t i;
-    static const char *const ignored[] = {"vp", "l", "p", "cstype", "deg", "bmat", "step",
-                                          "curv", "curv2", "surf", "parm", "trim", "hole",
-                                          "scrv", "sp", "end", "con", "mg", "lod", "usemap",
-                                          "maplib", "shadow_obj", "trace_obj", "ctech", "stech",
-                                          "bevel", "c_interp", "d_interp", "call", "csh"};
     L->pos.count = 0;
     L->nvt = 0;
     L->vn.count = 0;
@@ -3050,72 +3215,25 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
     it.end = buf + len;
     it.line = 0;
     while (appm__next_line(&it, &s, &e)) {
-        const char *ts, *te;
-        double v[3];
+        const char *ts, *te, *ns, *ne;
         if (!appm__token(&s, e, &ts, &te)) continue;
-        if (appm__token_is(ts, te, "v")) {
-            appm__v3 *p;
-            if ((st = appm__numbers(L, &s, e, it.line, "v", v, 3)) != APPM_OK) return st;
-            if (appm__token(&s, e, &ts, &te))
-                appm__warn(L, APPM__W_EXTRA, it.line, "extra vertex components (w, colours) ignored");
-            p = (appm__v3 *)appm__array_push(L->mem, &L->pos);
-            if (!p) return APPM_ERR_NOMEM;
-            *p = appm__v((float)v[0], (float)v[1], (float)v[2]);
-        } else if (appm__token_is(ts, te, "vn")) {
-            appm__v3 *p, n;
-            if ((st = appm__numbers(L, &s, e, it.line, "vn", v, 3)) != APPM_OK) return st;
-            p = (appm__v3 *)appm__array_push(L->mem, &L->vn);
-            if (!p) return APPM_ERR_NOMEM;
-            *p = appm__v((float)v[0], (float)v[1], (float)v[2]);
-            n = appm__normalize(*p);
-            if (!(appm__dot(n, n) > 0.5f))
-                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line, "zero-length normal");
-        } else if (appm__token_is(ts, te, "vt")) {
+        if (appm__token_is(ts, te, "v"))
+            st = appm__obj_v(L, &s, e, it.line);
+        else if (appm__token_is(ts, te, "vn"))
+            st = appm__obj_vn(L, &s, e, it.line);
+        else if (appm__token_is(ts, te, "vt"))
             L->nvt++;
-        } else if (appm__token_is(ts, te, "f")) {
-            if ((st = appm__obj_face(L, &s, e, it.line, mat)) != APPM_OK) return st;
-        } else if (appm__token_is(ts, te, "usemtl")) {
-            const char *ns, *ne;
-            size_t k;
-            mat = 0;
-            if (appm__rest(s, e, &ns, &ne)) {
-                for (k = L->mat.count; k-- > L->mat_base;) {
-                    const char *name = appm__mat_name(L, (appm__material *)L->mat.data + k);
-                    if (strlen(name) == (size_t)(ne - ns) && memcmp(name, ns, (size_t)(ne - ns)) == 0) {
-                        mat = (uint32_t)k;
-                        break;
-                    }
-                }
-                if (mat == 0)
-                    appm__warn(L, APPM__W_UNKNOWN_MAT, it.line,
-                               "unknown material '%.*s': default diffuse used",
-                               (int)(ne - ns > 60 ? 60 : ne - ns), ns);
-            }
-        } else if (appm__token_is(ts, te, "mtllib")) {
-            const char *ns, *ne;
-            if (appm__rest(s, e, &ns, &ne) &&
-                (st = appm__mtl_load(L, path, ns, (size_t)(ne - ns), it.line)) != APPM_OK)
-                return st;
-        } else if (appm__token_is(ts, te, "o") || appm__token_is(ts, te, "g") ||
-                   appm__token_is(ts, te, "s")) {
+        else if (appm__token_is(ts, te, "f"))
+            st = appm__obj_face(L, &s, e, it.line, mat);
+        else if (appm__token_is(ts, te, "usemtl"))
+            appm__obj_usemtl(L, s, e, it.line, &mat);
+        else if (appm__token_is(ts, te, "mtllib")) {
+            if (appm__rest(s, e, &ns, &ne)) st = appm__mtl_load(L, path, ns, (size_t)(ne - ns), it.line);
+        } else if (appm__token_is(ts, te, "o") || appm__token_is(ts, te, "g") || appm__token_is(ts, te, "s")) {
             /* grouping and smoothing groups: nothing to do */
-        } else {
-            size_t k, n = sizeof ignored / sizeof ignored[0];
-            int word = 1;
-            const char *c;
-            for (c = ts; c < te; ++c)
-                if (!((*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || *c == '_' ||
-                      (c > ts && *c >= '0' && *c <= '9')))
-                    word = 0;
-            if (!word)
-                return appm__fail(L->diag, APPM_ERR_PARSE, L->file, it.line,
-                                  "'%.*s' is not an OBJ statement", (int)(te - ts > 30 ? 30 : te - ts), ts);
-            for (k = 0; k < n; ++k)
-                if (appm__token_is(ts, te, ignored[k])) break;
-            appm__warn(L, k < n ? (uint64_t)1 << (8 + k) : (uint64_t)1 << 63, it.line,
-                       "OBJ statement '%.*s' is not modelled, ignored",
-                       (int)(te - ts > 30 ? 30 : te - ts), ts);
-        }
+        } else
+            st = appm__obj_ignored(L, ts, te, it.line);
+        if (st != APPM_OK) return st;
     }
     return APPM_OK;
 }
@@ -3218,6 +3336,154 @@ static appm_status appm__camera_set(appm__loader *L, unsigned line, appm__v3 eye
     return APPM_OK;
 }
 
+/* mesh: loads the OBJ named by the rest of the line s..e, a path relative to
+ * the scene file `path`. */
+static appm_status appm__scene_mesh(appm__loader *L, const char *s, const char *e, unsigned line, const char *path)
+{
+    const char *ns, *ne;
+    char mpath[4096];
+    if (!appm__rest(s, e, &ns, &ne))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "mesh: missing file name");
+    if (!appm__join_path(mpath, sizeof mpath, path, ns, (size_t)(ne - ns)))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "mesh: path too long");
+    return appm__obj_load(L, mpath, line);
+}
+
+/* camera eye x y z target x y z [up x y z] [fov degrees]: L->cam. */
+static appm_status appm__scene_camera(appm__loader *L, const char **s, const char *e, unsigned line,
+                                      const char *path)
+{
+    appm__kv kv[4] = {{"eye", 3, {0, 0, 0}, 0}, {"target", 3, {0, 0, 0}, 0},
+                      {"up", 3, {0, 1, 0}, 0}, {"fov", 1, {40, 0, 0}, 0}};
+    appm_status st;
+    if ((st = appm__keyvals(L, s, e, line, "camera", kv, 4)) != APPM_OK) return st;
+    if (!kv[0].seen || !kv[1].seen)
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "camera: needs eye and target");
+    return appm__camera_set(L, line, appm__kv3(&kv[0]), appm__kv3(&kv[1]), appm__kv3(&kv[2]), kv[3].v[0]);
+}
+
+/* lens aperture a focus f, a >= 0 and f > 0: the camera's thin lens. */
+static appm_status appm__scene_lens(appm__loader *L, const char **s, const char *e, unsigned line,
+                                    const char *path)
+{
+    appm__kv kv[2] = {{"aperture", 1, {0, 0, 0}, 0}, {"focus", 1, {0, 0, 0}, 0}};
+    appm_status st;
+    if ((st = appm__keyvals(L, s, e, line, "lens", kv, 2)) != APPM_OK) return st;
+    if ((st = appm__need(L, line, "lens", kv, 2)) != APPM_OK) return st;
+    if (kv[0].v[0] < 0 || !(kv[1].v[0] > 0))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "lens: aperture must be >= 0 and focus > 0");
+    L->cam.aperture = (float)kv[0].v[0];
+    L->cam.focus = (float)kv[1].v[0];
+    return APPM_OK;
+}
+
+/* image width height, integers in 1..32768: L->width, L->height. */
+static appm_status appm__scene_image(appm__loader *L, const char **s, const char *e, unsigned line,
+                                     const char *path)
+{
+    double v[2];
+    appm_status st;
+    if ((st = appm__numbers(L, s, e, line, "image", v, 2)) != APPM_OK ||
+        (st = appm__line_end(L, s, e, line, "image")) != APPM_OK)
+        return st;
+    if (v[0] < 1 || v[1] < 1 || v[0] > 32768 || v[1] > 32768 || v[0] != floor(v[0]) || v[1] != floor(v[1]))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line,
+                          "image: width and height must be integers in 1..32768");
+    L->width = (uint32_t)v[0];
+    L->height = (uint32_t)v[1];
+    return APPM_OK;
+}
+
+/* environment r g b (radiance >= 0): light l becomes the environment. */
+static appm_status appm__scene_env(appm__loader *L, appm__light *l, const char **s, const char *e, unsigned line,
+                                   const char *path)
+{
+    double v[3];
+    appm_status st;
+    if ((st = appm__numbers(L, s, e, line, "environment", v, 3)) != APPM_OK ||
+        (st = appm__line_end(L, s, e, line, "environment")) != APPM_OK)
+        return st;
+    if (v[0] < 0 || v[1] < 0 || v[2] < 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "environment: negative radiance");
+    l->kind = APPM__LIGHT_ENV;
+    l->value = appm__v((float)v[0], (float)v[1], (float)v[2]);
+    return APPM_OK;
+}
+
+/* light point position x y z intensity r g b: light l. */
+static appm_status appm__scene_point(appm__loader *L, appm__light *l, const char **s, const char *e,
+                                     unsigned line)
+{
+    appm__kv kv[2] = {{"position", 3, {0, 0, 0}, 0}, {"intensity", 3, {0, 0, 0}, 0}};
+    appm_status st;
+    if ((st = appm__keyvals(L, s, e, line, "light point", kv, 2)) != APPM_OK) return st;
+    if ((st = appm__need(L, line, "light point", kv, 2)) != APPM_OK) return st;
+    l->kind = APPM__LIGHT_POINT;
+    l->pos = appm__kv3(&kv[0]);
+    l->value = appm__kv3(&kv[1]);
+    return APPM_OK;
+}
+
+/* light spot position x y z target x y z intensity r g b [cone deg] [falloff
+ * deg], 0 < cone < 180 and 0 <= falloff <= cone: light l. */
+static appm_status appm__scene_spot(appm__loader *L, appm__light *l, const char **s, const char *e, unsigned line,
+                                    const char *path)
+{
+    appm__kv kv[5] = {{"position", 3, {0, 0, 0}, 0}, {"target", 3, {0, 0, 0}, 0},
+                      {"intensity", 3, {0, 0, 0}, 0}, {"cone", 1, {30, 0, 0}, 0},
+                      {"falloff", 1, {0, 0, 0}, 0}};
+    double cone, fall;
+    appm_status st;
+    if ((st = appm__keyvals(L, s, e, line, "light spot", kv, 5)) != APPM_OK) return st;
+    if ((st = appm__need(L, line, "light spot", kv, 3)) != APPM_OK) return st;
+    cone = kv[3].v[0];
+    fall = kv[4].v[0];
+    if (!(cone > 0 && cone < 180) || fall < 0 || fall > cone)
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line,
+                          "light spot: need 0 < cone < 180 and 0 <= falloff <= cone");
+    l->kind = APPM__LIGHT_SPOT;
+    l->pos = appm__kv3(&kv[0]);
+    l->axis = appm__sub(appm__kv3(&kv[1]), l->pos);
+    if (!(appm__length(l->axis) > 0))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "light spot: target equals position");
+    l->axis = appm__normalize(l->axis);
+    l->value = appm__kv3(&kv[2]);
+    l->cos_cone = (float)cos(cone * APPM__PI / 180.0);
+    l->cos_inner = (float)cos((cone - fall) * APPM__PI / 180.0);
+    l->target = appm__kv3(&kv[1]);
+    l->cone = cone;
+    l->falloff = fall;
+    return APPM_OK;
+}
+
+/* light point|spot ... (env = 0) or environment r g b (env = 1): a new entry
+ * of L->lights; its intensity or radiance must be >= 0. */
+static appm_status appm__scene_light(appm__loader *L, int env, const char **s, const char *e, unsigned line,
+                                     const char *path)
+{
+    appm__light *l;
+    const char *ks = NULL, *ke = NULL;
+    appm_status st;
+    if (!env && !appm__token(s, e, &ks, &ke))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "light: missing kind (point or spot)");
+    l = (appm__light *)appm__array_push(L->mem, &L->lights);
+    if (!l) return APPM_ERR_NOMEM;
+    l->line = line;
+    if (env)
+        st = appm__scene_env(L, l, s, e, line, path);
+    else if (appm__token_is(ks, ke, "point"))
+        st = appm__scene_point(L, l, s, e, line);
+    else if (appm__token_is(ks, ke, "spot"))
+        st = appm__scene_spot(L, l, s, e, line, path);
+    else
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "light: unknown kind '%.*s' (point or spot)",
+                          (int)(ke - ks > 30 ? 30 : ke - ks), ks);
+    if (st != APPM_OK) return st;
+    if (l->value.x < 0 || l->value.y < 0 || l->value.z < 0)
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "light: negative intensity");
+    return APPM_OK;
+}
+
 static appm_status appm__scene_parse(appm__loader *L, const char *buf, size_t len, const char *path)
 {
     appm__lines it;
@@ -3235,102 +3501,20 @@ static appm_status appm__scene_parse(appm__loader *L, const char *buf, size_t le
         const char *ts, *te;
         if (!appm__token(&s, e, &ts, &te)) continue;
         if (appm__token_is(ts, te, "mesh")) {
-            const char *ns, *ne;
-            char mpath[4096];
-            if (!appm__rest(s, e, &ns, &ne))
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "mesh: missing file name");
-            if (!appm__join_path(mpath, sizeof mpath, path, ns, (size_t)(ne - ns)))
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "mesh: path too long");
-            if ((st = appm__obj_load(L, mpath, it.line)) != APPM_OK) return st;
-            meshes++;
-        } else if (appm__token_is(ts, te, "camera")) {
-            appm__kv kv[4] = {{"eye", 3, {0, 0, 0}, 0}, {"target", 3, {0, 0, 0}, 0},
-                              {"up", 3, {0, 1, 0}, 0}, {"fov", 1, {40, 0, 0}, 0}};
-            if ((st = appm__keyvals(L, &s, e, it.line, "camera", kv, 4)) != APPM_OK) return st;
-            if (!kv[0].seen || !kv[1].seen)
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "camera: needs eye and target");
-            if ((st = appm__camera_set(L, it.line, appm__kv3(&kv[0]), appm__kv3(&kv[1]),
-                                       appm__kv3(&kv[2]), kv[3].v[0])) != APPM_OK)
-                return st;
-        } else if (appm__token_is(ts, te, "lens")) {
-            appm__kv kv[2] = {{"aperture", 1, {0, 0, 0}, 0}, {"focus", 1, {0, 0, 0}, 0}};
-            if ((st = appm__keyvals(L, &s, e, it.line, "lens", kv, 2)) != APPM_OK) return st;
-            if ((st = appm__need(L, it.line, "lens", kv, 2)) != APPM_OK) return st;
-            if (kv[0].v[0] < 0 || !(kv[1].v[0] > 0))
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
-                                  "lens: aperture must be >= 0 and focus > 0");
-            L->cam.aperture = (float)kv[0].v[0];
-            L->cam.focus = (float)kv[1].v[0];
-        } else if (appm__token_is(ts, te, "image")) {
-            double v[2];
-            if ((st = appm__numbers(L, &s, e, it.line, "image", v, 2)) != APPM_OK ||
-                (st = appm__line_end(L, &s, e, it.line, "image")) != APPM_OK)
-                return st;
-            if (v[0] < 1 || v[1] < 1 || v[0] > 32768 || v[1] > 32768 || v[0] != floor(v[0]) ||
-                v[1] != floor(v[1]))
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
-                                  "image: width and height must be integers in 1..32768");
-            L->width = (uint32_t)v[0];
-            L->height = (uint32_t)v[1];
-        } else if (appm__token_is(ts, te, "light") || appm__token_is(ts, te, "environment")) {
-            appm__light *l;
-            int env = ts[0] == 'e';
-            const char *ks = NULL, *ke = NULL;
-            if (!env && !appm__token(&s, e, &ks, &ke))
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "light: missing kind (point or spot)");
-            l = (appm__light *)appm__array_push(L->mem, &L->lights);
-            if (!l) return APPM_ERR_NOMEM;
-            l->line = it.line;
-            if (env) {
-                double v[3];
-                if ((st = appm__numbers(L, &s, e, it.line, "environment", v, 3)) != APPM_OK ||
-                    (st = appm__line_end(L, &s, e, it.line, "environment")) != APPM_OK)
-                    return st;
-                if (v[0] < 0 || v[1] < 0 || v[2] < 0)
-                    return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "environment: negative radiance");
-                l->kind = APPM__LIGHT_ENV;
-                l->value = appm__v((float)v[0], (float)v[1], (float)v[2]);
-            } else if (appm__token_is(ks, ke, "point")) {
-                appm__kv kv[2] = {{"position", 3, {0, 0, 0}, 0}, {"intensity", 3, {0, 0, 0}, 0}};
-                if ((st = appm__keyvals(L, &s, e, it.line, "light point", kv, 2)) != APPM_OK) return st;
-                if ((st = appm__need(L, it.line, "light point", kv, 2)) != APPM_OK) return st;
-                l->kind = APPM__LIGHT_POINT;
-                l->pos = appm__kv3(&kv[0]);
-                l->value = appm__kv3(&kv[1]);
-            } else if (appm__token_is(ks, ke, "spot")) {
-                appm__kv kv[5] = {{"position", 3, {0, 0, 0}, 0}, {"target", 3, {0, 0, 0}, 0},
-                                  {"intensity", 3, {0, 0, 0}, 0}, {"cone", 1, {30, 0, 0}, 0},
-                                  {"falloff", 1, {0, 0, 0}, 0}};
-                double cone, fall;
-                if ((st = appm__keyvals(L, &s, e, it.line, "light spot", kv, 5)) != APPM_OK) return st;
-                if ((st = appm__need(L, it.line, "light spot", kv, 3)) != APPM_OK) return st;
-                cone = kv[3].v[0];
-                fall = kv[4].v[0];
-                if (!(cone > 0 && cone < 180) || fall < 0 || fall > cone)
-                    return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
-                                      "light spot: need 0 < cone < 180 and 0 <= falloff <= cone");
-                l->kind = APPM__LIGHT_SPOT;
-                l->pos = appm__kv3(&kv[0]);
-                l->axis = appm__sub(appm__kv3(&kv[1]), l->pos);
-                if (!(appm__length(l->axis) > 0))
-                    return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "light spot: target equals position");
-                l->axis = appm__normalize(l->axis);
-                l->value = appm__kv3(&kv[2]);
-                l->cos_cone = (float)cos(cone * APPM__PI / 180.0);
-                l->cos_inner = (float)cos((cone - fall) * APPM__PI / 180.0);
-                l->target = appm__kv3(&kv[1]);
-                l->cone = cone;
-                l->falloff = fall;
-            } else {
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line,
-                                  "light: unknown kind '%.*s' (point or spot)", (int)(ke - ks > 30 ? 30 : ke - ks), ks);
-            }
-            if (l->value.x < 0 || l->value.y < 0 || l->value.z < 0)
-                return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "light: negative intensity");
-        } else {
+            st = appm__scene_mesh(L, s, e, it.line, path);
+            if (st == APPM_OK) meshes++;
+        } else if (appm__token_is(ts, te, "camera"))
+            st = appm__scene_camera(L, &s, e, it.line, path);
+        else if (appm__token_is(ts, te, "lens"))
+            st = appm__scene_lens(L, &s, e, it.line, path);
+        else if (appm__token_is(ts, te, "image"))
+            st = appm__scene_image(L, &s, e, it.line, path);
+        else if (appm__token_is(ts, te, "light") || appm__token_is(ts, te, "environment"))
+            st = appm__scene_light(L, ts[0] == 'e', &s, e, it.line, path);
+        else
             return appm__fail(L->diag, APPM_ERR_PARSE, path, it.line, "unknown keyword '%.*s'",
                               (int)(te - ts > 30 ? 30 : te - ts), ts);
-        }
+        if (st != APPM_OK) return st;
     }
     if (meshes == 0 && L->lights.count == 0)
         return appm__fail(L->diag, APPM_ERR_PARSE, path, 0, "empty scene: no mesh and no light");
@@ -3700,7 +3884,7 @@ static int appm__occluded_bin(const appm_scene *s, const appm__ray *r, uint32_t 
 }
 #endif
 
-/* ---- Wide traversal --------------------------------------------------------
+/* ---- 5.1 Wide traversal ---------------------------------------------------
  *
  * A node's W child boxes are tested at once; the hit children are visited
  * nearest first (their entry distances sorted, at most W of them), the others
@@ -3951,7 +4135,7 @@ static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
 
 #define APPM__WSTACK ((APPM__BVH_W - 1) * APPM__BVH_MAX_DEPTH + APPM__BVH_W)
 
-/* ---- Leaf packs ----------------------------------------------------------------
+/* ---- 5.2 Leaf packs -----------------------------------------------------------
  *
  * appm__pack_hit is appm__tri_hit for four triangles at once: the same float
  * operations on the same operands in the same order (no contraction), lane by
@@ -4282,7 +4466,7 @@ static int appm__occluded(const appm_scene *s, const appm__ray *r, uint32_t skip
 #endif
     return appm__occluded_wide(s, r, skip0, skip1, s->bvh_path == APPM__BVH_SCALAR);
 }
-/* ---- 5.1 Build ------------------------------------------------------------- */
+/* ---- 5.3 Build ------------------------------------------------------------- */
 
 typedef struct appm__bbox {
     appm__v3 lo, hi;
@@ -4396,29 +4580,12 @@ static uint32_t appm__bvh_split(const appm__bbox *tb, const appm__v3 *cen, uint3
     return count / 2;
 }
 
-/* The binary tree (s->node), triangles put in leaf order. */
-static appm_status appm__bvh_build_binary(appm_scene *s, appm_diag *diag)
+/* Per triangle of s: idx[i] = i, its bounding box tb[i] and the box's centre
+ * cen[i], the arrays holding s->ntri entries. */
+static void appm__bvh_boxes(const appm_scene *s, uint32_t *idx, appm__bbox *tb, appm__v3 *cen)
 {
-    appm__mem *m = &s->mem;
-    uint32_t n = s->ntri, i, nnode = 1, sp = 0;
-    uint32_t *idx = NULL;
-    appm__bbox *tb = NULL;
-    appm__v3 *cen = NULL;
-    appm__build_item *stack = NULL;
-    appm__tri *tri2 = NULL;
-    appm__tri_info *info2 = NULL;
-    s->node = NULL;
-    s->nnode = 0;
-    s->depth = 0;
-    if (n == 0) return APPM_OK;
-    (void)diag;
-    idx = (uint32_t *)appm__alloc(m, n, sizeof *idx);
-    tb = (appm__bbox *)appm__alloc(m, n, sizeof *tb);
-    cen = (appm__v3 *)appm__alloc(m, n, sizeof *cen);
-    stack = (appm__build_item *)appm__alloc(m, APPM__BVH_MAX_DEPTH * 2 + 8, sizeof *stack);
-    s->node = (appm__node *)appm__alloc(m, 2 * (size_t)n, sizeof *s->node);
-    if (!idx || !tb || !cen || !stack || !s->node) goto nomem;
-    for (i = 0; i < n; ++i) {
+    uint32_t i;
+    for (i = 0; i < s->ntri; ++i) {
         idx[i] = i;
         appm__bbox_empty(&tb[i]);
         appm__bbox_grow(&tb[i], s->tri[i].p0);
@@ -4426,9 +4593,19 @@ static appm_status appm__bvh_build_binary(appm_scene *s, appm_diag *diag)
         appm__bbox_grow(&tb[i], s->tri[i].p2);
         cen[i] = appm__scale(appm__add(tb[i].lo, tb[i].hi), 0.5f);
     }
+}
+
+/* The binary nodes, top down from the root over all s->ntri triangles, into
+ * s->node (room for 2 ntri) and s->depth, reordering idx[] so that every leaf's
+ * triangles are consecutive.  `stack` holds APPM__BVH_MAX_DEPTH * 2 + 8 items.
+ * Returns the number of nodes. */
+static uint32_t appm__bvh_nodes(appm_scene *s, const appm__bbox *tb, const appm__v3 *cen, uint32_t *idx,
+                                appm__build_item *stack)
+{
+    uint32_t i, nnode = 1, sp = 0;
     stack[sp].node = 0;
     stack[sp].start = 0;
-    stack[sp].count = n;
+    stack[sp].count = s->ntri;
     stack[sp].depth = 1;
     sp++;
     while (sp > 0) {
@@ -4467,19 +4644,53 @@ static appm_status appm__bvh_build_binary(appm_scene *s, appm_diag *diag)
         sp++;
         nnode += 2;
     }
-    s->nnode = nnode;
+    return nnode;
+}
+
+/* Puts s's triangles in leaf order, tri2[i] and info2[i] (fresh arrays of
+ * s->ntri entries) taking triangle idx[i]; s's old arrays are freed. */
+static void appm__bvh_leaf_order(appm_scene *s, const uint32_t *idx, appm__tri *tri2, appm__tri_info *info2)
+{
+    uint32_t i;
+    for (i = 0; i < s->ntri; ++i) {
+        tri2[i] = s->tri[idx[i]];
+        info2[i] = s->info[idx[i]];
+    }
+    appm__free(&s->mem, s->tri);
+    appm__free(&s->mem, s->info);
+    s->tri = tri2;
+    s->info = info2;
+}
+
+/* The binary tree (s->node), triangles put in leaf order. */
+static appm_status appm__bvh_build_binary(appm_scene *s, appm_diag *diag)
+{
+    appm__mem *m = &s->mem;
+    uint32_t n = s->ntri;
+    uint32_t *idx = NULL;
+    appm__bbox *tb = NULL;
+    appm__v3 *cen = NULL;
+    appm__build_item *stack = NULL;
+    appm__tri *tri2 = NULL;
+    appm__tri_info *info2 = NULL;
+    s->node = NULL;
+    s->nnode = 0;
+    s->depth = 0;
+    if (n == 0) return APPM_OK;
+    (void)diag;
+    idx = (uint32_t *)appm__alloc(m, n, sizeof *idx);
+    tb = (appm__bbox *)appm__alloc(m, n, sizeof *tb);
+    cen = (appm__v3 *)appm__alloc(m, n, sizeof *cen);
+    stack = (appm__build_item *)appm__alloc(m, APPM__BVH_MAX_DEPTH * 2 + 8, sizeof *stack);
+    s->node = (appm__node *)appm__alloc(m, 2 * (size_t)n, sizeof *s->node);
+    if (!idx || !tb || !cen || !stack || !s->node) goto nomem;
+    appm__bvh_boxes(s, idx, tb, cen);
+    s->nnode = appm__bvh_nodes(s, tb, cen, idx, stack);
     /* Put the triangles in leaf order, so a leaf reads consecutive memory. */
     tri2 = (appm__tri *)appm__alloc(m, n, sizeof *tri2);
     info2 = (appm__tri_info *)appm__alloc(m, n, sizeof *info2);
     if (!tri2 || !info2) goto nomem;
-    for (i = 0; i < n; ++i) {
-        tri2[i] = s->tri[idx[i]];
-        info2[i] = s->info[idx[i]];
-    }
-    appm__free(m, s->tri);
-    appm__free(m, s->info);
-    s->tri = tri2;
-    s->info = info2;
+    appm__bvh_leaf_order(s, idx, tri2, info2);
     appm__free(m, idx);
     appm__free(m, tb);
     appm__free(m, cen);
@@ -4762,7 +4973,7 @@ static appm_status appm__bvh_build(appm_scene *s, appm_diag *diag)
     return st;
 }
 
-/* ---- 5.2 Surface points and ray offsets ------------------------------------ */
+/* ---- 5.4 Surface points and ray offsets ------------------------------------ */
 
 typedef struct appm__surf {
     appm__v3 p;    /* hit point, interpolated from the vertices */
@@ -5972,21 +6183,12 @@ static int appm__pmap_grow(appm__mem *mem, void *old_a, void *old_b, size_t n1, 
     return 1;
 }
 
-/* Builds map `m` over photons ph[0..n) with cubic cells of size `cell_size` > 0,
- * reordering ph in place.  `dest` is scratch for n entries.  `runs` (NULL: the
- * whole array, in order) lists the stretches of ph in the order the photons
- * must keep within a bucket - the photon pass's chunks in global order, so
- * that sums over a bucket do not depend on the thread count.  Fails only for
- * memory (the bucket table grows when a pass has more photons than any before). */
-static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon *ph, size_t n, uint32_t *dest,
-                                    const appm__chunk_rec *runs, uint32_t nruns, float cell_size)
+/* The bucket table for 2^bits = nb buckets (cell[] and bbox[]) and hot[] and
+ * side[] for n photons, each grown only when too small, so that memory stays
+ * flat.  APPM_ERR_NOMEM leaves the old arrays in place. */
+static appm_status appm__pmap_reserve(appm__pmap *m, appm__mem *mem, size_t n, uint32_t nb)
 {
-    size_t i, k;
-    uint32_t c, bits = 10, nb;
-    appm__bbox bb;
-    while (bits < 30 && ((size_t)1 << bits) < n) bits++;
-    nb = 1u << bits;
-    if ((size_t)nb + 1 > m->cell_cap) { /* the table only grows: memory stays flat */
+    if ((size_t)nb + 1 > m->cell_cap) {
         void *cell, *bbox;
         if (!appm__pmap_grow(mem, m->cell, m->bbox, (size_t)nb + 1, sizeof *m->cell, (size_t)nb * 6, sizeof *m->bbox,
                              &cell, &bbox))
@@ -5995,7 +6197,7 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
         m->bbox = (float *)bbox;
         m->cell_cap = (size_t)nb + 1;
     }
-    /* so do hot[] and side[], sized with the table (2^bits >= n, bar the cap of
+    /* hot[] and side[] are sized with the table (2^bits >= n, bar the cap of
      * 2^30): a pass with a few more photons than the last needs no new ones */
     if (n > m->hot_cap || !m->hot) {
         void *hot, *side;
@@ -6006,14 +6208,17 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
         m->side = (float *)side;
         m->hot_cap = cap;
     }
-    m->bits = bits;
-    m->ph = ph;
-    m->n = n;
-    appm__bbox_empty(&bb);
-    for (i = 0; i < n; ++i) appm__bbox_grow(&bb, appm__v(ph[i].x, ph[i].y, ph[i].z));
-    m->lo = n ? bb.lo : appm__v(0, 0, 0);
-    m->cell_size = cell_size;
-    m->inv_cell = 1.0f / cell_size;
+    return APPM_OK;
+}
+
+/* Steps (1) - (3) of the build: m->cell[0..nb] the buckets' starts and dest[i]
+ * the slot of photon i, slots given out walking `runs` in order (NULL: the
+ * whole array).  m's grid (lo, inv_cell, bits) must be set. */
+static void appm__pmap_slots(appm__pmap *m, const appm__photon *ph, size_t n, uint32_t *dest,
+                             const appm__chunk_rec *runs, uint32_t nruns, uint32_t nb)
+{
+    size_t i, k;
+    uint32_t c;
     memset(m->cell, 0, ((size_t)nb + 1) * sizeof *m->cell);
     /* (1) counts, with each photon's bucket kept in dest[] for step (3) */
     for (i = 0; i < n; ++i) {
@@ -6031,7 +6236,13 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
         for (i = runs[c].start; i < (size_t)runs[c].start + runs[c].count; ++i) dest[i] = m->cell[dest[i]]++;
     for (k = nb; k > 0; --k) m->cell[k] = m->cell[k - 1];
     m->cell[0] = 0;
-    /* (4) permute in place: each swap puts one photon in its final slot */
+}
+
+/* Step (4): moves photon i to slot dest[i], in place; each swap puts one photon
+ * in its final slot.  dest[] ends as the identity. */
+static void appm__pmap_permute(appm__photon *ph, size_t n, uint32_t *dest)
+{
+    size_t i;
     for (i = 0; i < n; ++i) {
         while (dest[i] != i) {
             uint32_t j = dest[i], tj;
@@ -6043,10 +6254,16 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
             dest[i] = tj;
         }
     }
-    /* (5) the query's side arrays: the positions (hot[]) and decoded normals
-     * (side[]) in map order, then each non-empty bucket's bounding box (an
-     * empty one's is never read) */
-    for (i = 0; i < n; ++i) {
+}
+
+/* Step (5): the query's side arrays from the sorted photons m->ph[0..m->n): the
+ * positions (hot[]) and decoded normals (side[]) in map order, then each
+ * non-empty bucket's bounding box among the nb (an empty one's is never read). */
+static void appm__pmap_side_arrays(appm__pmap *m, uint32_t nb)
+{
+    const appm__photon *ph = m->ph;
+    size_t i, k;
+    for (i = 0; i < m->n; ++i) {
         m->hot[i] = ph[i].x;
         m->hot[m->hot_cap + i] = ph[i].y;
         m->hot[2 * m->hot_cap + i] = ph[i].z;
@@ -6068,6 +6285,34 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
             if (ph[i].z > bx[5]) bx[5] = ph[i].z;
         }
     }
+}
+
+/* Builds map `m` over photons ph[0..n) with cubic cells of size `cell_size` > 0,
+ * reordering ph in place.  `dest` is scratch for n entries.  `runs` (NULL: the
+ * whole array, in order) lists the stretches of ph in the order the photons
+ * must keep within a bucket - the photon pass's chunks in global order, so
+ * that sums over a bucket do not depend on the thread count.  Fails only for
+ * memory (the bucket table grows when a pass has more photons than any before). */
+static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon *ph, size_t n, uint32_t *dest,
+                                    const appm__chunk_rec *runs, uint32_t nruns, float cell_size)
+{
+    size_t i;
+    uint32_t bits = 10, nb;
+    appm__bbox bb;
+    while (bits < 30 && ((size_t)1 << bits) < n) bits++;
+    nb = 1u << bits;
+    if (appm__pmap_reserve(m, mem, n, nb) != APPM_OK) return APPM_ERR_NOMEM;
+    m->bits = bits;
+    m->ph = ph;
+    m->n = n;
+    appm__bbox_empty(&bb);
+    for (i = 0; i < n; ++i) appm__bbox_grow(&bb, appm__v(ph[i].x, ph[i].y, ph[i].z));
+    m->lo = n ? bb.lo : appm__v(0, 0, 0);
+    m->cell_size = cell_size;
+    m->inv_cell = 1.0f / cell_size;
+    appm__pmap_slots(m, ph, n, dest, runs, nruns, nb);
+    appm__pmap_permute(ph, n, dest);
+    appm__pmap_side_arrays(m, nb);
     return APPM_OK;
 }
 
@@ -6804,11 +7049,12 @@ static size_t appm__store_compact(appm_renderer *r)
 
 /* ---- 10.1 The gather's sums ---------------------------------------------------
  *
- * A gather visits the photons within its reach of x (the map's query, 7.2)
- * and adds each one's share to the sums of its component: one set of sums
- * for a method with one radius, two (diffuse and caustic photons, each with its
- * own radius) for appm.  What a method does with the sums after the gather is
- * its commit hook (10.5). */
+ * A gather (10.6) visits the photons within its reach of x (the map's query,
+ * 7.2) and adds each one's share to the sums of its component: one set of
+ * sums for a method with one radius, two (diffuse and caustic photons, each
+ * with its own radius) for appm.  Here: what the sums are, how they become a
+ * pass's estimates (appm__gather_finish), what a method's table entry holds,
+ * and the per-pixel statistics every method shares. */
 typedef struct appm__sums { /* one photon component's sums over a gather's photons */
     double e[3];         /* sum of K-weighted gamma (scaled at the end) */
     double eg[3];        /* glossy: sum of K-weighted lobe(wi) gamma */
@@ -6878,136 +7124,6 @@ static double appm__cut_mass_at(const appm__gather *g, double R, double sx, doub
 }
 
 static double appm__cut_mass(const appm__gather *g, double R) { return appm__cut_mass_at(g, R, 0.0, 0.0); }
-
-/* One photon's share of one component's sums (lobe: the glossy lobe's value at
- * the photon's direction). */
-static inline void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
-                                     double q, float lobe, appm__sums *sum)
-{
-    if (d2 < R2) {
-        double k = 1.0;
-        if (g->biweight) {
-            double u = 1.0 - (double)d2 / R2;
-            k = u * u;
-            sum->s += k * q * q;
-        }
-        sum->e[0] += k * p->power[0];
-        sum->e[1] += k * p->power[1];
-        sum->e[2] += k * p->power[2];
-        if (g->glossy) {
-            sum->eg[0] += k * lobe * p->power[0];
-            sum->eg[1] += k * lobe * p->power[1];
-            sum->eg[2] += k * lobe * p->power[2];
-        }
-        sum->count++;
-    }
-    if (g->h > 0.0f) {
-        /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
-         * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h.
-         * Beyond 2h (a >= 4) every term is 0, since a + 1 - 2 |d.t| / h >= (sqrt(a) - 1)^2 >= 1:
-         * such photons (inside a wider R or Rc) are skipped (the power is finite, checked
-         * at emission, so 0 * q is 0). */
-        double a = (double)d2 * ih * ih, stencil = 0.0;
-        if (a < 4.0) {
-            float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
-            double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
-            double db = (dx * g->b.x + dy * g->b.y + dz * g->b.z) * ih;
-            double c[4];
-            int k;
-            c[0] = a + 1.0 + 2.0 * dt;
-            c[1] = a + 1.0 - 2.0 * dt;
-            c[2] = a + 1.0 + 2.0 * db;
-            c[3] = a + 1.0 - 2.0 * db;
-            for (k = 0; k < 4; ++k)
-                if (c[k] < 1.0) stencil += g->lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
-            if (a < 1.0) stencil -= 4.0 * g->lw[4] * (1.0 - a) * (1.0 - a);
-            sum->dl += stencil * q;
-        }
-    }
-}
-
-/* Photon p at squared distance d2 (< the query's reach, max(R, Rc, 2h)^2)
- * into g's sums; R2 = R^2, ih = 1/h.  The cheap rejections come first (path
- * length, one byte; then the normal), and lum(Psi), which only the second
- * moment and the Laplacian read, is not formed for the uniform kernel. */
-static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
-                              const float *side)
-{
-    float lobe = 0.0f, dn;
-    double q = 0.0;
-    if (p->segs > g->max_p) return;
-    /* same surface: angle(n_photon, n) < 60 deg.  With the octahedral decode
-     * not normalised (side, from appm__photon_side): cos >= c <=> dot > 0 and
-     * dot^2 >= c^2 |n|^2 */
-    dn = side[0] * g->n.x + side[1] * g->n.y + side[2] * g->n.z;
-    if (!(dn > 0.0f) || dn * dn < side[3]) return;
-    if (g->glossy) { /* the lobe at the photon's own direction (section 6.1) */
-        float c = appm__dot(appm__photon_wi(p), g->rd);
-        appm__v3 wf;
-        lobe = c > 0.0f ? powf(c > 1.0f ? 1.0f : c, g->ns) : 0.0f;
-        wf = appm__add(g->wf, appm__scale(g->wg, lobe));
-        q = 0.2126 * wf.x * p->power[0] + 0.7152 * wf.y * p->power[1] + 0.0722 * wf.z * p->power[2];
-    } else if (g->biweight || g->h > 0.0f) {
-        q = g->qw[0] * p->power[0] + g->qw[1] * p->power[1] + g->qw[2] * p->power[2];
-    }
-    { /* one call site, so that the compiler inlines it: the caustic component's
-       * radius and sums, or the diffuse (or only) one's */
-        int c = p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f;
-        appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, ih, q, lobe, &g->sum[c ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE]);
-    }
-}
-
-/* The per-pixel constants of the visit: 1/h and the luminance weights of
- * lum(Psi), whose first factor is (0.2126 W f_x) gamma_x, as before. */
-static void appm__gather_consts(appm__gather *g)
-{
-    int k;
-    g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
-    for (k = 0; k < 5; ++k) g->lw[k] = 1.0;
-    if (APPM__CUT_LAP && g->ncut > 0 && g->h > 0.0f) { /* the stencil's kernels, each renormalised by its own mass */
-        double h = g->h;
-        g->lw[0] = 1.0 / appm__cut_mass_at(g, h, h, 0.0);
-        g->lw[1] = 1.0 / appm__cut_mass_at(g, h, -h, 0.0);
-        g->lw[2] = 1.0 / appm__cut_mass_at(g, h, 0.0, h);
-        g->lw[3] = 1.0 / appm__cut_mass_at(g, h, 0.0, -h);
-        g->lw[4] = 1.0 / appm__cut_mass_at(g, h, 0.0, 0.0);
-    }
-    g->qw[0] = 0.2126 * g->wf.x;
-    g->qw[1] = 0.7152 * g->wf.y;
-    g->qw[2] = 0.0722 * g->wf.z;
-}
-
-/* Photon p into g's sums if it lies within Rg2 = (reach)^2 of g->x (R2 = R^2):
- * the entry for callers that hold a photon but no query (the tests' toys). */
-APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
-{
-    float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
-    float d2 = dx * dx + dy * dy + dz * dz, side[4];
-    if (!(d2 < Rg2)) return;
-    appm__photon_side(p, side);
-    appm__gather_consts(g);
-    appm__gather_near(g, p, d2, R2, g->ih, side);
-}
-
-static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
-{
-    appm__gather *g = (appm__gather *)ctx;
-    appm__gather_near(g, p, d2, g->R2, g->ih, g->map->side + 4 * (size_t)(p - g->map->ph));
-}
-
-/* Visits every photon within max(R, Rc, 2h) of g->x (7.2's query), with
- * the per-pixel constants of the visit computed once. */
-static void appm__gather_query(const appm__pmap *m, appm__gather *g)
-{
-    float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h;
-    if (g->Rc > Rg) Rg = g->Rc;
-    g->Rc2 = g->Rc * g->Rc;
-    g->R2 = g->R * g->R;
-    g->Rg2 = Rg * Rg;
-    appm__gather_consts(g);
-    g->map = m;
-    appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
-}
 
 /* Turns one component's sums (kernel radius R) into this pass's estimates:
  *   e  = (1/M) sum_i k_R(x - y_i) Psi_i          (the photon term of Ihat_j)
@@ -7461,7 +7577,7 @@ static double appm__paper_aux(const appm_renderer *r, const void *state, appm_au
  *   step 1  two photon components, caustic (the last bounce specular) and
  *           diffuse, each with its own statistics and radius, c_f halved:
  *           a caustic over a smooth floor no longer shares the floor's wide
- *           kernel (toy of 5.1: RMSE at the caustic 0.052 -> 0.024);
+ *           kernel (toy of algorithm.md 5.1: RMSE at the caustic 0.052 -> 0.024);
  *   step 2  the Laplacian on the warm-up passes and then every 8th, with
  *           h = kappa r_auto j^(-1/8) from the automatic radius, averaged with
  *           inverse-variance weights h^6: a wide bandwidth on a few passes
@@ -8006,7 +8122,139 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * pass's direct term, gather the photons near the visible point (with the
  * kernel cut's lines where the method cuts), and hand the sums to the
  * method's commit.  A pixel without a visible point commits an empty gather:
- * its pass contributes 0. */
+ * its pass contributes 0.  A photon's share of the sums comes first: the
+ * biweight (or uniform) kernel and the 5-point Laplacian stencil of
+ * algorithm.md 4.6, per photon. */
+
+/* One photon's share of one component's sums (lobe: the glossy lobe's value at
+ * the photon's direction). */
+static inline void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
+                                     double q, float lobe, appm__sums *sum)
+{
+    if (d2 < R2) {
+        double k = 1.0;
+        if (g->biweight) {
+            double u = 1.0 - (double)d2 / R2;
+            k = u * u;
+            sum->s += k * q * q;
+        }
+        sum->e[0] += k * p->power[0];
+        sum->e[1] += k * p->power[1];
+        sum->e[2] += k * p->power[2];
+        if (g->glossy) {
+            sum->eg[0] += k * lobe * p->power[0];
+            sum->eg[1] += k * lobe * p->power[1];
+            sum->eg[2] += k * lobe * p->power[2];
+        }
+        sum->count++;
+    }
+    if (g->h > 0.0f) {
+        /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
+         * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h.
+         * Beyond 2h (a >= 4) every term is 0, since a + 1 - 2 |d.t| / h >= (sqrt(a) - 1)^2 >= 1:
+         * such photons (inside a wider R or Rc) are skipped (the power is finite, checked
+         * at emission, so 0 * q is 0). */
+        double a = (double)d2 * ih * ih, stencil = 0.0;
+        if (a < 4.0) {
+            float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
+            double dt = (dx * g->t.x + dy * g->t.y + dz * g->t.z) * ih;
+            double db = (dx * g->b.x + dy * g->b.y + dz * g->b.z) * ih;
+            double c[4];
+            int k;
+            c[0] = a + 1.0 + 2.0 * dt;
+            c[1] = a + 1.0 - 2.0 * dt;
+            c[2] = a + 1.0 + 2.0 * db;
+            c[3] = a + 1.0 - 2.0 * db;
+            for (k = 0; k < 4; ++k)
+                if (c[k] < 1.0) stencil += g->lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
+            if (a < 1.0) stencil -= 4.0 * g->lw[4] * (1.0 - a) * (1.0 - a);
+            sum->dl += stencil * q;
+        }
+    }
+}
+
+/* Photon p at squared distance d2 (< the query's reach, max(R, Rc, 2h)^2)
+ * into g's sums; R2 = R^2, ih = 1/h.  The cheap rejections come first (path
+ * length, one byte; then the normal), and lum(Psi), which only the second
+ * moment and the Laplacian read, is not formed for the uniform kernel. */
+static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
+                              const float *side)
+{
+    float lobe = 0.0f, dn;
+    double q = 0.0;
+    if (p->segs > g->max_p) return;
+    /* same surface: angle(n_photon, n) < 60 deg.  With the octahedral decode
+     * not normalised (side, from appm__photon_side): cos >= c <=> dot > 0 and
+     * dot^2 >= c^2 |n|^2 */
+    dn = side[0] * g->n.x + side[1] * g->n.y + side[2] * g->n.z;
+    if (!(dn > 0.0f) || dn * dn < side[3]) return;
+    if (g->glossy) { /* the lobe at the photon's own direction (section 6.1) */
+        float c = appm__dot(appm__photon_wi(p), g->rd);
+        appm__v3 wf;
+        lobe = c > 0.0f ? powf(c > 1.0f ? 1.0f : c, g->ns) : 0.0f;
+        wf = appm__add(g->wf, appm__scale(g->wg, lobe));
+        q = 0.2126 * wf.x * p->power[0] + 0.7152 * wf.y * p->power[1] + 0.0722 * wf.z * p->power[2];
+    } else if (g->biweight || g->h > 0.0f) {
+        q = g->qw[0] * p->power[0] + g->qw[1] * p->power[1] + g->qw[2] * p->power[2];
+    }
+    { /* one call site, so that the compiler inlines it: the caustic component's
+       * radius and sums, or the diffuse (or only) one's */
+        int c = p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f;
+        appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, ih, q, lobe, &g->sum[c ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE]);
+    }
+}
+
+/* The per-pixel constants of the visit: 1/h and the luminance weights of
+ * lum(Psi), whose first factor is (0.2126 W f_x) gamma_x, as before. */
+static void appm__gather_consts(appm__gather *g)
+{
+    int k;
+    g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
+    for (k = 0; k < 5; ++k) g->lw[k] = 1.0;
+    if (APPM__CUT_LAP && g->ncut > 0 && g->h > 0.0f) { /* the stencil's kernels, each renormalised by its own mass */
+        double h = g->h;
+        g->lw[0] = 1.0 / appm__cut_mass_at(g, h, h, 0.0);
+        g->lw[1] = 1.0 / appm__cut_mass_at(g, h, -h, 0.0);
+        g->lw[2] = 1.0 / appm__cut_mass_at(g, h, 0.0, h);
+        g->lw[3] = 1.0 / appm__cut_mass_at(g, h, 0.0, -h);
+        g->lw[4] = 1.0 / appm__cut_mass_at(g, h, 0.0, 0.0);
+    }
+    g->qw[0] = 0.2126 * g->wf.x;
+    g->qw[1] = 0.7152 * g->wf.y;
+    g->qw[2] = 0.0722 * g->wf.z;
+}
+
+/* Photon p into g's sums if it lies within Rg2 = (reach)^2 of g->x (R2 = R^2):
+ * the entry for callers that hold a photon but no query (the tests' toys). */
+APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon *p, float R2, float Rg2)
+{
+    float dx = g->x.x - p->x, dy = g->x.y - p->y, dz = g->x.z - p->z;
+    float d2 = dx * dx + dy * dy + dz * dz, side[4];
+    if (!(d2 < Rg2)) return;
+    appm__photon_side(p, side);
+    appm__gather_consts(g);
+    appm__gather_near(g, p, d2, R2, g->ih, side);
+}
+
+static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
+{
+    appm__gather *g = (appm__gather *)ctx;
+    appm__gather_near(g, p, d2, g->R2, g->ih, g->map->side + 4 * (size_t)(p - g->map->ph));
+}
+
+/* Visits every photon within max(R, Rc, 2h) of g->x (7.2's query), with
+ * the per-pixel constants of the visit computed once. */
+static void appm__gather_query(const appm__pmap *m, appm__gather *g)
+{
+    float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h;
+    if (g->Rc > Rg) Rg = g->Rc;
+    g->Rc2 = g->Rc * g->Rc;
+    g->R2 = g->R * g->R;
+    g->Rg2 = Rg * Rg;
+    appm__gather_consts(g);
+    g->map = m;
+    appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
+}
 
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
