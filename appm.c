@@ -5345,13 +5345,12 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
     power[2] = f * l->value.z;
 }
 
-/* Samples the start of a photon path from u[0..4] (appm__smp_emit): light by
- * power (u[0]), then position and direction (u[1], u[2] the first 2-D sample of
- * each light kind, the one a stratified sampler serves best; u[3], u[4] the
- * second). */
-static int appm__emit(const appm_scene *s, const float *u, appm__photon_start *ps)
+/* Samples the start of a photon path from light li and u[1..4] (appm__smp_emit):
+ * position and direction (u[1], u[2] the first 2-D sample of each light kind,
+ * the one a stratified sampler serves best; u[3], u[4] the second), with the
+ * weight of a light picked by power (u[0] in appm__emit). */
+static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, appm__photon_start *ps)
 {
-    uint32_t li = appm__pick_light(s, u[0]);
     const appm__light *l = &s->light[li];
     float u1 = u[1], u2 = u[2], u3 = u[3], u4 = u[4];
     appm__v3 o, d;
@@ -5397,6 +5396,13 @@ static int appm__emit(const appm_scene *s, const float *u, appm__photon_start *p
     }
     appm__ray_init(&ps->ray, o, d, FLT_MAX);
     return appm__finite3(ps->gamma);
+}
+
+/* The start of a photon path from u[0..4]: the light by power (u[0]), then
+ * appm__emit_light. */
+static int appm__emit(const appm_scene *s, const float *u, appm__photon_start *ps)
+{
+    return appm__emit_light(s, appm__pick_light(s, u[0]), u, ps);
 }
 
 typedef struct appm__light_sample {
@@ -6081,6 +6087,7 @@ typedef struct appm__pmap {
     float *side;       /* per photon, in map order: its normal n decoded (not normalised) and
                         * c^2 |n|^2 (c = APPM__NORMAL_COS), what the same-surface test reads */
     size_t hot_cap;    /* photons hot[] and side[] have room for (only grow: memory stays flat) */
+    uint32_t *tag;     /* borrowed, NULL or one per photon: permuted with them by the build */
 } appm__pmap;
 
 #define APPM__CELL_SCALE 2.0f /* grid cell = this times the median gather radius (speed only) */
@@ -6240,7 +6247,7 @@ static void appm__pmap_slots(appm__pmap *m, const appm__photon *ph, size_t n, ui
 
 /* Step (4): moves photon i to slot dest[i], in place; each swap puts one photon
  * in its final slot.  dest[] ends as the identity. */
-static void appm__pmap_permute(appm__photon *ph, size_t n, uint32_t *dest)
+static void appm__pmap_permute(appm__photon *ph, uint32_t *tag, size_t n, uint32_t *dest)
 {
     size_t i;
     for (i = 0; i < n; ++i) {
@@ -6249,6 +6256,11 @@ static void appm__pmap_permute(appm__photon *ph, size_t n, uint32_t *dest)
             appm__photon tp = ph[j];
             ph[j] = ph[i];
             ph[i] = tp;
+            if (tag) {
+                tj = tag[j];
+                tag[j] = tag[i];
+                tag[i] = tj;
+            }
             tj = dest[j];
             dest[j] = j;
             dest[i] = tj;
@@ -6311,7 +6323,7 @@ static appm_status appm__pmap_build(appm__pmap *m, appm__mem *mem, appm__photon 
     m->cell_size = cell_size;
     m->inv_cell = 1.0f / cell_size;
     appm__pmap_slots(m, ph, n, dest, runs, nruns, nb);
-    appm__pmap_permute(ph, n, dest);
+    appm__pmap_permute(ph, m->tag, n, dest);
     appm__pmap_side_arrays(m, nb);
     return APPM_OK;
 }
@@ -6497,6 +6509,27 @@ typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pix
 
 struct appm__estimator; /* a method's entry in the table of section 10 */
 
+#define APPM__GUIDE_RES 32        /* cells per side of a light's learned emission density (9.1) */
+#define APPM__GUIDE_CELLS (APPM__GUIDE_RES * APPM__GUIDE_RES)
+#define APPM__GUIDE_LIGHTS 16     /* lights guided at most: the most powerful */
+
+typedef struct appm__guide { /* emission guided by visual importance (section 9.1) */
+    uint32_t nslot;      /* guided lights (0: --emission light) */
+    uint32_t *slot;      /* per scene light: its slot, or UINT32_MAX */
+    uint32_t *light;     /* per slot: its scene light */
+    double *score;       /* per slot and cell: the learned importance, summed over passes */
+    uint64_t *seen;      /* per slot: pixel-photon pairs counted so far */
+    uint64_t *passes;    /* per slot: passes that counted */
+    double *samples;     /* per slot and cell: the paths it emitted, expected, summed over those passes */
+    double ref;          /* this pass: the image's mean photon term (luminance), the unit of counts */
+    float *pdf;          /* per slot and cell: the density of this pass's emission, mean 1 */
+    double *cdf;         /* per slot: the CDF over rows (RES + 1), then each row's (RES x (RES + 1)) */
+    unsigned char *active; /* per slot: whether pdf is learned (else 1 everywhere) */
+    uint64_t *count;     /* per worker: per slot and cell the contributions gathered this pass, in units
+                          * of ref / 2^16, then per slot the pixel-photon pairs */
+    float *map;          /* appm_renderer_emission_map's picture */
+} appm__guide;
+
 struct appm_renderer {
     appm__mem mem;
     appm_diag diag;
@@ -6538,6 +6571,8 @@ struct appm_renderer {
     uint32_t *task_used;
     int *task_failed;
     uint32_t *dest;      /* scratch of the map's counting sort: one per slot of the store */
+    uint32_t *tag;       /* guided emission: per slot of the store, its path's emission cell (9.1) */
+    appm__guide guide;
     appm__pmap pmap;     /* this pass's photons, compacted and sorted (7.2) */
     uint64_t dropped[APPM__MAX_THREADS];
     appm_stats stats;
@@ -6791,16 +6826,280 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
  * where it was stored was specular (the paths L S+ D of Jensen's caustic map
  * and the specular tail of longer ones), diffuse otherwise.
  */
+/* ---- 9.1 Emission guided by visual importance -------------------------------------
+ *
+ * Most photons of a scene can land where no camera looks: on caustic-glass a
+ * spot light hits the floor directly (direct light is the shadow rays' job)
+ * and only the few that pass through the glass make the caustic.  So the
+ * emission of each guided light learns where the photons that the visible
+ * points gathered were emitted, and emits more there (docs/algorithm.md 5.8).
+ *
+ * A light's emission is a map from its first 2-D sample u = (u1, u2) in
+ * [0,1)^2 (appm__emit: the direction of a point or spot light or of the
+ * environment, the point on an area light) to a photon path; the light's own
+ * distribution is u uniform.  Drawing u from a density p(u) instead, and
+ * dividing the photon weight gamma by p(u), leaves every expectation as it was
+ * (importance sampling in the primary sample space), so every estimator stays
+ * consistent whatever p is, as long as p > 0 wherever a path can contribute.
+ * p is piecewise constant on a RES x RES grid of cells (row i from u1, column k
+ * from u2), a mixture
+ *      p_ik = a + (1 - a) g_ik,     a = APPM__GUIDE_DEFENSIVE = 1/4,
+ * of the light's own density (every path stays possible: p >= 1/4, so weights
+ * grow by at most 4x) and a learned density g with mean 1.  Sampling inverts
+ * p's CDF, rows by u1, then the row's columns by u2: a continuous map, so the
+ * low-discrepancy sampler's points (section 2.3) stay stratified.
+ *
+ * What g learns: a gather adds, per pixel and photon inside its kernel, the
+ * pair's share of the pixel's estimate, k_R(d) lum(Psi) / M, to the photon's
+ * emission cell (appm__pmap.tag, carried from the photon pass through the
+ * map's sort).  Summed over pixels, a photon's shares are about its flux times
+ * the density of visible points where it landed, whatever the radius: the
+ * image's need for it.  With light l picked with probability pick_l and the
+ * photon's weight divided by p, the sum S_c over cell c estimates pick_l V_c /
+ * RES^2, V_c the mean image contribution of a path started in c, whatever p
+ * drew it; the score, the sum over passes of S_c RES^2 / pick_l, is the learned
+ * importance and g = score / mean(score).  The shares are counted as integers
+ * in units of 2^-16 of the image's mean photon term, per worker, so that their
+ * sums do not depend on which worker gathered which row, and the scores are
+ * updated on one thread in cell order after the pass: images stay
+ * bit-identical for any thread count.  A light uses its learned density once
+ * APPM__GUIDE_MIN pairs have been counted. */
+#define APPM__GUIDE_DEFENSIVE 0.25 /* the light's own density's share of the mixture */
+#define APPM__GUIDE_MIN 64u        /* pixel-photon pairs counted before a light is guided */
+#define APPM__GUIDE_PRIOR 16.0     /* paths a cell's importance is shrunk with (appm__guide_importance) */
+#define APPM__GUIDE_GAIN 0.5       /* a learned density is used if it halves the second moment */
+#define APPM__GUIDE_CDF ((APPM__GUIDE_RES + 1) * (APPM__GUIDE_RES + 1)) /* doubles per slot */
+
+/* The cell of u: row from u1, column from u2 (clamped: u < 1 always, but a
+ * float may round up). */
+static uint32_t appm__guide_cell(float u1, float u2)
+{
+    int i = (int)(u1 * (float)APPM__GUIDE_RES), k = (int)(u2 * (float)APPM__GUIDE_RES);
+    i = i < 0 ? 0 : (i >= APPM__GUIDE_RES ? APPM__GUIDE_RES - 1 : i);
+    k = k < 0 ? 0 : (k >= APPM__GUIDE_RES ? APPM__GUIDE_RES - 1 : k);
+    return (uint32_t)(i * APPM__GUIDE_RES + k);
+}
+
+/* Inverts the piecewise-constant CDF c[0..n] (c[0] = 0, c[n] = 1, strictly
+ * increasing) at u in [0,1): the cell *i with c[i] <= u < c[i+1], and the point
+ * (i + t) / n, t the position of u within the cell. */
+static float appm__cdf_invert(const double *c, int n, float u, int *cell)
+{
+    int lo = 0, hi = n;
+    double t, x;
+    while (hi - lo > 1) {
+        int mid = lo + (hi - lo) / 2;
+        if (c[mid] <= (double)u) lo = mid;
+        else hi = mid;
+    }
+    t = ((double)u - c[lo]) / (c[lo + 1] - c[lo]);
+    t = t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+    x = ((double)lo + t) / (double)n;
+    *cell = lo;
+    return (float)x < 1.0f ? (float)x : 0.99999994f;
+}
+
+/* The light of a photon path (by power, as appm__emit picks it, from u[0]) and
+ * its first emission sample u[1], u[2], drawn from the light's slot's density
+ * if it is active.  Returns the path's tag, slot * RES^2 + cell (UINT32_MAX: an
+ * unguided light), the light in *li, and in *w the factor of the photon
+ * weight, 1 / p(u). */
+static uint32_t appm__guide_warp(const appm__guide *gd, const appm_scene *s, float *u, uint32_t *li, float *w)
+{
+    uint32_t slot;
+    int i, k;
+    *w = 1.0f;
+    *li = appm__pick_light(s, u[0]);
+    if ((slot = gd->slot[*li]) == UINT32_MAX) return UINT32_MAX;
+    if (!gd->active[slot]) return slot * APPM__GUIDE_CELLS + appm__guide_cell(u[1], u[2]);
+    {
+        const double *c = gd->cdf + (size_t)slot * APPM__GUIDE_CDF;
+        u[1] = appm__cdf_invert(c, APPM__GUIDE_RES, u[1], &i);
+        u[2] = appm__cdf_invert(c + (size_t)(i + 1) * (APPM__GUIDE_RES + 1), APPM__GUIDE_RES, u[2], &k);
+    }
+    *w = 1.0f / gd->pdf[(size_t)slot * APPM__GUIDE_CELLS + (size_t)i * APPM__GUIDE_RES + (size_t)k];
+    return slot * APPM__GUIDE_CELLS + (uint32_t)(i * APPM__GUIDE_RES + k);
+}
+
+/* The learned importance of slot `slot`'s cells, V_c (the mean per pass of its
+ * scores), each shrunk towards the mean over the cells by the paths behind it:
+ * (N_c V_c + n0 mean(V)) / (N_c + n0), N_c the paths the cell has emitted
+ * (expected), n0 = APPM__GUIDE_PRIOR.  A cell few paths have tried says little;
+ * without the shrinkage a handful of lucky photons make a density of spikes
+ * whose weights are noise (a closed box, 576 paths a pass, rendered 6x noisier
+ * than without guiding).  Into v[]; returns their sum. */
+static double appm__guide_importance(const appm__guide *gd, uint32_t slot, double *v)
+{
+    const double *sc = gd->score + (size_t)slot * APPM__GUIDE_CELLS, *n = gd->samples + (size_t)slot * APPM__GUIDE_CELLS;
+    double mean = 0.0, sum = 0.0, J = gd->passes[slot] ? (double)gd->passes[slot] : 1.0;
+    int i;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) mean += sc[i] / J;
+    mean /= APPM__GUIDE_CELLS;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        v[i] = (n[i] * (sc[i] / J) + APPM__GUIDE_PRIOR * mean) / (n[i] + APPM__GUIDE_PRIOR);
+        sum += v[i];
+    }
+    return sum;
+}
+
+/* Slot `slot`'s density and CDFs for the next pass: p_c = a + (1 - a) g_c,
+ * g = v / mean(v) from appm__guide_importance, if the light has counted
+ * APPM__GUIDE_MIN pairs and if p pays: the second moment of the estimate of
+ * sum(v) that p gives, sum(v_c^2 / p_c), at most APPM__GUIDE_GAIN times the
+ * light's own, sum(v_c^2) (importance sampling's variance, against uniform; a
+ * density the data cannot tell from flat is not worth its weights' noise).
+ * Else p = 1 everywhere (not active). */
+static void appm__guide_density(appm__guide *gd, uint32_t slot)
+{
+    double v[APPM__GUIDE_CELLS], sum, own = 0.0, with = 0.0;
+    float *p = gd->pdf + (size_t)slot * APPM__GUIDE_CELLS;
+    double *c = gd->cdf + (size_t)slot * APPM__GUIDE_CDF;
+    int i, k;
+    sum = appm__guide_importance(gd, slot, v);
+    gd->active[slot] = gd->seen[slot] >= APPM__GUIDE_MIN && sum > 0.0 && sum < HUGE_VAL;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        p[i] = gd->active[slot]
+                   ? (float)(APPM__GUIDE_DEFENSIVE + (1.0 - APPM__GUIDE_DEFENSIVE) * v[i] * APPM__GUIDE_CELLS / sum)
+                   : 1.0f;
+        own += v[i] * v[i];
+        with += v[i] * v[i] / p[i];
+    }
+    if (gd->active[slot] && !(with <= APPM__GUIDE_GAIN * own)) {
+        gd->active[slot] = 0;
+        for (i = 0; i < APPM__GUIDE_CELLS; ++i) p[i] = 1.0f;
+    }
+    c[0] = 0.0;
+    for (i = 0; i < APPM__GUIDE_RES; ++i) { /* the rows' marginal, then each row's conditional */
+        double *cr = c + (size_t)(i + 1) * (APPM__GUIDE_RES + 1), row = 0.0;
+        for (k = 0; k < APPM__GUIDE_RES; ++k) row += p[i * APPM__GUIDE_RES + k];
+        c[i + 1] = c[i] + row / APPM__GUIDE_CELLS;
+        cr[0] = 0.0;
+        for (k = 0; k < APPM__GUIDE_RES; ++k) cr[k + 1] = cr[k] + p[i * APPM__GUIDE_RES + k] / row;
+        cr[APPM__GUIDE_RES] = 1.0;
+    }
+    c[APPM__GUIDE_RES] = 1.0;
+}
+
+/* Before a pass: every slot's density and the share of the paths drawn from
+ * learned densities (the unit of the pass's counts, guide.ref, is set with
+ * the renderer's state in section 12). */
+static void appm__guide_prepare(appm_renderer *r)
+{
+    appm__guide *gd = &r->guide;
+    uint32_t s;
+    double share = 0.0;
+    for (s = 0; s < gd->nslot; ++s) {
+        appm__guide_density(gd, s);
+        if (gd->active[s]) share += (1.0 - APPM__GUIDE_DEFENSIVE) * r->scene->light[gd->light[s]].pick;
+    }
+    r->stats.emission_guided = share;
+    r->stats.emission_lights = gd->nslot;
+}
+
+/* One pixel-photon pair into a worker's counts (a gather inside the kernel of
+ * radius^2 R2): the pair's share of the pixel, k_R(d) lum(Psi) / M, in units
+ * of ref / 2^16 (unit = 2^16 / (pi M ref); the biweight's 3 / pi, the uniform
+ * kernel's 1 / pi), rounded, and one pair. */
+static void appm__guide_count(uint64_t *count, size_t pairs, uint32_t tag, float d2, float R2, int biweight,
+                              double q, double unit)
+{
+    double u = 1.0 - (double)d2 / R2, k = biweight ? 3.0 * u * u : 1.0, n = k * q / R2 * unit;
+    count[tag] += n < 1e15 ? (uint64_t)(n + 0.5) : (uint64_t)1e15;
+    count[pairs + tag / APPM__GUIDE_CELLS]++;
+}
+
+/* After the gather: the workers' counts (integers: the same sums in any
+ * order) into the scores, cell by cell - score_c += S_c RES^2, S_c the pass's
+ * contributions from cell c, which estimates the mean over the cell of the
+ * image contribution of the light's paths started there, whatever density
+ * drew the cell (the photon's weight carries 1 / p) - and back to 0. */
+static void appm__guide_learn(appm_renderer *r)
+{
+    appm__guide *gd = &r->guide;
+    size_t cells = (size_t)gd->nslot * APPM__GUIDE_CELLS, stride = cells + gd->nslot, c;
+    unsigned w;
+    if (!(gd->ref > 0.0)) return;
+    for (c = 0; c < cells; ++c) /* M pick_l p_c / RES^2 paths from cell c this pass */
+        gd->samples[c] += (double)r->M * r->scene->light[gd->light[c / APPM__GUIDE_CELLS]].pick * (double)gd->pdf[c] /
+                          APPM__GUIDE_CELLS;
+    for (w = 0; w < gd->nslot; ++w) gd->passes[w]++;
+    for (c = 0; c < stride; ++c) {
+        uint64_t n = 0;
+        for (w = 0; w < r->threads; ++w) {
+            n += gd->count[w * stride + c];
+            gd->count[w * stride + c] = 0;
+        }
+        if (c >= cells) gd->seen[c - cells] += n;
+        else if (n) gd->score[c] += (double)n * (gd->ref / 65536.0) * APPM__GUIDE_CELLS;
+    }
+}
+
+/* The guided lights: the APPM__GUIDE_LIGHTS most powerful (ties: the first),
+ * and their arrays; 0 when out of memory. */
+static int appm__guide_alloc(appm_renderer *r)
+{
+    appm__guide *gd = &r->guide;
+    const appm_scene *s = r->scene;
+    uint32_t i, k, n = 0;
+    gd->slot = (uint32_t *)appm__alloc(&r->mem, s->nlight, sizeof *gd->slot);
+    gd->light = (uint32_t *)appm__alloc(&r->mem, APPM__GUIDE_LIGHTS, sizeof *gd->light);
+    if (!gd->slot || !gd->light) return 0;
+    for (i = 0; i < s->nlight; ++i) gd->slot[i] = UINT32_MAX;
+    while (n < APPM__GUIDE_LIGHTS) { /* the next most powerful light not yet taken */
+        uint32_t best = UINT32_MAX;
+        for (i = 0; i < s->nlight; ++i)
+            if (gd->slot[i] == UINT32_MAX && s->light[i].pick > 0.0 &&
+                (best == UINT32_MAX || s->light[i].pick > s->light[best].pick))
+                best = i;
+        if (best == UINT32_MAX) break;
+        gd->slot[best] = n;
+        gd->light[n++] = best;
+    }
+    gd->nslot = n;
+    k = n * APPM__GUIDE_CELLS;
+    gd->score = (double *)appm__alloc(&r->mem, k, sizeof *gd->score);
+    gd->seen = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->seen);
+    gd->passes = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->passes);
+    gd->samples = (double *)appm__alloc(&r->mem, k, sizeof *gd->samples);
+    gd->pdf = (float *)appm__alloc(&r->mem, k, sizeof *gd->pdf);
+    gd->cdf = (double *)appm__alloc(&r->mem, (size_t)n * APPM__GUIDE_CDF, sizeof *gd->cdf);
+    gd->active = (unsigned char *)appm__alloc(&r->mem, n, 1);
+    gd->count = (uint64_t *)appm__alloc(&r->mem, ((size_t)k + n) * r->threads, sizeof *gd->count);
+    return n == 0 || (gd->score && gd->seen && gd->passes && gd->samples && gd->pdf && gd->cdf && gd->active &&
+                      gd->count);
+}
+
+static void appm__guide_free(appm_renderer *r)
+{
+    appm__guide *gd = &r->guide;
+    appm__free(&r->mem, gd->slot);
+    appm__free(&r->mem, gd->light);
+    appm__free(&r->mem, gd->score);
+    appm__free(&r->mem, gd->seen);
+    appm__free(&r->mem, gd->passes);
+    appm__free(&r->mem, gd->samples);
+    appm__free(&r->mem, gd->pdf);
+    appm__free(&r->mem, gd->cdf);
+    appm__free(&r->mem, gd->active);
+    appm__free(&r->mem, gd->count);
+    appm__free(&r->mem, gd->map);
+}
+
+/* ---- 9.2 Photon paths ---------------------------------------------------------- */
+
 #define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
 
 static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
-                                   appm__v3 gamma, unsigned segs, unsigned comp)
+                                   appm__v3 gamma, unsigned segs, unsigned comp, uint32_t tag)
 {
     appm__photon *p;
     appm__v3 n = appm__dot(wi, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
     float a, b;
+    size_t slot;
     if (r->task_used[task] >= r->cap) return 0;
-    p = &r->ph[(size_t)task * r->cap + r->task_used[task]++];
+    slot = (size_t)task * r->cap + r->task_used[task]++;
+    if (r->tag) r->tag[slot] = tag;
+    p = &r->ph[slot];
     p->x = sf->p.x;
     p->y = sf->p.y;
     p->z = sf->p.z;
@@ -6822,7 +7121,7 @@ static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__
 APPM__UNUSED static int appm__store_photon(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
                                            appm__v3 gamma, unsigned segs)
 {
-    return appm__store_photon_comp(r, task, sf, wi, gamma, segs, APPM__COMP_DIFFUSE);
+    return appm__store_photon_comp(r, task, sf, wi, gamma, segs, APPM__COMP_DIFFUSE, UINT32_MAX);
 }
 
 /* Whether an eye path can gather at m (section 8.2): diffuse, or glossy with a
@@ -6860,15 +7159,23 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     uint32_t skip;
     unsigned segs = 0, comp = APPM__COMP_DIFFUSE; /* the component of a photon stored next */
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
-    float ue[5];
+    float ue[5], w = 1.0f;
+    uint32_t tag = UINT32_MAX, li;
+    int ok;
     appm__sampler_photon(&smp, r->sobol, cache, r->chains, r->seed, r->pass, r->M, index);
     appm__smp_emit(&smp, r->emit_dims, ue);
-    if (!appm__emit(s, ue, &ps)) {
+    if (r->guide.nslot) { /* 9.1 */
+        tag = appm__guide_warp(&r->guide, s, ue, &li, &w);
+        ok = appm__emit_light(s, li, ue, &ps);
+    } else {
+        ok = appm__emit(s, ue, &ps);
+    }
+    if (!ok) {
         if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
         return 1;
     }
     ray = ps.ray;
-    gamma = ps.gamma;
+    gamma = w != 1.0f ? appm__scale(ps.gamma, w) : ps.gamma;
     skip = ps.skip;
     while (++segs + 1 <= r->max_depth) {
         appm__hit h;
@@ -6888,7 +7195,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
                 r->dropped[worker]++;
                 break;
             }
-            if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp)) return 0;
+            if (!appm__store_photon_comp(r, task, &sf, wi, gamma, segs, comp, tag)) return 0;
         }
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
         dims = appm__bsdf_dims(m) | appm__photon_rr_dim(m);
@@ -6938,7 +7245,7 @@ static appm_status appm__photon_pass(appm_renderer *r)
         int failed = 0;
         size_t ncap;
         appm__photon *nph;
-        uint32_t *ndest;
+        uint32_t *ndest, *ntag;
         appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
         for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
         if (!failed) return APPM_OK;
@@ -6950,14 +7257,18 @@ static appm_status appm__photon_pass(appm_renderer *r)
                               "more than 4e9 photons stored in one pass: use fewer photons per pass");
         nph = (appm__photon *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *nph);
         ndest = nph ? (uint32_t *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *ndest) : NULL;
-        if (!ndest) {
+        ntag = ndest && r->tag ? (uint32_t *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *ntag) : NULL;
+        if (!ndest || (r->tag && !ntag)) {
             appm__free(&r->mem, nph);
+            appm__free(&r->mem, ndest);
             return APPM_ERR_NOMEM;
         }
         appm__free(&r->mem, r->ph);
         appm__free(&r->mem, r->dest);
+        appm__free(&r->mem, r->tag);
         r->ph = nph;
         r->dest = ndest;
+        r->tag = ntag;
         r->cap = ncap;
     }
 }
@@ -6974,8 +7285,10 @@ static size_t appm__store_compact(appm_renderer *r)
     for (t = 0; t < r->tasks; ++t) {
         size_t base = (size_t)t * r->cap;
         for (c = t; c < r->nchunks; c += r->tasks) {
-            if (cr[c].count && base + cr[c].start != out)
+            if (cr[c].count && base + cr[c].start != out) {
                 memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
+                if (r->tag) memmove(&r->tag[out], &r->tag[base + cr[c].start], cr[c].count * sizeof *r->tag);
+            }
             cr[c].start = (uint32_t)out;
             out += cr[c].count;
         }
@@ -7088,6 +7401,9 @@ typedef struct appm__gather {
     float cut_u[APPM__CUT_LINES][2], cut_d[APPM__CUT_LINES];
     double lw[5]; /* 1 / the mass of the Laplacian's kernels at x + h t, x - h t, x + h b, x - h b
                    * and x (step 6; 1 without lines), set by the query */
+    uint64_t *gcount; /* guided emission (9.1): this worker's counts per emission cell; NULL: none */
+    double gunit;     /* guided emission: counts per unit of k lum(Psi) (2^16 / (pi M ref)) */
+    size_t gpairs;    /* guided emission: where in gcount the pairs per slot start */
 } appm__gather;
 
 /* The part of the kernel K_R (biweight or uniform) beyond a line at distance
@@ -8178,7 +8494,7 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
  * length, one byte; then the normal), and lum(Psi), which only the second
  * moment and the Laplacian read, is not formed for the uniform kernel. */
 static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
-                              const float *side)
+                              const float *side, uint32_t tag)
 {
     float lobe = 0.0f, dn;
     double q = 0.0;
@@ -8194,12 +8510,14 @@ static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, 
         lobe = c > 0.0f ? powf(c > 1.0f ? 1.0f : c, g->ns) : 0.0f;
         wf = appm__add(g->wf, appm__scale(g->wg, lobe));
         q = 0.2126 * wf.x * p->power[0] + 0.7152 * wf.y * p->power[1] + 0.0722 * wf.z * p->power[2];
-    } else if (g->biweight || g->h > 0.0f) {
+    } else if (g->biweight || g->h > 0.0f || g->gcount) {
         q = g->qw[0] * p->power[0] + g->qw[1] * p->power[1] + g->qw[2] * p->power[2];
     }
     { /* one call site, so that the compiler inlines it: the caustic component's
        * radius and sums, or the diffuse (or only) one's */
         int c = p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f;
+        if (g->gcount && tag != UINT32_MAX && d2 < (c ? g->Rc2 : R2)) /* 9.1: this pair's share of the image */
+            appm__guide_count(g->gcount, g->gpairs, tag, d2, c ? g->Rc2 : R2, g->biweight, q, g->gunit);
         appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, ih, q, lobe, &g->sum[c ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE]);
     }
 }
@@ -8233,13 +8551,14 @@ APPM__UNUSED static void appm__gather_photon(appm__gather *g, const appm__photon
     if (!(d2 < Rg2)) return;
     appm__photon_side(p, side);
     appm__gather_consts(g);
-    appm__gather_near(g, p, d2, R2, g->ih, side);
+    appm__gather_near(g, p, d2, R2, g->ih, side, UINT32_MAX);
 }
 
 static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
 {
     appm__gather *g = (appm__gather *)ctx;
-    appm__gather_near(g, p, d2, g->R2, g->ih, g->map->side + 4 * (size_t)(p - g->map->ph));
+    size_t i = (size_t)(p - g->map->ph);
+    appm__gather_near(g, p, d2, g->R2, g->ih, g->map->side + 4 * i, g->map->tag ? g->map->tag[i] : UINT32_MAX);
 }
 
 /* Visits every photon within max(R, Rc, 2h) of g->x (7.2's query), with
@@ -8283,6 +8602,11 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.Rc = vp->Rc;
             g.h = (float)r->lap_h;
             if (r->cut) appm__cut_lines(r, pi, &g);
+            if (r->guide.nslot && r->guide.ref > 0.0) {
+                g.gpairs = (size_t)r->guide.nslot * APPM__GUIDE_CELLS;
+                g.gcount = r->guide.count + (size_t)worker * (g.gpairs + r->guide.nslot);
+                g.gunit = 65536.0 / (APPM__PI * (double)r->M * r->guide.ref);
+            }
             appm__gather_query(&r->pmap, &g);
         }
         est->commit(r, p, appm__state(r, pi), vp, &g, worker);
@@ -8423,6 +8747,7 @@ APPM_API void appm_config_init(appm_config *cfg)
     cfg->max_depth = 32;
     cfg->sampler = APPM_SAMPLER_QMC;
     cfg->chains = 1;
+    cfg->emission = APPM_EMISSION_LIGHT;
 }
 
 
@@ -8438,6 +8763,8 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->task_used);
     appm__free(&r->mem, r->task_failed);
     appm__free(&r->mem, r->dest);
+    appm__free(&r->mem, r->tag);
+    appm__guide_free(r);
     appm__free(&r->mem, r->state);
     appm__pmap_free(&r->pmap, &r->mem);
     appm__free(&r->mem, r->sobol);
@@ -8479,6 +8806,8 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "%u chains is above %d", c.chains,
                           APPM__MAX_CHAINS);
     if (c.chains == 0 || c.sampler == APPM_SAMPLER_RANDOM) c.chains = 1;
+    if ((int)c.emission < 0 || c.emission > APPM_EMISSION_GUIDED)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "unknown emission %d", (int)c.emission);
     if (c.alpha == 0.0) c.alpha = 2.0 / 3.0;
     if (!(c.alpha > 0.0 && c.alpha <= 1.0))
         return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "alpha %g is not in (0, 1]", c.alpha);
@@ -8534,6 +8863,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     appm_status st;
     size_t npix;
     appm_diag local;
+    int guided = 1; /* 0: guided emission's memory could not be had */
     if (!diag) diag = &local;
     appm__diag_clear(diag);
     if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
@@ -8576,9 +8906,14 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         r->cap = appm__store_guess(r->M, r->tasks);
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
+        if (c.emission == APPM_EMISSION_GUIDED && r->dest)
+            guided = appm__guide_alloc(r) &&
+                     (!r->guide.nslot || (r->tag = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks,
+                                                                            sizeof *r->tag)) != NULL);
     }
     if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) || !appm__sampler_alloc(r, &c) ||
-        ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest))) {
+        ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest)) ||
+        !guided) {
         appm__mem fm;
         appm__renderer_free_parts(r);
         fm = r->mem;
@@ -8687,6 +9022,20 @@ static void appm__estimate_error(appm_renderer *r)
     r->stats.est_relerr = sqrt(sum / (double)npix);
 }
 
+/* The photon part of the image's mean luminance after the passes so far: the
+ * unit in which guided emission counts contributions (9.1; 0: nothing
+ * gathered yet, nothing to learn). */
+static double appm__guide_ref(const appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    double sum = 0.0, t[3];
+    if (r->pass < 2) return 0.0;
+    for (i = 0; i < npix; ++i)
+        if (appm__photon_term(r, i, (double)(r->pass - 1), t)) sum += appm__lumd(t);
+    sum /= (double)npix;
+    return sum > 0.0 && sum < HUGE_VAL ? sum : 0.0;
+}
+
 /* One photon-mapping pass (eye pass, radii, photon pass, map, gather); times
  * t[0..2] at the ends of the radii, the photon pass and the map.  On failure
  * nothing is committed: the pixel state changes only in the gather. */
@@ -8706,15 +9055,21 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
     r->shrink_pass = r->pass;
     appm__parallel_for(r->threads, r->h, appm__radius_task, r);
     cell = appm__median_gather_radius(r);
+    if (r->guide.nslot) {
+        appm__guide_prepare(r);
+        r->guide.ref = appm__guide_ref(r);
+    }
     t[0] = appm__seconds();
     st = appm__photon_pass(r);
     t[1] = appm__seconds();
+    r->pmap.tag = r->tag;
     if (st == APPM_OK)
         st = appm__pmap_build(&r->pmap, &r->mem, r->ph, appm__store_compact(r), r->dest, r->chunk, r->nchunks,
                               cell > 0.0f ? cell : 1.0f);
     if (st != APPM_OK) return st;
     t[2] = appm__seconds();
     appm__parallel_for(r->threads, r->h, appm__gather_task, r);
+    if (r->guide.nslot) appm__guide_learn(r);
     if (est->pass_end) est->pass_end(r);
     r->stats.photons_emitted += r->M;
     r->stats.photons_stored = r->pmap.n;
@@ -8828,6 +9183,26 @@ APPM_API const char *appm_method_name(appm_method m)
     return (int)m >= 0 && m < APPM_METHOD_COUNT ? appm__estimators[m].name : NULL;
 }
 
+APPM_API const float *appm_renderer_emission_map(appm_renderer *r, unsigned k, unsigned *width,
+                                                 unsigned *height)
+{
+    const appm__guide *gd;
+    int i, v;
+    if (width) *width = 0;
+    if (height) *height = 0;
+    if (!r || k >= r->guide.nslot) return NULL;
+    gd = &r->guide;
+    if (!r->guide.map && !(r->guide.map = (float *)appm__alloc(&r->mem, APPM__GUIDE_CELLS, sizeof(float))))
+        return NULL;
+    appm__guide_density(&r->guide, k); /* a function of the scores: the next pass makes the same */
+    for (v = 0; v < APPM__GUIDE_RES; ++v) /* picture row v: u2; column: u1 */
+        for (i = 0; i < APPM__GUIDE_RES; ++i)
+            r->guide.map[v * APPM__GUIDE_RES + i] = gd->pdf[(size_t)k * APPM__GUIDE_CELLS + (size_t)i * APPM__GUIDE_RES + v];
+    if (width) *width = APPM__GUIDE_RES;
+    if (height) *height = APPM__GUIDE_RES;
+    return r->guide.map;
+}
+
 APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
 {
     int k;
@@ -8858,7 +9233,7 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  * Layout, little-endian, each value packed byte by byte (doubles as their
  * IEEE-754 bits), so a checkpoint moves between machines:
  *   "APPMCKPT", u32 format version, u32 x 3 library version,
- *   u32 method, direct, width, height, max_depth, sampler, chains;
+ *   u32 method, direct, width, height, max_depth, sampler, chains, guided lights;
  *   u64 photons, seed;
  *   f64 alpha, radius option (0: automatic); u64 x 5 scene hashes (below:
  *   geometry, materials, shading normals, lights, camera and image size);
@@ -8868,17 +9243,20 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  *   sums (one field of `chains` values with chains >= 2, else none) (u32
  *   count, then per field u32 name length, name, u32 count, u32 is_u64);
  *   per pixel, in reading order, those fields' values (8 bytes each);
+ *   per guided light (9.1), u64 pairs counted, u64 passes that counted, f64 x
+ *   RES^2 learned scores and f64 x RES^2 paths per cell;
  *   u64 FNV-1a hash of all bytes before it.
  * The format version changes with this layout and with what the scene hashes
  * cover, so that a checkpoint of an older build is refused as such, never
  * misread nor taken for one of another scene (version 2: the hashes in five
- * parts, with the glossy lobe, the normals and the statements as written).
+ * parts, with the glossy lobe, the normals and the statements as written;
+ * version 3: the guided emission's lights and scores).
  * A checkpoint of another format or library version, scene, method, option set,
  * image size or field list is refused (APPM_ERR_INVALID_ARG, saying which); a
  * truncated, altered or impossible one is APPM_ERR_PARSE.  Loading reads the
  * input twice - first to check everything, then to apply it - so a refused
  * checkpoint leaves the renderer as it was. */
-#define APPM__CK_FORMAT 2u
+#define APPM__CK_FORMAT 3u
 #define APPM__CK_BLOCK 65536              /* file buffer */
 #define APPM__CK_MAXFIELDS 64
 #define APPM__FNV_BASIS 14695981039346656037ull
@@ -9120,7 +9498,7 @@ static double appm__ckr_d(appm__ckr *r)
 /* -- What a checkpoint says about its render (compared on load) and the
  *    renderer-wide state (applied on load). */
 typedef struct appm__ck_head {
-    uint32_t format, version[3], method, direct, w, h, max_depth, sampler, chains;
+    uint32_t format, version[3], method, direct, w, h, max_depth, sampler, chains, guided;
     uint64_t M, seed, scene[APPM__SH_PARTS];
     double alpha, radius;
 } appm__ck_head;
@@ -9143,6 +9521,7 @@ static void appm__ck_head_of(const appm_renderer *r, appm__ck_head *h)
     h->max_depth = r->max_depth;
     h->sampler = (uint32_t)(r->sobol ? APPM_SAMPLER_QMC : APPM_SAMPLER_RANDOM);
     h->chains = r->chains;
+    h->guided = r->guide.nslot;
     h->M = r->M;
     h->seed = r->seed;
     appm__scene_hash(r->scene, h->scene);
@@ -9201,6 +9580,7 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
     appm__ckw_u(w, h.max_depth, 4);
     appm__ckw_u(w, h.sampler, 4);
     appm__ckw_u(w, h.chains, 4);
+    appm__ckw_u(w, h.guided, 4);
     appm__ckw_u(w, h.M, 8);
     appm__ckw_u(w, h.seed, 8);
     appm__ckw_d(w, h.alpha);
@@ -9229,6 +9609,13 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
     for (i = 0; i < npix; ++i)
         for (t = 0; t < APPM__CK_TABLES; ++t)
             if (L->n[t]) appm__ck_put_fields(w, appm__ck_base(r, t, i), L->f[t], L->n[t]);
+    for (k = 0; k < r->guide.nslot; ++k) { /* the learned emission (9.1) */
+        unsigned c;
+        appm__ckw_u(w, r->guide.seen[k], 8);
+        appm__ckw_u(w, r->guide.passes[k], 8);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.score[(size_t)k * APPM__GUIDE_CELLS + c]);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.samples[(size_t)k * APPM__GUIDE_CELLS + c]);
+    }
     appm__ckw_u(w, w->sum, 8);
 }
 
@@ -9294,6 +9681,7 @@ static void appm__ck_read_front(appm__ckr *rd, appm__ck_file *F)
     h->max_depth = (uint32_t)appm__ckr_u(rd, 4);
     h->sampler = (uint32_t)appm__ckr_u(rd, 4);
     h->chains = (uint32_t)appm__ckr_u(rd, 4);
+    h->guided = (uint32_t)appm__ckr_u(rd, 4);
     h->M = appm__ckr_u(rd, 8);
     h->seed = appm__ckr_u(rd, 8);
     h->alpha = appm__ckr_d(rd);
@@ -9327,6 +9715,13 @@ static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *non
                     memcpy(&d, &u, sizeof d);
                     if (!F->f[t][k].is_u64 && !(d - d == 0.0)) *nonfinite = 1;
                 }
+    for (i = 0; i < (uint64_t)F->h.guided * (2 + 2 * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
+         ++i) {
+        uint64_t u = appm__ckr_u(rd, 8);
+        double d;
+        memcpy(&d, &u, sizeof d);
+        if (i % (2 + 2 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* a score */
+    }
 }
 
 /* Second reading: the values into the renderer, at the offsets of its own
@@ -9348,6 +9743,13 @@ static void appm__ck_load_pixels(appm__ckr *rd, appm_renderer *r, const appm__ck
     for (i = 0; i < npix; ++i)
         for (t = 0; t < APPM__CK_TABLES; ++t)
             if (L->n[t]) appm__ck_get_fields(rd, appm__ck_base(r, t, i), L->f[t], L->n[t]);
+    for (t = 0; t < r->guide.nslot; ++t) {
+        unsigned c;
+        r->guide.seen[t] = appm__ckr_u(rd, 8);
+        r->guide.passes[t] = appm__ckr_u(rd, 8);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.score[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.samples[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
+    }
 }
 
 /* The stored hash after the pixels: 1 it matches and the input ends there,
@@ -9408,6 +9810,8 @@ static appm_status appm__ck_compare(const appm__ck_file *F, const appm__ck_head 
                           h->sampler == APPM_SAMPLER_QMC ? "qmc" : h->sampler == APPM_SAMPLER_RANDOM ? "random" : "?",
                           want->sampler == APPM_SAMPLER_QMC ? "qmc" : "random");
     if (h->chains != want->chains) return appm__ck_option(d, name, "chains", h->chains, want->chains);
+    if (h->guided != want->guided)
+        return appm__ck_option(d, name, "guided lights (--emission)", h->guided, want->guided);
     for (t = 0; t < APPM__CK_TABLES; ++t)
         for (k = 0; k < (F->n[t] > L->n[t] ? F->n[t] : L->n[t]); ++k)
             if (k >= F->n[t] || k >= L->n[t] || strcmp(F->f[t][k].name, L->f[t][k].name) != 0 ||
@@ -9470,6 +9874,12 @@ static void appm__ck_reset(appm_renderer *r)
     memset(r->pix, 0, npix * sizeof *r->pix);
     if (r->est->state_size) memset(r->state, 0, npix * r->est->state_size);
     if (r->chain_sum) memset(r->chain_sum, 0, npix * r->chains * sizeof *r->chain_sum);
+    if (r->guide.nslot) {
+        memset(r->guide.score, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.score);
+        memset(r->guide.samples, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.samples);
+        memset(r->guide.seen, 0, r->guide.nslot * sizeof *r->guide.seen);
+        memset(r->guide.passes, 0, r->guide.nslot * sizeof *r->guide.passes);
+    }
     appm__ck_apply(r, &g);
 }
 

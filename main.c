@@ -127,13 +127,17 @@ static const char *const RENDER_HELP =
     "  --direct MODE         nee (shadow rays, default) | photons (first-bounce photons)\n"
     "  --sampler S           qmc (scrambled Sobol' in every path dimension, default) |\n"
     "                        random (independent PCG streams, the earlier sampler)\n"
+    "  --emission E          light (each light's own distribution, default) | guided\n"
+    "                        (photons emitted where the camera's visible points gathered\n"
+    "                        them, learned pass by pass: for caustics seen through glass)\n"
     "  --chains K            qmc: K independently scrambled chains of passes, so that\n"
     "                        est_relerr is honest (K >= 2) at a price in accuracy [1]\n"
     "  --exposure X          multiply before the sRGB conversion of .png/.ppm [1]\n"
     "  --reference REF.pfm   compare with this image after every pass\n"
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
     "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
-    "                        (appm also PREFIX-radius-{caustic,diffuse}: each component's radius)\n"
+    "                        (appm also PREFIX-radius-{caustic,diffuse}: each component's radius;\n"
+    "                        guided emission PREFIX-emission-K: light K's learned density)\n"
     "  --checkpoint FILE     save the whole render state to FILE (atomically) every 10 s of\n"
     "                        wall time, or every --checkpoint-every N passes, and at the end\n"
     "  --checkpoint-every N  with --checkpoint: every N passes instead of every 10 s\n"
@@ -415,6 +419,10 @@ static int parse_render_option(const char *a, const char *v, render_opts *o, int
     } else if (strcmp(a, "--seed") == 0) {
         if (!parse_u64(v, &u)) *rc = usage_error("--seed needs a non-negative integer, not '%s'", v);
         else o->cfg.seed = u;
+    } else if (strcmp(a, "--emission") == 0) {
+        if (strcmp(v, "guided") == 0) o->cfg.emission = APPM_EMISSION_GUIDED;
+        else if (strcmp(v, "light") == 0) o->cfg.emission = APPM_EMISSION_LIGHT;
+        else *rc = usage_error("--emission needs guided or light, not '%s'", v);
     } else if (strcmp(a, "--chains") == 0) {
         if (!parse_u64(v, &u) || u == 0 || u > 64) *rc = usage_error("--chains needs 1..64, not '%s'", v);
         else o->cfg.chains = (unsigned)u;
@@ -686,9 +694,16 @@ static int render_write_aux(render_run *R)
                                                       "error",  "radius-caustic", "radius-diffuse"};
     static const int modes[APPM_AUX_COUNT] = {0, 1, 2, 1, 0, 0};
     int k, ok = 1;
+    const float *e;
+    unsigned w, h;
     for (k = 0; k < APPM_AUX_COUNT; ++k) {
         const float *a = appm_renderer_aux(R->r, (appm_aux)k);
         if (a && !write_aux(R->o.aux, names[k], a, R->img.width, R->img.height, modes[k])) ok = 0;
+    }
+    for (k = 0; (e = appm_renderer_emission_map(R->r, (unsigned)k, &w, &h)) != NULL; ++k) {
+        char name[32];
+        snprintf(name, sizeof name, "emission-%d", k);
+        if (!write_aux(R->o.aux, name, e, w, h, 0)) ok = 0;
     }
     return ok;
 }
@@ -731,6 +746,8 @@ static void render_summary(render_run *R)
            st->seconds_photons, st->seconds_grid, st->seconds_gather, (unsigned long long)st->photons_stored);
     if (st->est_relerr >= 0) printf(" est_relerr=%.4g", st->est_relerr);
     if (st->clamped >= 0) printf(" clamped=%.4f", st->clamped);
+    if (st->emission_lights > 0) printf(" emission=guided guided=%.3f", st->emission_guided);
+    else if (o->cfg.emission == APPM_EMISSION_LIGHT) printf(" emission=light");
     printf(" sampler=%s", o->cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
     if (o->cfg.sampler == APPM_SAMPLER_QMC) printf(" chains=%u", o->cfg.chains ? o->cfg.chains : 1u);
     printf(" cpu_s=%.3f", (double)(clock() - R->c0) / CLOCKS_PER_SEC);

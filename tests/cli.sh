@@ -392,6 +392,24 @@ for bad in "--light spot 0 0 0 1 1 1" "--light point 0 0 0 1 1" "--light point 0
 done
 check "no image from the refused renders" absent "$T/never.png"
 
+# ---- --emission ------------------------------------------------------------------
+# light (the default) renders the same bytes as no option; guided reports its share,
+# writes each guided light's density with --aux, and is refused by a light resume.
+GLASS=scenes/caustic-glass.scene
+run "$APPM" render "$GLASS" --size 24x34 --passes 6 -q -o "$T/glass-d.pfm"
+run "$APPM" render "$GLASS" --size 24x34 --passes 6 -q --emission light -o "$T/glass-l.pfm"
+check "--emission light: the default's image, byte for byte" cmp -s "$T/glass-d.pfm" "$T/glass-l.pfm"
+check "--emission light: the summary says so" contains "$T/out" "emission=light"
+run "$APPM" render "$GLASS" --size 24x34 --passes 6 -q --emission guided --aux "$T/gl" -o "$T/glass-g.pfm" \
+    --checkpoint "$T/glass.ckpt"
+check "--emission guided exits 0" [ "$rc" -eq 0 ]
+check "--emission guided: the summary gives the guided share" contains "$T/out" "emission=guided guided="
+check "--emission guided --aux writes light 0's density" [ -s "$T/gl-emission-0.pfm" ] && [ -s "$T/gl-emission-0.png" ]
+run "$APPM" render "$GLASS" --size 24x34 --passes 8 -q --emission light --resume "$T/glass.ckpt" -o "$T/never.pfm"
+check "a guided checkpoint is refused by --emission light (exit $rc)" [ "$rc" -ne 0 ] && contains "$T/err" "emission"
+run "$APPM" render "$GLASS" --size 8x8 --passes 1 -q --emission both -o "$T/never.png"
+check "--emission both is a usage error" [ "$rc" -eq 1 ]
+
 if [ -n "$EMBED" ]; then
     run "$EMBED" "$SCENE" "$T/embed.png"
     check "embed exits 0" [ "$rc" -eq 0 ]

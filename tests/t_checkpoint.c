@@ -44,14 +44,14 @@
 #define SPARSE 300
 #define DENSE 20000 /* enough caustic photons for appm's caustic component */
 
-/* Offsets of the layout comment of section 12.2. */
+/* Offsets of the layout comment of section 13. */
 #define OFF_FORMAT 8
 #define OFF_VERSION 12
 #define OFF_W 32
-#define OFF_PASS 124
-#define OFF_R1 164
-#define OFF_SECONDS 196
-#define OFF_LAYOUT 236
+#define OFF_PASS 128
+#define OFF_R1 168
+#define OFF_SECONDS 200
+#define OFF_LAYOUT 240
 
 static appm_config config(appm_method m, unsigned threads)
 {
@@ -508,12 +508,14 @@ static void test_byte_order(const appm_scene *s)
     CHECK(buf[OFF_FORMAT] == APPM__CK_FORMAT && buf[OFF_FORMAT + 1] == 0 && buf[OFF_FORMAT + 3] == 0);
     CHECK(get_le(buf + OFF_W, 4) == 12 && get_le(buf + OFF_W + 4, 4) == 10);
     CHECK(get_le(buf + 44, 4) == APPM_SAMPLER_QMC && get_le(buf + 48, 4) == 1); /* sampler, chains */
-    CHECK(get_le(buf + 52, 8) == 3000 && get_le(buf + 60, 8) == 7);              /* photons, seed */
+    CHECK(get_le(buf + 52, 4) == 0 && a->guide.nslot == 0);                      /* guided lights */
+    CHECK(get_le(buf + 56, 8) == 3000 && get_le(buf + 64, 8) == 7);              /* photons, seed */
     CHECK(get_le(buf + OFF_PASS, 8) == 3);
     u = get_le(buf + OFF_R1, 8);
     memcpy(&r1, &u, sizeof r1);
     CHECK(r1 == a->r1 && r1 > 0.0);
-    pix0 = n - 8 - (size_t)a->w * a->h * 8 * (5 + 3); /* ppm: 5 pixel values + I[3] */
+    /* ppm: 5 pixel values + I[3]; then per guided light 2 counts and 2 x RES^2 doubles */
+    pix0 = n - 8 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (5 + 3);
     u = get_le(buf + pix0, 8);
     memcpy(&ld0, &u, sizeof ld0);
     CHECK(ld0 == a->pix[0].ld[0]);
