@@ -22,7 +22,7 @@ SAN      = -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all -fno-om
 TESTSRC  = $(wildcard tests/t_*.c)
 TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
-DEPS     = appm.c appm.h tests/check.h
+DEPS     = appm.c appm.h tests/check.h tests/fuzz/targets.h
 
 .PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler fuzz web \
         test-web clean

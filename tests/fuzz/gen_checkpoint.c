@@ -40,9 +40,9 @@ int main(int argc, char **argv)
         fprintf(stderr, "usage: gen_checkpoint FOLDER\n");
         return 2;
     }
-    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m)
+    for (m = 0; m < 2 * (int)APPM_METHOD_COUNT; ++m) /* m >= the method count: guided emission */
         for (passes = 0; passes <= 2; passes += 2) {
-            unsigned char probe[FUZZ_CK_METHOD_AT + 1], *buf;
+            unsigned char probe[FUZZ_CK_GUIDED_AT + 1], *buf;
             fuzz_env e;
             appm_scene *scene = NULL;
             appm_renderer *r = NULL;
@@ -50,14 +50,16 @@ int main(int argc, char **argv)
             int k;
             char name[64];
             memset(probe, 0, sizeof probe);
-            probe[FUZZ_CK_METHOD_AT] = (unsigned char)m;
+            probe[FUZZ_CK_METHOD_AT] = (unsigned char)(m % APPM_METHOD_COUNT);
+            probe[FUZZ_CK_GUIDED_AT] = (unsigned char)(m >= (int)APPM_METHOD_COUNT);
             fuzz__env_init(&e, 0);
             if (fuzz__ck_setup(&e, probe, sizeof probe, &scene, &r) != APPM_OK) return 1;
             for (k = 0; k < passes; ++k) appm_renderer_pass(r);
             appm_renderer_save(r, NULL, 0, &n, NULL);
             buf = (unsigned char *)malloc(n);
             if (!buf || appm_renderer_save(r, buf, n, &n, NULL) != APPM_OK) return 1;
-            snprintf(name, sizeof name, "ok-%s-%d.ckpt", appm_method_name((appm_method)m), passes);
+            snprintf(name, sizeof name, "ok-%s%s-%d.ckpt", appm_method_name((appm_method)(m % APPM_METHOD_COUNT)),
+                     m >= (int)APPM_METHOD_COUNT ? "-guided" : "", passes);
             bad |= put(argv[1], name, buf, n);
             if (m == APPM_METHOD_APPM && passes == 2) {
                 snprintf(name, sizeof name, "err-%s-truncated.ckpt", appm_method_name((appm_method)m));
@@ -68,10 +70,10 @@ int main(int argc, char **argv)
                 forge(buf, n, 32, 0xFFFFFFFFu, 4); /* width */
                 bad |= put(argv[1], "err-appm-width-2e32.ckpt", buf, n);
                 forge(buf, n, 32, 4, 4);
-                forge(buf, n, 164, 0x7FF8000000000000ull, 8); /* r1 = NaN */
+                forge(buf, n, 168, 0x7FF8000000000000ull, 8); /* r1 = NaN */
                 bad |= put(argv[1], "err-appm-nan-radius.ckpt", buf, n);
-                forge(buf, n, 164, 0, 8);
-                forge(buf, n, 236, 0xFFFFFFFFu, 4); /* pixel field count */
+                forge(buf, n, 168, 0, 8);
+                forge(buf, n, 240, 0xFFFFFFFFu, 4); /* pixel field count */
                 bad |= put(argv[1], "err-appm-field-count.ckpt", buf, n);
             }
             free(buf);

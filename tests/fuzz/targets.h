@@ -676,8 +676,10 @@ static int fuzz_pfm_one(const unsigned char *data, size_t size)
 /* The renderer checkpoints are loaded into: a lamp over a floor, 4x3 pixels, 64
  * photons, one thread; the method is the one named at the checkpoint's method
  * offset (24), so that a mutated checkpoint of any method meets its own kind
- * of renderer.  tests/fuzz/gen_checkpoint.c writes the seed corpus with it. */
+ * of renderer, with guided emission if its count of guided lights (offset 52)
+ * is not 0.  tests/fuzz/gen_checkpoint.c writes the seed corpus with it. */
 #define FUZZ_CK_METHOD_AT 24
+#define FUZZ_CK_GUIDED_AT 52
 
 static const char fuzz__ck_obj[] = "mtllib lamp.mtl\nv -2 0 -2\nv 2 0 -2\nv 2 0 2\nv -2 0 2\nf 4 3 2 1\n"
                                    "usemtl lamp\nv -0.5 2 -0.5\nv 0.5 2 -0.5\nv 0 2 0.5\nf 7 6 5\n";
@@ -697,7 +699,9 @@ static appm_status fuzz__ck_setup(fuzz_env *e, const unsigned char *data, size_t
     c.photons = 64;
     c.threads = 1;
     c.max_depth = 6;
-    c.method = (appm_method)(size > FUZZ_CK_METHOD_AT ? data[FUZZ_CK_METHOD_AT] % 4u : 0u);
+    c.method = (appm_method)(size > FUZZ_CK_METHOD_AT ? data[FUZZ_CK_METHOD_AT] % (unsigned)APPM_METHOD_COUNT : 0u);
+    /* guided emission if the checkpoint says it guides lights: it carries their densities */
+    c.emission = size > FUZZ_CK_GUIDED_AT && data[FUZZ_CK_GUIDED_AT] ? APPM_EMISSION_GUIDED : APPM_EMISSION_LIGHT;
     return appm_renderer_create(*scene, &c, r, &e->diag);
 }
 
