@@ -6855,10 +6855,10 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
  * map's sort).  Summed over pixels, a photon's shares are about its flux times
  * the density of visible points where it landed, whatever the radius: the
  * image's need for it.  With light l picked with probability pick_l and the
- * photon's weight divided by p, the sum S_c over cell c estimates pick_l V_c /
- * RES^2, V_c the mean image contribution of a path started in c, whatever p
- * drew it; the score, the sum over passes of S_c RES^2 / pick_l, is the learned
- * importance and g = score / mean(score).  The shares are counted as integers
+ * photon's weight divided by p, the sum S_c over cell c estimates V_c / RES^2,
+ * V_c the mean image contribution of the light's paths started in c (with
+ * the light's own weight), whatever p drew it; the score, the sum over passes
+ * of S_c RES^2, is the learned importance and g = score / mean(score).  The shares are counted as integers
  * in units of 2^-16 of the image's mean photon term, per worker, so that their
  * sums do not depend on which worker gathered which row, and the scores are
  * updated on one thread in cell order after the pass: images stay
@@ -6912,12 +6912,13 @@ static uint32_t appm__guide_warp(const appm__guide *gd, const appm_scene *s, flo
     *li = appm__pick_light(s, u[0]);
     if ((slot = gd->slot[*li]) == UINT32_MAX) return UINT32_MAX;
     if (!gd->active[slot]) return slot * APPM__GUIDE_CELLS + appm__guide_cell(u[1], u[2]);
-    {
-        const double *c = gd->cdf + (size_t)slot * APPM__GUIDE_CDF;
+    {   /* the weight from the CDFs' own steps: exactly the probability the cell was drawn with */
+        const double *c = gd->cdf + (size_t)slot * APPM__GUIDE_CDF, *cr;
         u[1] = appm__cdf_invert(c, APPM__GUIDE_RES, u[1], &i);
-        u[2] = appm__cdf_invert(c + (size_t)(i + 1) * (APPM__GUIDE_RES + 1), APPM__GUIDE_RES, u[2], &k);
+        cr = c + (size_t)(i + 1) * (APPM__GUIDE_RES + 1);
+        u[2] = appm__cdf_invert(cr, APPM__GUIDE_RES, u[2], &k);
+        *w = (float)(1.0 / ((c[i + 1] - c[i]) * (cr[k + 1] - cr[k]) * APPM__GUIDE_CELLS));
     }
-    *w = 1.0f / gd->pdf[(size_t)slot * APPM__GUIDE_CELLS + (size_t)i * APPM__GUIDE_RES + (size_t)k];
     return slot * APPM__GUIDE_CELLS + (uint32_t)(i * APPM__GUIDE_RES + k);
 }
 
@@ -6957,6 +6958,8 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot)
     int i, k;
     sum = appm__guide_importance(gd, slot, v);
     gd->active[slot] = gd->seen[slot] >= APPM__GUIDE_MIN && sum > 0.0 && sum < HUGE_VAL;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) /* a checkpoint's scores are checked, but never trusted */
+        if (!(v[i] >= 0.0 && v[i] < HUGE_VAL)) gd->active[slot] = 0;
     for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
         p[i] = gd->active[slot]
                    ? (float)(APPM__GUIDE_DEFENSIVE + (1.0 - APPM__GUIDE_DEFENSIVE) * v[i] * APPM__GUIDE_CELLS / sum)
@@ -7004,7 +7007,8 @@ static void appm__guide_count(uint64_t *count, size_t pairs, uint32_t tag, float
                               double q, double unit)
 {
     double u = 1.0 - (double)d2 / R2, k = biweight ? 3.0 * u * u : 1.0, n = k * q / R2 * unit;
-    count[tag] += n < 1e15 ? (uint64_t)(n + 0.5) : (uint64_t)1e15;
+    uint64_t add = n > 0.0 ? (n < 1e15 ? (uint64_t)(n + 0.5) : (uint64_t)1e15) : 0u;
+    count[tag] = count[tag] > UINT64_MAX - add ? UINT64_MAX : count[tag] + add; /* saturates */
     count[pairs + tag / APPM__GUIDE_CELLS]++;
 }
 

@@ -458,7 +458,7 @@ typedef struct appm_stats {
     unsigned threads;
     double emission_guided;         /* the share of the last pass's photon paths drawn
                                        from learned densities (0: none; at most 3/4)       */
-    unsigned emission_lights;       /* lights with a learned emission density            */
+    unsigned emission_lights;       /* lights guided emission may guide (set by a pass)  */
 } appm_stats;
 
 APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
@@ -491,8 +491,9 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which);
  * the lights in order of power) that the next pass samples, over the light's
  * first emission sample (u1, u2) in [0,1)^2: *width x *height floats, row v
  * for u2 in [v/height, (v+1)/height), mean 1 (1 everywhere: the light's own
- * distribution), borrowed until the next pass.  NULL for k beyond the guided
- * lights or with --emission light. */
+ * distribution), borrowed until the next pass or the next call (one buffer
+ * serves every k).  NULL for k beyond the guided lights or with
+ * APPM_EMISSION_LIGHT. */
 APPM_API const float *appm_renderer_emission_map(appm_renderer *r, unsigned k, unsigned *width,
                                                  unsigned *height);
 

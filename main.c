@@ -746,8 +746,8 @@ static void render_summary(render_run *R)
            st->seconds_photons, st->seconds_grid, st->seconds_gather, (unsigned long long)st->photons_stored);
     if (st->est_relerr >= 0) printf(" est_relerr=%.4g", st->est_relerr);
     if (st->clamped >= 0) printf(" clamped=%.4f", st->clamped);
-    if (st->emission_lights > 0) printf(" emission=guided guided=%.3f", st->emission_guided);
-    else if (o->cfg.emission == APPM_EMISSION_LIGHT) printf(" emission=light");
+    if (o->cfg.emission == APPM_EMISSION_GUIDED) printf(" emission=guided guided=%.3f", st->emission_guided);
+    else printf(" emission=light");
     printf(" sampler=%s", o->cfg.sampler == APPM_SAMPLER_RANDOM ? "random" : "qmc");
     if (o->cfg.sampler == APPM_SAMPLER_QMC) printf(" chains=%u", o->cfg.chains ? o->cfg.chains : 1u);
     printf(" cpu_s=%.3f", (double)(clock() - R->c0) / CLOCKS_PER_SEC);
