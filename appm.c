@@ -7664,14 +7664,16 @@ static void appm__ppm_pass_end(appm_renderer *r)
     r->ppm.R2 *= ((double)r->pass + r->alpha) / ((double)r->pass + 1.0);
 }
 
-static int appm__ppm_term(const appm_renderer *r, const void *state, double j, double *out)
+/* The photon term of a method whose state begins with its running mean I[3]
+ * (ppm and appm-paper: the pixel is the plain mean of the Ihat_j). */
+static int appm__mean_term(const appm_renderer *r, const void *state, double j, double *out)
 {
-    const appm__ppm_state *ppm = (const appm__ppm_state *)state;
+    const double *I = (const double *)state;
     (void)r;
     (void)j;
-    out[0] = ppm->I[0];
-    out[1] = ppm->I[1];
-    out[2] = ppm->I[2];
+    out[0] = I[0];
+    out[1] = I[1];
+    out[2] = I[2];
     return 1;
 }
 
@@ -7861,17 +7863,6 @@ static void appm__paper_pass_end(appm_renderer *r)
         at += (uint64_t)appm__at_bound(((const appm__paper_state *)appm__state(r, i))->R, lo, hi);
     }
     r->stats.clamped = n ? (double)at / (double)n : 0.0;
-}
-
-static int appm__paper_term(const appm_renderer *r, const void *state, double j, double *out)
-{
-    const appm__paper_state *p = (const appm__paper_state *)state;
-    (void)r;
-    (void)j;
-    out[0] = p->I[0];
-    out[1] = p->I[1];
-    out[2] = p->I[2];
-    return 1;
 }
 
 /* 4.2: the bias (mu2 / 2) dI r^2, with r^2 the mean over the passes. */
@@ -8410,7 +8401,7 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
     [APPM_METHOD_PPM] = {"ppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE),
                          sizeof(appm__ppm_state), appm__ppm_fields,
                          sizeof appm__ppm_fields / sizeof appm__ppm_fields[0], appm__ppm_start, NULL,
-                         appm__ppm_radius, NULL, appm__ppm_commit, appm__ppm_pass_end, appm__ppm_term, NULL,
+                         appm__ppm_radius, NULL, appm__ppm_commit, appm__ppm_pass_end, appm__mean_term, NULL,
                          appm__ppm_aux},
     [APPM_METHOD_SPPM] = {"sppm", APPM__CAP_PHOTONS, APPM__AUX_BIT(APPM_AUX_RADIUS), sizeof(appm__sppm_state),
                           appm__sppm_fields, sizeof appm__sppm_fields / sizeof appm__sppm_fields[0],
@@ -8422,7 +8413,7 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
                                 sizeof(appm__paper_state), appm__paper_fields,
                                 sizeof appm__paper_fields / sizeof appm__paper_fields[0], NULL,
                                 appm__paper_bandwidth, appm__paper_radius, NULL, appm__paper_commit,
-                                appm__paper_pass_end, appm__paper_term, appm__paper_bias, appm__paper_aux},
+                                appm__paper_pass_end, appm__mean_term, appm__paper_bias, appm__paper_aux},
     [APPM_METHOD_APPM] = {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_CUT | APPM__CAP_ERROR,
                           APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) |
                               APPM__AUX_BIT(APPM_AUX_LAPLACIAN) | APPM__AUX_BIT(APPM_AUX_ERROR) |

@@ -259,7 +259,7 @@ typedef enum appm_sampler {
  *     densities are part of a checkpoint.  At most 16 lights (the most
  *     powerful) are guided.  Measured at equal time (docs/algorithm.md 5.8):
  *     0.73x the RMSE on a caustic seen only through glass, but 1.02x on the
- *     teapot and 1.15-1.24x on the bunny under a sky, where more photons cost
+ *     teapot and 1.14-1.19x on the bunny under a sky, where more photons cost
  *     more than they help; so it is not (yet) the default. */
 typedef enum appm_emission {
     APPM_EMISSION_LIGHT = 0, /* default */

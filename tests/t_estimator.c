@@ -45,6 +45,10 @@ static void test_names(void)
 static void test_entries(void)
 {
     int m;
+    /* appm__mean_term reads a state's first three doubles as I: ppm's and appm-paper's */
+    CHECK(offsetof(appm__ppm_state, I) == 0 && offsetof(appm__paper_state, I) == 0);
+    CHECK(appm__estimators[APPM_METHOD_PPM].photon_term == appm__mean_term &&
+          appm__estimators[APPM_METHOD_APPM_PAPER].photon_term == appm__mean_term);
     for (m = 0; m < (int)APPM_METHOD_COUNT; ++m) {
         const appm__estimator *e = &appm__estimators[m];
         size_t covered = 0, end = 0;
