@@ -2,6 +2,8 @@
 #   make              the command line tool ./appm
 #   make test         every test, normal build and ASan+UBSan build, plus the CLI
 #   make test-long    the slow statistical tests (more samples)
+#   make mpi          appm-mpi, the command line over MPI (mpicc); make test-mpi: it against appm;
+#                     make bench-mpi: its speed-up and exchange (bench/mpi.sh)
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), wasm32-wasi,
 #                     C89/C++ header
 #   make bench        the speed/accuracy suite (bench/run.sh); make bench-quick: a subset;
@@ -24,13 +26,26 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h tests/fuzz/targets.h
 
-.PHONY: all test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler fuzz web \
+.PHONY: all mpi test-mpi bench-mpi test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler fuzz web \
         test-web clean
 
 all: appm
 
 appm: appm.c appm.h main.c
 	$(CC) $(WARN) $(CFLAGS) appm.c main.c -o $@ $(LDLIBS)
+
+# appm-mpi: the command line over MPI (mpi.c includes main.c); the library stays MPI-free
+MPICC ?= mpicc
+mpi: appm-mpi
+
+appm-mpi: appm.c appm.h main.c mpi.c
+	$(MPICC) $(WARN) $(CFLAGS) appm.c mpi.c -o $@ $(LDLIBS)
+
+test-mpi: appm appm-mpi
+	@sh tests/mpi.sh ./appm ./appm-mpi
+
+bench-mpi: appm appm-mpi
+	sh bench/mpi.sh
 
 build/%: tests/%.c $(DEPS)
 	@mkdir -p build
@@ -114,4 +129,4 @@ test-web: web appm
 	python3 tests/web.py
 
 clean:
-	rm -rf appm appm.exe build tests/out bench/report web/appm.wasm web/scenes
+	rm -rf appm appm.exe appm-mpi build tests/out bench/report web/appm.wasm web/scenes

@@ -237,7 +237,7 @@ typedef void (*appm__task_fn)(void *arg, uint32_t task, unsigned worker);
 
 typedef struct appm__queue {
     appm__mutex lock;
-    uint32_t next, count;
+    uint32_t first, next, count; /* tasks first + [next, count) are left */
     appm__task_fn fn;
     void *arg;
 } appm__queue;
@@ -258,7 +258,7 @@ static void appm__worker_loop(appm__queue *q, unsigned id)
         if (ok) q->next++;
         appm__mutex_unlock(&q->lock);
         if (!ok) return;
-        q->fn(q->arg, t, id);
+        q->fn(q->arg, q->first + t, id);
     }
 }
 
@@ -278,15 +278,16 @@ static DWORD WINAPI appm__thread_main(LPVOID p)
 }
 #endif
 
-/* Runs fn(arg, t, worker) for t = 0..count-1 on up to `threads` workers (the
- * caller is worker 0).  A thread that cannot be started simply leaves its share
- * to the others, so this never fails. */
-static void appm__parallel_for(unsigned threads, uint32_t count, appm__task_fn fn, void *arg)
+/* Runs fn(arg, t, worker) for t = first .. first + count - 1 on up to `threads`
+ * workers (the caller is worker 0).  A thread that cannot be started simply
+ * leaves its share to the others, so this never fails. */
+static void appm__parallel_range(unsigned threads, uint32_t first, uint32_t count, appm__task_fn fn, void *arg)
 {
     appm__queue q;
     unsigned n = threads < 1 ? 1 : threads, i;
     if (n > APPM__MAX_THREADS) n = APPM__MAX_THREADS;
     if (n > count) n = count ? count : 1;
+    q.first = first;
     q.next = 0;
     q.count = count;
     q.fn = fn;
@@ -328,6 +329,11 @@ static void appm__parallel_for(unsigned threads, uint32_t count, appm__task_fn f
         appm__worker_loop(&q, 0);
     }
     appm__mutex_destroy(&q.lock);
+}
+
+static void appm__parallel_for(unsigned threads, uint32_t count, appm__task_fn fn, void *arg)
+{
+    appm__parallel_range(threads, 0, count, fn, arg);
 }
 
 /* ==== 2. CORE UTILITIES ==================================================
@@ -389,6 +395,7 @@ static appm_status appm__fail(appm_diag *d, appm_status s, const char *file, uns
 
 typedef struct appm__mem {
     appm_allocator a;
+    appm_file_reader reader; /* appm_config.reader: where appm__read_file gets its bytes */
     appm_diag *diag; /* where an allocation failure is reported (may be NULL) */
     size_t live, peak;
 } appm__mem;
@@ -416,6 +423,7 @@ static void appm__mem_init(appm__mem *m, const appm_config *cfg)
         m->a.free = appm__default_free;
         m->a.user = NULL;
     }
+    if (cfg && cfg->reader.read) m->reader = cfg->reader;
 }
 
 #define APPM__ALLOC_HEADER 16
@@ -2152,14 +2160,34 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
 
 /* Reads a whole file through the allocator; one extra zero byte is appended so
  * that callers can print from it, but no parser relies on that terminator. */
+/* The file through the user's reader (appm_config.reader), copied as above. */
+static appm_status appm__read_hooked(appm__mem *m, const char *path, char **out, size_t *len, appm_diag *diag)
+{
+    const void *data = NULL;
+    size_t n = 0;
+    char *buf;
+    if (m->reader.read(m->reader.user, path, &data, &n) != 0 || (!data && n))
+        return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot open file");
+    buf = n < (size_t)-1 ? (char *)appm__alloc(m, n + 1, 1) : NULL;
+    if (buf && n) memcpy(buf, data, n);
+    if (m->reader.release) m->reader.release(m->reader.user, data);
+    if (!buf) return appm__fail(diag, APPM_ERR_NOMEM, path, 0, "out of memory reading the file");
+    buf[n] = 0;
+    *out = buf;
+    *len = n;
+    return APPM_OK;
+}
+
 static appm_status appm__read_file(appm__mem *m, const char *path, char **out, size_t *len,
                                    appm_diag *diag)
 {
-    FILE *f = fopen(path, "rb");
+    FILE *f;
     char *buf = NULL;
     size_t cap = 0, n = 0;
     *out = NULL;
     *len = 0;
+    if (m->reader.read) return appm__read_hooked(m, path, out, len, diag);
+    f = fopen(path, "rb");
     if (!f) return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot open file");
     for (;;) {
         size_t got;
@@ -6575,6 +6603,19 @@ struct appm_renderer {
     appm__guide guide;
     appm__pmap pmap;     /* this pass's photons, compacted and sorted (7.2) */
     uint64_t dropped[APPM__MAX_THREADS];
+    /* a render split over a cluster (12.1); alone: ranks 1, all rows and chunks */
+    appm_cluster cluster;
+    uint32_t eye0, eye1;     /* this rank's rows of the eye pass */
+    uint32_t row0, row1;     /* this rank's rows of the gather (or of path tracing) */
+    uint32_t chunk0, chunk1; /* this rank's chunks of photon paths */
+    size_t store_slots;      /* photons that ph, dest and tag can hold */
+    size_t *cl_lens;         /* per rank: the bytes of its part of the exchange at hand */
+    uint32_t *cl_eye, *cl_rows, *cl_chunks; /* ranks + 1 bounds each: rank k does rows (chunks) [b[k], b[k+1]) */
+    float *eye_cost, *row_cost, *chunk_cost; /* seconds each row and chunk took in the last pass */
+    uint64_t *cl_words;      /* per rank: one word (a status, a count) */
+    uint64_t *cl_count;      /* guided emission: per rank, its workers' counts summed */
+    uint64_t dropped_other;  /* samples the other ranks dropped, all passes */
+    uint64_t dropped_seen;   /* this rank's own dropped total after the last pass */
     appm_stats stats;
     char last_error[256];
 };
@@ -6801,8 +6842,10 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
 static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
+    const double t0 = r->eye_cost ? appm__seconds() : 0.0;
     uint32_t x;
     for (x = 0; x < r->w; ++x) appm__eye_pixel(r, x, row, worker);
+    if (r->eye_cost) r->eye_cost[row] = (float)(appm__seconds() - t0); /* a cluster's balance (12.1) */
 }
 
 /* ==== 9. PHOTON PASS ======================================================
@@ -7228,8 +7271,9 @@ static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
     cache.set = 0;
     r->task_used[task] = 0;
     r->task_failed[task] = 0;
-    for (c = task; c < r->nchunks; c += r->tasks) {
+    for (c = r->chunk0 + task; c < r->chunk1; c += r->tasks) {
         uint64_t i0 = (uint64_t)c * APPM__CHUNK, i1 = i0 + APPM__CHUNK, i;
+        const double t0 = r->chunk_cost ? appm__seconds() : 0.0;
         if (i1 > r->M) i1 = r->M;
         r->chunk[c].start = r->task_used[task];
         for (i = i0; i < i1; ++i) {
@@ -7239,7 +7283,33 @@ static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
             }
         }
         r->chunk[c].count = r->task_used[task] - r->chunk[c].start;
+        if (r->chunk_cost) r->chunk_cost[c] = (float)(appm__seconds() - t0);
     }
+}
+
+/* New ph, dest and tag arrays of `slots` photons each (tag only with guided
+ * emission), the first `keep` photons and tags copied over; the old ones are
+ * freed, and on failure nothing changes. */
+static appm_status appm__store_realloc(appm_renderer *r, size_t slots, size_t keep)
+{
+    appm__photon *nph = (appm__photon *)appm__alloc(&r->mem, slots, sizeof *nph);
+    uint32_t *ndest = nph ? (uint32_t *)appm__alloc(&r->mem, slots, sizeof *ndest) : NULL;
+    uint32_t *ntag = ndest && r->tag ? (uint32_t *)appm__alloc(&r->mem, slots, sizeof *ntag) : NULL;
+    if (!ndest || (r->tag && !ntag)) {
+        appm__free(&r->mem, nph);
+        appm__free(&r->mem, ndest);
+        return APPM_ERR_NOMEM;
+    }
+    if (keep) memcpy(nph, r->ph, keep * sizeof *nph);
+    if (keep && r->tag) memcpy(ntag, r->tag, keep * sizeof *ntag);
+    appm__free(&r->mem, r->ph);
+    appm__free(&r->mem, r->dest);
+    appm__free(&r->mem, r->tag);
+    r->ph = nph;
+    r->dest = ndest;
+    r->tag = ntag;
+    r->store_slots = slots;
+    return APPM_OK;
 }
 
 static appm_status appm__photon_pass(appm_renderer *r)
@@ -7248,8 +7318,6 @@ static appm_status appm__photon_pass(appm_renderer *r)
         uint32_t t;
         int failed = 0;
         size_t ncap;
-        appm__photon *nph;
-        uint32_t *ndest, *ntag;
         appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
         for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
         if (!failed) return APPM_OK;
@@ -7259,28 +7327,17 @@ static appm_status appm__photon_pass(appm_renderer *r)
         if (ncap > (size_t)0xFFFFFFF0u / r->tasks)
             return appm__fail(&r->diag, APPM_ERR_NOMEM, NULL, 0,
                               "more than 4e9 photons stored in one pass: use fewer photons per pass");
-        nph = (appm__photon *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *nph);
-        ndest = nph ? (uint32_t *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *ndest) : NULL;
-        ntag = ndest && r->tag ? (uint32_t *)appm__alloc(&r->mem, ncap * r->tasks, sizeof *ntag) : NULL;
-        if (!ndest || (r->tag && !ntag)) {
-            appm__free(&r->mem, nph);
-            appm__free(&r->mem, ndest);
-            return APPM_ERR_NOMEM;
-        }
-        appm__free(&r->mem, r->ph);
-        appm__free(&r->mem, r->dest);
-        appm__free(&r->mem, r->tag);
-        r->ph = nph;
-        r->dest = ndest;
-        r->tag = ntag;
+        if (appm__store_realloc(r, ncap * r->tasks, 0) != APPM_OK) return APPM_ERR_NOMEM;
         r->cap = ncap;
     }
 }
 
-/* Moves the regions' chunks together so that chunk c follows chunk c - 1 (the
- * chunks of one region are already in order; regions move down one after
- * another).  chunk[c].start becomes the offset in the compacted array, which
- * is what the map's build reads.  Returns the number of photons. */
+/* Moves the regions' chunks (this rank's: all when alone) together, region
+ * after region, leaving no gaps (the chunks of one region are in order).
+ * chunk[c].start becomes the offset in the compacted array: the map's build
+ * reads the photons chunk by chunk through these records, so its order is
+ * that of the paths whatever the number of regions.  Returns the number of
+ * photons. */
 static size_t appm__store_compact(appm_renderer *r)
 {
     size_t out = 0;
@@ -7288,7 +7345,7 @@ static size_t appm__store_compact(appm_renderer *r)
     appm__chunk_rec *cr = r->chunk;
     for (t = 0; t < r->tasks; ++t) {
         size_t base = (size_t)t * r->cap;
-        for (c = t; c < r->nchunks; c += r->tasks) {
+        for (c = r->chunk0 + t; c < r->chunk1; c += r->tasks) {
             if (cr[c].count && base + cr[c].start != out) {
                 memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
                 if (r->tag) memmove(&r->tag[out], &r->tag[base + cr[c].start], cr[c].count * sizeof *r->tag);
@@ -8574,6 +8631,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
     const appm__estimator *est = r->est;
+    const double t0 = r->row_cost ? appm__seconds() : 0.0;
     uint32_t x;
     for (x = 0; x < r->w; ++x) {
         size_t pi = (size_t)row * r->w + x;
@@ -8606,6 +8664,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
         }
         est->commit(r, p, appm__state(r, pi), vp, &g, worker);
     }
+    if (r->row_cost) r->row_cost[row] = (float)(appm__seconds() - t0);
 }
 
 /* ==== 11. PATH-TRACING REFERENCE ==========================================
@@ -8721,8 +8780,10 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
 static void appm__pt_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
+    const double t0 = r->row_cost ? appm__seconds() : 0.0;
     uint32_t x;
     for (x = 0; x < r->w; ++x) appm__pt_pixel(r, x, row, worker);
+    if (r->row_cost) r->row_cost[row] = (float)(appm__seconds() - t0);
 }
 
 /* ==== 12. RENDERER ======================================================
@@ -8746,6 +8807,29 @@ APPM_API void appm_config_init(appm_config *cfg)
 }
 
 
+/* Frees the cluster's arrays (12.1): the renderer renders alone again. */
+static void appm__cluster_free(appm_renderer *r)
+{
+    appm__free(&r->mem, r->cl_lens);
+    appm__free(&r->mem, r->cl_words);
+    appm__free(&r->mem, r->cl_count);
+    appm__free(&r->mem, r->cl_eye);
+    appm__free(&r->mem, r->cl_rows);
+    appm__free(&r->mem, r->cl_chunks);
+    appm__free(&r->mem, r->eye_cost);
+    appm__free(&r->mem, r->row_cost);
+    appm__free(&r->mem, r->chunk_cost);
+    r->cl_lens = NULL;
+    r->cl_words = r->cl_count = NULL;
+    r->cl_eye = r->cl_rows = r->cl_chunks = NULL;
+    r->eye_cost = r->row_cost = r->chunk_cost = NULL;
+    memset(&r->cluster, 0, sizeof r->cluster);
+    r->cluster.ranks = 1;
+    r->eye0 = r->row0 = r->chunk0 = 0;
+    r->eye1 = r->row1 = r->h;
+    r->chunk1 = r->nchunks;
+}
+
 static void appm__renderer_free_parts(appm_renderer *r)
 {
     int k;
@@ -8764,6 +8848,7 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__pmap_free(&r->pmap, &r->mem);
     appm__free(&r->mem, r->sobol);
     appm__free(&r->mem, r->chain_sum);
+    appm__cluster_free(r);
 }
 
 /* Photons per task region of the first store, 1.5 per path plus slack, in
@@ -8888,6 +8973,9 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->pixel_angle = 2.0f * scene->cam.tan_half / (float)r->h;
     r->tasks = r->threads;
     r->nchunks = (uint32_t)((r->M + APPM__CHUNK - 1) / APPM__CHUNK);
+    r->cluster.ranks = 1;
+    r->eye1 = r->row1 = r->h;
+    r->chunk1 = r->nchunks;
     npix = (size_t)r->w * r->h;
     r->vp = (appm__vp *)appm__alloc(&r->mem, npix, sizeof *r->vp);
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
@@ -8899,6 +8987,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
         r->task_failed = (int *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_failed);
         /* first guess at the store: 1.5 photons per path; it grows if needed */
         r->cap = appm__store_guess(r->M, r->tasks);
+        r->store_slots = r->cap * r->tasks;
         r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
         if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
         if (c.emission == APPM_EMISSION_GUIDED && r->dest)
@@ -9017,6 +9106,268 @@ static void appm__estimate_error(appm_renderer *r)
     r->stats.est_relerr = sqrt(sum / (double)npix);
 }
 
+/* ---- 12.1 Passes split over a cluster -----------------------------------------
+ *
+ * appm_renderer_set_cluster (appm.h): every rank holds the whole per-pixel
+ * state and does a share of each pass's work - rows [eye0, eye1) of the eye
+ * pass, chunks [chunk0, chunk1) of the photon paths, rows [row0, row1) of the
+ * gather - then the ranks exchange what they computed, so that after each
+ * exchange every rank's arrays are those a renderer alone would hold.  Everything else (the radii,
+ * the medians that size the grid, the photon map's build, the pooled dI^2,
+ * the error estimate) every rank computes from identical data in the same
+ * order, so no floating-point sum is ever split.  The exchanges of a pass:
+ *   after the eye pass     vp of each rank's rows
+ *   after the photon pass  a status word, the chunk records, the photons
+ *                          (and their emission cells), a status word
+ *   after the map's build  a status word
+ *   after the gather       pix, the method's state and the chains' sums of
+ *                          each rank's rows; guided emission's counts; the
+ *                          samples each rank dropped; the seconds each row
+ *                          and chunk took in each phase
+ * Sums of integers (counts, drops) are exact in any order.  Which rank does
+ * which rows and chunks changes nothing but the time: each phase's shares of
+ * the next pass are cut where the last pass's seconds say the work is even
+ * (the floor's rows cost more than the ceiling's, and not in the same
+ * proportion in the eye pass as in the gather), from data every rank holds
+ * alike.  docs/distributed.md has the measured exchange and its model. */
+
+/* The hook over buf with the parts in r->cl_lens; its time and bytes into the stats. */
+static appm_status appm__cluster_exchange(appm_renderer *r, void *buf)
+{
+    const double t0 = appm__seconds();
+    unsigned k;
+    int rc = r->cluster.allgather(r->cluster.user, buf, r->cl_lens);
+    for (k = 0; k < r->cluster.ranks; ++k) {
+        if (k == r->cluster.rank) r->stats.cluster_bytes_out += r->cl_lens[k];
+        else r->stats.cluster_bytes_in += r->cl_lens[k];
+    }
+    r->stats.seconds_cluster += appm__seconds() - t0;
+    if (rc == 0) return APPM_OK;
+    return appm__fail(&r->diag, APPM_ERR_IO, NULL, 0, "the cluster's exchange failed (rank %u of %u)",
+                      r->cluster.rank, r->cluster.ranks);
+}
+
+/* Items [b[k], b[k+1]) at base, `size` bytes each: rank k's into every rank's copy. */
+static appm_status appm__cluster_share(appm_renderer *r, void *base, const uint32_t *b, size_t size)
+{
+    unsigned k;
+    for (k = 0; k < r->cluster.ranks; ++k) r->cl_lens[k] = (size_t)(b[k + 1] - b[k]) * size;
+    return appm__cluster_exchange(r, base);
+}
+
+/* One word per rank into r->cl_words (rank k's at [k]). */
+static appm_status appm__cluster_words(appm_renderer *r, uint64_t mine)
+{
+    unsigned k;
+    for (k = 0; k < r->cluster.ranks; ++k) r->cl_lens[k] = sizeof *r->cl_words;
+    r->cl_words[r->cluster.rank] = mine;
+    return appm__cluster_exchange(r, r->cl_words);
+}
+
+/* After a step that can fail on one rank (memory): every rank learns the
+ * first failure and returns it, so that none waits in an exchange the failed
+ * one never enters.  The failed rank keeps its own message. */
+static appm_status appm__cluster_agree(appm_renderer *r, appm_status st, const char *step)
+{
+    unsigned k;
+    appm_status x;
+    if (r->cluster.ranks <= 1) return st;
+    if ((x = appm__cluster_words(r, (uint64_t)st)) != APPM_OK) return x;
+    for (k = 0; k < r->cluster.ranks; ++k) {
+        if (r->cl_words[k] == APPM_OK) continue;
+        if (k == r->cluster.rank) return st;
+        x = r->cl_words[k] < APPM_STATUS_COUNT ? (appm_status)r->cl_words[k] : APPM_ERR_IO;
+        return appm__fail(&r->diag, x, NULL, 0, "rank %u failed in %s: %s", k, step, appm_status_string(x));
+    }
+    return APPM_OK;
+}
+
+/* ph, dest and tag with room for n photons, keeping the first `keep`. */
+static appm_status appm__store_reserve(appm_renderer *r, size_t n, size_t keep)
+{
+    if (n <= r->store_slots) return APPM_OK;
+    if (n > (size_t)0xFFFFFFF0u)
+        return appm__fail(&r->diag, APPM_ERR_NOMEM, NULL, 0,
+                          "more than 4e9 photons stored in one pass: use fewer photons per pass");
+    return appm__store_realloc(r, n + n / 8 + 4096, keep);
+}
+
+/* The photons rank k's chunks stored (their records must be every rank's). */
+static size_t appm__cluster_stored(const appm_renderer *r, unsigned k)
+{
+    size_t n = 0;
+    uint32_t c;
+    for (c = r->cl_chunks[k]; c < r->cl_chunks[k + 1]; ++c) n += r->chunk[c].count;
+    return n;
+}
+
+/* Each rank's photons, `size` bytes each, laid out rank after rank at base,
+ * into every rank's copy. */
+static appm_status appm__cluster_share_photons(appm_renderer *r, void *base, size_t size)
+{
+    unsigned k;
+    for (k = 0; k < r->cluster.ranks; ++k) r->cl_lens[k] = appm__cluster_stored(r, k) * size;
+    return appm__cluster_exchange(r, base);
+}
+
+/* The photons of every rank into ph, rank after rank, and the chunk records
+ * of every chunk with its offset there; *n: this rank's photons on entry (at
+ * the front of ph, as compacted), all of them on return. */
+static appm_status appm__cluster_photons(appm_renderer *r, size_t *n)
+{
+    size_t total = 0, base = 0;
+    appm_status st;
+    unsigned k;
+    uint32_t c;
+    if ((st = appm__cluster_share(r, r->chunk, r->cl_chunks, sizeof *r->chunk)) != APPM_OK) return st;
+    for (k = 0; k < r->cluster.ranks; ++k) { /* rank k's records are offsets in its own compacted store */
+        if (k == r->cluster.rank) base = total;
+        for (c = r->cl_chunks[k]; c < r->cl_chunks[k + 1]; ++c) r->chunk[c].start += (uint32_t)total;
+        total += appm__cluster_stored(r, k);
+    }
+    st = appm__cluster_agree(r, appm__store_reserve(r, total, *n), "the photon store");
+    if (st != APPM_OK) return st;
+    memmove(r->ph + base, r->ph, *n * sizeof *r->ph);
+    if (r->tag) memmove(r->tag + base, r->tag, *n * sizeof *r->tag);
+    *n = total;
+    if ((st = appm__cluster_share_photons(r, r->ph, sizeof *r->ph)) != APPM_OK) return st;
+    return r->tag ? appm__cluster_share_photons(r, r->tag, sizeof *r->tag) : APPM_OK;
+}
+
+/* Guided emission's counts of this rank's workers, summed, then over the
+ * ranks (in rank order: integers, exact) into worker 0's. */
+static appm_status appm__cluster_guide(appm_renderer *r)
+{
+    appm__guide *gd = &r->guide;
+    const size_t stride = (size_t)gd->nslot * APPM__GUIDE_CELLS + gd->nslot;
+    uint64_t *mine = r->cl_count + r->cluster.rank * stride;
+    appm_status st;
+    size_t c;
+    unsigned k, w;
+    for (c = 0; c < stride; ++c) {
+        uint64_t sum = 0;
+        for (w = 0; w < r->threads; ++w) {
+            sum += gd->count[w * stride + c];
+            gd->count[w * stride + c] = 0;
+        }
+        mine[c] = sum;
+    }
+    for (k = 0; k < r->cluster.ranks; ++k) r->cl_lens[k] = stride * sizeof *r->cl_count;
+    if ((st = appm__cluster_exchange(r, r->cl_count)) != APPM_OK) return st;
+    for (k = 0; k < r->cluster.ranks; ++k)
+        for (c = 0; c < stride; ++c) gd->count[c] += r->cl_count[k * stride + c];
+    return APPM_OK;
+}
+
+/* Bounds b[0 .. ranks] that cut items 0 .. n-1 where the running sum of their
+ * costs crosses k/ranks of the total (an even split of the items when
+ * nothing was measured). */
+static void appm__cluster_balance(const float *cost, uint32_t n, unsigned ranks, uint32_t *b)
+{
+    double total = 0.0, run = 0.0;
+    uint32_t i;
+    unsigned k;
+    for (i = 0; i < n; ++i)
+        if (cost[i] > 0.0f) total += cost[i]; /* NaN and negative: nothing */
+    b[0] = 0;
+    b[ranks] = n;
+    for (k = 1, i = 0; k < ranks; ++k) {
+        if (!(total > 0.0 && total < HUGE_VAL)) {
+            b[k] = (uint32_t)((uint64_t)n * k / ranks);
+            continue;
+        }
+        for (; i < n; ++i) {
+            const double c = cost[i] > 0.0f ? cost[i] : 0.0;
+            if (run + c > total * k / ranks) break;
+            run += c;
+        }
+        b[k] = i;
+    }
+}
+
+/* This rank's rows and chunks from the bounds. */
+static void appm__cluster_mine(appm_renderer *r)
+{
+    const unsigned k = r->cluster.rank;
+    r->eye0 = r->cl_eye[k];
+    r->eye1 = r->cl_eye[k + 1];
+    r->row0 = r->cl_rows[k];
+    r->row1 = r->cl_rows[k + 1];
+    r->chunk0 = r->cl_chunks[k];
+    r->chunk1 = r->cl_chunks[k + 1];
+}
+
+/* After the gather (or a path-tracing pass): every rank's rows of the pixel
+ * state, guided emission's counts, the samples the other ranks dropped, and
+ * the costs that cut the next pass's shares. */
+static appm_status appm__cluster_pixels(appm_renderer *r)
+{
+    const size_t w = r->w;
+    uint64_t own = 0;
+    appm_status st;
+    unsigned k;
+    if ((st = appm__cluster_share(r, r->pix, r->cl_rows, w * sizeof *r->pix)) != APPM_OK) return st;
+    if (r->state && (st = appm__cluster_share(r, r->state, r->cl_rows, w * r->est->state_size)) != APPM_OK)
+        return st;
+    if (r->chain_sum &&
+        (st = appm__cluster_share(r, r->chain_sum, r->cl_rows, w * r->chains * sizeof *r->chain_sum)) != APPM_OK)
+        return st;
+    if (r->guide.nslot && r->guide.ref > 0.0 && (st = appm__cluster_guide(r)) != APPM_OK) return st;
+    for (k = 0; k < APPM__MAX_THREADS; ++k) own += r->dropped[k];
+    if ((st = appm__cluster_words(r, own - r->dropped_seen)) != APPM_OK) return st;
+    r->dropped_seen = own;
+    for (k = 0; k < r->cluster.ranks; ++k)
+        if (k != r->cluster.rank) r->dropped_other += r->cl_words[k];
+    if ((st = appm__cluster_share(r, r->row_cost, r->cl_rows, sizeof *r->row_cost)) != APPM_OK) return st;
+    appm__cluster_balance(r->row_cost, r->h, r->cluster.ranks, r->cl_rows);
+    if (r->est->caps & APPM__CAP_PHOTONS) {
+        if ((st = appm__cluster_share(r, r->eye_cost, r->cl_eye, sizeof *r->eye_cost)) != APPM_OK ||
+            (st = appm__cluster_share(r, r->chunk_cost, r->cl_chunks, sizeof *r->chunk_cost)) != APPM_OK)
+            return st;
+        appm__cluster_balance(r->eye_cost, r->h, r->cluster.ranks, r->cl_eye);
+        appm__cluster_balance(r->chunk_cost, r->nchunks, r->cluster.ranks, r->cl_chunks);
+    }
+    appm__cluster_mine(r);
+    return APPM_OK;
+}
+
+APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_cluster *c, appm_diag *diag)
+{
+    appm_diag local;
+    const size_t counts = r && r->guide.nslot ? (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1) : 0;
+    if (!diag) diag = &local;
+    appm__diag_clear(diag);
+    if (!r) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no renderer");
+    appm__cluster_free(r);
+    if (!c || c->ranks <= 1) return APPM_OK;
+    if (c->ranks > 65536 || c->rank >= c->ranks || !c->allgather)
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "cluster: rank %u of %u%s", c->rank, c->ranks,
+                          c->allgather ? "" : " without an allgather");
+    r->cl_lens = (size_t *)appm__alloc(&r->mem, c->ranks, sizeof *r->cl_lens);
+    r->cl_words = (uint64_t *)appm__alloc(&r->mem, c->ranks, sizeof *r->cl_words);
+    r->cl_eye = (uint32_t *)appm__alloc(&r->mem, (size_t)c->ranks + 1, sizeof *r->cl_eye);
+    r->cl_rows = (uint32_t *)appm__alloc(&r->mem, (size_t)c->ranks + 1, sizeof *r->cl_rows);
+    r->cl_chunks = (uint32_t *)appm__alloc(&r->mem, (size_t)c->ranks + 1, sizeof *r->cl_chunks);
+    r->eye_cost = (float *)appm__alloc(&r->mem, r->h, sizeof *r->eye_cost);
+    r->row_cost = (float *)appm__alloc(&r->mem, r->h, sizeof *r->row_cost);
+    r->chunk_cost = (float *)appm__alloc(&r->mem, r->nchunks ? r->nchunks : 1, sizeof *r->chunk_cost);
+    if (counts) r->cl_count = (uint64_t *)appm__alloc(&r->mem, c->ranks, counts * sizeof *r->cl_count);
+    if (!r->cl_lens || !r->cl_words || !r->cl_eye || !r->cl_rows || !r->cl_chunks || !r->eye_cost ||
+        !r->row_cost || !r->chunk_cost || (counts && !r->cl_count)) {
+        appm__cluster_free(r);
+        return appm__fail(diag, APPM_ERR_NOMEM, NULL, 0, "out of memory for the cluster's arrays");
+    }
+    memset(r->eye_cost, 0, r->h * sizeof *r->eye_cost);
+    memset(r->row_cost, 0, r->h * sizeof *r->row_cost);
+    memset(r->chunk_cost, 0, (r->nchunks ? r->nchunks : 1) * sizeof *r->chunk_cost);
+    r->cluster = *c;
+    appm__cluster_balance(r->eye_cost, r->h, c->ranks, r->cl_eye); /* nothing measured: even */
+    appm__cluster_balance(r->row_cost, r->h, c->ranks, r->cl_rows);
+    appm__cluster_balance(r->chunk_cost, r->nchunks, c->ranks, r->cl_chunks);
+    appm__cluster_mine(r);
+    return APPM_OK;
+}
+
 /* The photon part of the image's mean luminance after the passes so far: the
  * unit in which guided emission counts contributions (9.1; 0: nothing
  * gathered yet, nothing to learn). */
@@ -9037,9 +9388,13 @@ static double appm__guide_ref(const appm_renderer *r)
 static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
 {
     const appm__estimator *est = r->est;
+    const int alone = r->cluster.ranks <= 1;
     appm_status st;
+    size_t n;
     float cell;
-    appm__parallel_for(r->threads, r->h, appm__eye_task, r);
+    appm__parallel_range(r->threads, r->eye0, r->eye1 - r->eye0, appm__eye_task, r);
+    if (!alone && (st = appm__cluster_share(r, r->vp, r->cl_eye, (size_t)r->w * sizeof *r->vp)) != APPM_OK)
+        return st;
     if (r->pass == 1) {
         r->r_auto = appm__default_radius(r);
         if (r->r1_auto) r->r1 = r->r_auto;
@@ -9055,15 +9410,17 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
         r->guide.ref = appm__guide_ref(r);
     }
     t[0] = appm__seconds();
-    st = appm__photon_pass(r);
+    st = appm__cluster_agree(r, appm__photon_pass(r), "the photon pass");
+    if (st != APPM_OK) return st;
+    n = appm__store_compact(r);
+    if (!alone && (st = appm__cluster_photons(r, &n)) != APPM_OK) return st;
     t[1] = appm__seconds();
     r->pmap.tag = r->tag;
-    if (st == APPM_OK)
-        st = appm__pmap_build(&r->pmap, &r->mem, r->ph, appm__store_compact(r), r->dest, r->chunk, r->nchunks,
-                              cell > 0.0f ? cell : 1.0f);
-    if (st != APPM_OK) return st;
+    st = appm__pmap_build(&r->pmap, &r->mem, r->ph, n, r->dest, r->chunk, r->nchunks, cell > 0.0f ? cell : 1.0f);
+    if ((st = appm__cluster_agree(r, st, "the photon map's build")) != APPM_OK) return st;
     t[2] = appm__seconds();
-    appm__parallel_for(r->threads, r->h, appm__gather_task, r);
+    appm__parallel_range(r->threads, r->row0, r->row1 - r->row0, appm__gather_task, r);
+    if (!alone && (st = appm__cluster_pixels(r)) != APPM_OK) return st;
     if (r->guide.nslot) appm__guide_learn(r);
     if (est->pass_end) est->pass_end(r);
     r->stats.photons_emitted += r->M;
@@ -9081,9 +9438,13 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
     t0 = appm__seconds();
     r->pass++;
     if (!(r->est->caps & APPM__CAP_PHOTONS)) {
-        appm__parallel_for(r->threads, r->h, appm__pt_task, r);
+        appm__parallel_range(r->threads, r->row0, r->row1 - r->row0, appm__pt_task, r);
+        st = r->cluster.ranks > 1 ? appm__cluster_pixels(r) : APPM_OK;
         t[0] = t[1] = t[2] = appm__seconds();
-    } else if ((st = appm__photon_method_pass(r, t)) != APPM_OK) {
+    } else {
+        st = appm__photon_method_pass(r, t);
+    }
+    if (st != APPM_OK) {
         r->pass--;
         if (st == APPM_ERR_NOMEM && r->diag.status == APPM_OK)
             appm__fail(&r->diag, st, NULL, 0, "out of memory in the photon pass");
@@ -9099,7 +9460,7 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
     r->stats.seconds_photons += t[1] - t[0];
     r->stats.seconds_grid += t[2] - t[1];
     r->stats.seconds_gather += t4 - t[2];
-    r->stats.dropped_samples = 0;
+    r->stats.dropped_samples = r->dropped_other;
     for (k = 0; k < APPM__MAX_THREADS; ++k) r->stats.dropped_samples += r->dropped[k];
     r->stats.memory_bytes = r->mem.live;
     r->stats.peak_bytes = r->mem.peak;
@@ -9531,7 +9892,7 @@ static void appm__ck_glob_of(const appm_renderer *r, appm__ck_glob *g)
     g->emitted = r->stats.photons_emitted;
     g->stored = r->stats.photons_stored;
     g->eye = r->stats.eye_paths;
-    g->dropped = 0;
+    g->dropped = r->dropped_other;
     for (k = 0; k < APPM__MAX_THREADS; ++k) g->dropped += r->dropped[k];
     g->r1 = r->r1;
     g->r_auto = r->r_auto;
@@ -9844,7 +10205,8 @@ static void appm__ck_apply(appm_renderer *r, const appm__ck_glob *g)
     r->ppm.R2 = g->ppm_R2;
     r->ppm.R = g->ppm_R;
     memset(r->dropped, 0, sizeof r->dropped);
-    r->dropped[0] = g->dropped;
+    r->dropped[0] = r->dropped_seen = g->dropped; /* counted as this rank's own */
+    r->dropped_other = 0;
     r->stats.passes = g->pass;
     r->stats.photons_emitted = g->emitted;
     r->stats.photons_stored = g->stored;

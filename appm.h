@@ -192,6 +192,19 @@ typedef struct appm_allocator {
  * `file` may be "" and `line` 0.  Each kind of warning is sent once per file. */
 typedef void (*appm_log_fn)(void *user, const char *file, unsigned line, const char *message);
 
+/* Where the loaders get the bytes of a file (appm_config.reader): read(user,
+ * path, &data, &len) returns 0 and a buffer of len bytes that stays valid until
+ * release(user, data), or non-zero when the file cannot be read (a missing
+ * file: what fopen failing would mean).  appm copies the bytes and releases
+ * them before it returns.  The distributed front end (mpi.c) reads every file
+ * on rank 0 and sends it to the others with these hooks, so a scene only rank
+ * 0 can see renders on every rank. */
+typedef struct appm_file_reader {
+    int (*read)(void *user, const char *path, const void **data, size_t *len);
+    void (*release)(void *user, const void *data);
+    void *user;
+} appm_file_reader;
+
 /* ---- Configuration --------------------------------------------------------- */
 
 /* The methods.  appm-paper is Kaplanyan and Dachsbacher's adaptive radius as
@@ -292,6 +305,8 @@ typedef struct appm_config {
      * half or more of the gain on diffuse boxes at 256 passes), 8 K bytes a pixel. */
     unsigned chains;
     appm_emission emission;   /* APPM_EMISSION_LIGHT                                 */
+    appm_file_reader reader;  /* every file a load reads (scenes, meshes, materials,
+                               * PFM images): NULL read hook: the file system        */
 } appm_config;
 
 /* The defaults spelled out (every field set to the value 0 stands for, where that
@@ -459,6 +474,12 @@ typedef struct appm_stats {
     double emission_guided;         /* the share of the last pass's photon paths drawn
                                        from learned densities (0: none; at most 3/4)       */
     unsigned emission_lights;       /* lights guided emission may guide (set by a pass)  */
+    /* A render split over a cluster (appm_renderer_set_cluster), all passes of
+     * this renderer: the bytes of this rank's parts of the exchanges, the bytes
+     * of the other ranks' parts it received, and the wall time spent in the
+     * exchange hook (waiting for slower ranks included).  0 when alone. */
+    uint64_t cluster_bytes_out, cluster_bytes_in;
+    double seconds_cluster;
 } appm_stats;
 
 APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
@@ -531,6 +552,52 @@ APPM_API appm_status appm_renderer_save(const appm_renderer *r, void *buf, size_
 APPM_API appm_status appm_renderer_save_file(appm_renderer *r, const char *path, appm_diag *diag);
 APPM_API appm_status appm_renderer_load(appm_renderer *r, const void *buf, size_t len, appm_diag *diag);
 APPM_API appm_status appm_renderer_load_file(appm_renderer *r, const char *path, appm_diag *diag);
+
+/* ---- Distributed rendering ----------------------------------------------------
+ *
+ * One render split over `ranks` processes (an MPI job, say: mpi.c is such a
+ * front end), each holding a renderer of the same scene and options.  Every
+ * rank keeps the whole per-pixel state; a pass splits its work - each rank
+ * traces the eye paths of a band of rows, the photon paths of a band of the
+ * pass's 1024-path chunks and gathers for a band of rows, the bands cut where
+ * the last pass's measured times say the work is even (the first pass: even
+ * counts) - and then exchanges what it computed, so that after each pass every
+ * rank holds, bit for bit, the state of a renderer that ran alone.  Hence
+ * the image, the diagnostic maps and a checkpoint on any rank are those of a
+ * render on one machine with the same options, for any number of ranks and
+ * threads per rank, and a checkpoint saved by a job of N ranks resumes in a
+ * job of any other size (and alone).  The per-phase times of appm_stats
+ * include each phase's exchange.
+ * What is exchanged per pass (docs/distributed.md has the cost model):
+ *   the visible points of each rank's rows (92 bytes a pixel), its photons
+ *   (32 bytes each, 4 more with guided emission) with their chunk records
+ *   (8 bytes per 1024 paths), and after the gather its rows' pixel state (40
+ *   bytes a pixel plus the method's: 24 ppm, 40 sppm, 64 appm-paper, 176
+ *   appm, 0 pt; 8 a chain with chains >= 2), plus a few words (statuses,
+ *   dropped samples, guided emission's counts: 8 KiB a guided light, and 4
+ *   bytes a row and a chunk of measured times).
+ *
+ * allgather(user, buf, lens) is the one collective the library needs: every
+ * rank calls it at the same point of the same pass with the same lens[0 ..
+ * ranks-1]; buf holds the parts of all ranks one after another (rank k's at
+ * offset lens[0] + ... + lens[k-1]), of which this rank's is filled on entry;
+ * on return every part must be (MPI_Allgatherv with MPI_IN_PLACE).  A non-zero
+ * return fails the pass with APPM_ERR_IO and leaves the renderer's pixel
+ * state undefined (destroy it; resume from a checkpoint).  Every rank must call
+ * appm_renderer_pass the same number of times; a pass that fails on one rank
+ * for lack of memory fails on all of them (the ranks agree on a status word
+ * after each step that can fail), the failing rank's message naming the
+ * cause and the others' naming the rank.
+ *
+ * appm_renderer_set_cluster: c NULL or c->ranks <= 1 renders alone again.
+ * APPM_ERR_INVALID_ARG for rank >= ranks, ranks > 65536 or no allgather;
+ * APPM_ERR_NOMEM if its few arrays cannot be had.  Call it between passes. */
+typedef struct appm_cluster {
+    unsigned rank, ranks;
+    int (*allgather)(void *user, void *buf, const size_t *lens);
+    void *user;
+} appm_cluster;
+APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_cluster *c, appm_diag *diag);
 
 /* The message of the last failed call on `r` ("" if none). */
 APPM_API const char *appm_renderer_last_error(const appm_renderer *r);

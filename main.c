@@ -38,6 +38,44 @@ enum { EXIT_OK = 0, EXIT_USAGE = 1, EXIT_INPUT = 2, EXIT_RUNTIME = 3 };
 
 static volatile sig_atomic_t g_interrupted = 0;
 
+/* The distributed front end, mpi.c, includes this file (with APPM_CLI_NO_MAIN)
+ * and runs `appm render` on every rank of a job through these hooks; a plain
+ * build has none (g_cli NULL) and renders alone. */
+typedef struct cli_hooks {
+    unsigned rank, ranks;
+    appm_file_reader reader; /* every file of a load read on rank 0 and sent to all */
+    appm_cluster cluster;    /* the exchanges of a pass (appm_renderer_set_cluster) */
+    appm_allocator allocator; /* the renderer's and the scene's, if set (tests) */
+    /* collective: every rank's exit code in, the job's out (the first failing
+     * rank's code, that rank into *who) */
+    int (*agree)(int rc, unsigned *who);
+    /* collective: rank 0's code to every rank (0 go on, 1 stop, else an exit code) */
+    int (*decide)(int code);
+} cli_hooks;
+
+static const cli_hooks *g_cli = NULL;
+static const char *g_who = "appm"; /* how messages begin: "appm", or "appm: rank K" */
+
+/* Whether this process writes: images, maps, logs, checkpoints, the summary. */
+static int cli_root(void)
+{
+    return !g_cli || g_cli->rank == 0;
+}
+
+/* After a step every rank takes: the job's exit code (the first failing rank's;
+ * rank 0 names it when another rank failed). */
+static int cli_agree(int rc)
+{
+    unsigned who = 0;
+    int job;
+    if (!g_cli) return rc;
+    job = g_cli->agree(rc, &who);
+    if (job != EXIT_OK && who != g_cli->rank && g_cli->rank == 0)
+        fprintf(stderr, "%s: rank %u of %u failed (exit code %d; its message is above): the job ends\n", g_who, who,
+                g_cli->ranks, job);
+    return job;
+}
+
 static void on_sigint(int sig)
 {
     (void)sig;
@@ -58,7 +96,7 @@ static double now_seconds(void)
 static int usage_error(const char *fmt, ...)
 {
     va_list ap;
-    fprintf(stderr, "appm: ");
+    fprintf(stderr, "%s: ", g_who);
     va_start(ap, fmt);
     vfprintf(stderr, fmt, ap);
     va_end(ap);
@@ -71,9 +109,9 @@ static int lib_error(appm_status s, const appm_diag *d, const char *fallback_fil
 {
     const char *file = d && d->file[0] ? d->file : fallback_file;
     const char *msg = d && d->message[0] ? d->message : appm_status_string(s);
-    if (file && d && d->line) fprintf(stderr, "appm: %s:%u: %s\n", file, d->line, msg);
-    else if (file) fprintf(stderr, "appm: %s: %s\n", file, msg);
-    else fprintf(stderr, "appm: %s\n", msg);
+    if (file && d && d->line) fprintf(stderr, "%s: %s:%u: %s\n", g_who, file, d->line, msg);
+    else if (file) fprintf(stderr, "%s: %s: %s\n", g_who, file, msg);
+    else fprintf(stderr, "%s: %s\n", g_who, msg);
     if (s == APPM_ERR_PARSE || s == APPM_ERR_IO) return EXIT_INPUT;
     if (s == APPM_ERR_INVALID_ARG) return EXIT_USAGE;
     return EXIT_RUNTIME;
@@ -83,9 +121,9 @@ static void on_warning(void *user, const char *file, unsigned line, const char *
 {
     int quiet = *(const int *)user;
     if (quiet) return;
-    if (file && file[0] && line) fprintf(stderr, "appm: warning: %s:%u: %s\n", file, line, message);
-    else if (file && file[0]) fprintf(stderr, "appm: warning: %s: %s\n", file, message);
-    else fprintf(stderr, "appm: warning: %s\n", message);
+    if (file && file[0] && line) fprintf(stderr, "%s: warning: %s:%u: %s\n", g_who, file, line, message);
+    else if (file && file[0]) fprintf(stderr, "%s: warning: %s: %s\n", g_who, file, message);
+    else fprintf(stderr, "%s: warning: %s\n", g_who, message);
 }
 
 static const char *const HELP =
@@ -241,7 +279,7 @@ static int write_aux(const char *prefix, const char *name, const float *v, uint3
     if (!rgb || !tmp) {
         free(rgb);
         free(tmp);
-        fprintf(stderr, "appm: out of memory writing %s map\n", name);
+        fprintf(stderr, "%s: out of memory writing %s map\n", g_who, name);
         return 0;
     }
     for (i = 0; i < n; ++i) {
@@ -253,7 +291,7 @@ static int write_aux(const char *prefix, const char *name, const float *v, uint3
     img.rgb = rgb;
     snprintf(path, sizeof path, "%s-%s.pfm", prefix, name);
     if (appm_image_write(path, &img, 1.0, &d) != APPM_OK) {
-        fprintf(stderr, "appm: %s: %s\n", path, d.message);
+        fprintf(stderr, "%s: %s: %s\n", g_who, path, d.message);
         ok = 0;
     }
     if (m > 0) { /* 99th percentile by a partial sort would be nicer; a histogram pass is enough */
@@ -284,7 +322,7 @@ static int write_aux(const char *prefix, const char *name, const float *v, uint3
     }
     snprintf(path, sizeof path, "%s-%s.png", prefix, name);
     if (appm_image_write(path, &img, 1.0, &d) != APPM_OK) {
-        fprintf(stderr, "appm: %s: %s\n", path, d.message);
+        fprintf(stderr, "%s: %s: %s\n", g_who, path, d.message);
         ok = 0;
     }
     free(rgb);
@@ -545,11 +583,23 @@ static int resume_render(appm_renderer *r, const render_opts *o, unsigned long l
 {
     appm_diag d;
     appm_stats st;
-    appm_status s = appm_renderer_load_file(r, o->resume, &d);
+    appm_status s;
+    if (g_cli) { /* the checkpoint as rank 0 reads it */
+        const void *data;
+        size_t len;
+        if (g_cli->reader.read(g_cli->reader.user, o->resume, &data, &len) != 0) {
+            fprintf(stderr, "%s: %s: cannot open file\n", g_who, o->resume);
+            return EXIT_INPUT;
+        }
+        s = appm_renderer_load(r, data, len, &d);
+        g_cli->reader.release(g_cli->reader.user, data);
+    } else {
+        s = appm_renderer_load_file(r, o->resume, &d);
+    }
     if (s != APPM_OK) return lib_error(s, &d, o->resume);
     appm_renderer_stats(r, &st);
     *resumed = (unsigned long long)st.passes;
-    if (!o->quiet) fprintf(stderr, "appm: resuming %s after pass %llu\n", o->resume, *resumed);
+    if (!o->quiet) fprintf(stderr, "%s: resuming %s after pass %llu\n", g_who, o->resume, *resumed);
     return EXIT_OK;
 }
 
@@ -575,6 +625,11 @@ static void render_defaults(render_run *R)
     render_opts *o = &R->o;
     o->cfg.log = on_warning;
     o->cfg.log_user = &o->quiet;
+    if (g_cli) {
+        o->cfg.reader = g_cli->reader;
+        if (g_cli->allocator.alloc) o->cfg.allocator = g_cli->allocator;
+        if (!cli_root()) o->quiet = 1; /* rank 0 speaks for the job; errors still print */
+    }
     if (!o->output) {
         default_output(o->scene, R->outbuf, sizeof R->outbuf);
         o->output = R->outbuf;
@@ -595,23 +650,24 @@ static int render_setup(render_run *R)
     int rc;
     if ((s = appm_scene_load(o->scene, &o->cfg, &R->scene, &d)) != APPM_OK) return lib_error(s, &d, o->scene);
     if ((rc = add_cli_lights(o, R->scene)) != EXIT_OK) return rc;
-    if (o->reference && (s = appm_image_read_pfm(o->reference, NULL, &R->ref, &d)) != APPM_OK)
+    if (o->reference && cli_root() && (s = appm_image_read_pfm(o->reference, NULL, &R->ref, &d)) != APPM_OK)
         return lib_error(s, &d, o->reference);
     if ((s = appm_renderer_create(R->scene, &o->cfg, &R->r, &d)) != APPM_OK) return lib_error(s, &d, NULL);
+    if (g_cli && (s = appm_renderer_set_cluster(R->r, &g_cli->cluster, &d)) != APPM_OK) return lib_error(s, &d, NULL);
     if (o->resume && (rc = resume_render(R->r, o, &R->resumed)) != EXIT_OK) return rc;
     if (R->ref.rgb) {
         appm_renderer_image(R->r, &R->img);
         if (R->ref.width != R->img.width || R->ref.height != R->img.height) {
-            fprintf(stderr, "appm: %s: reference is %lux%lu, the render %lux%lu\n", o->reference,
+            fprintf(stderr, "%s: %s: reference is %lux%lu, the render %lux%lu\n", g_who, o->reference,
                     (unsigned long)R->ref.width, (unsigned long)R->ref.height, (unsigned long)R->img.width,
                     (unsigned long)R->img.height);
             return EXIT_INPUT;
         }
     }
-    if (o->log) {
+    if (o->log && cli_root()) {
         R->logf = fopen(o->log, o->resume ? "a" : "w"); /* a resumed render continues its log */
         if (!R->logf) {
-            fprintf(stderr, "appm: %s: cannot open the log for writing\n", o->log);
+            fprintf(stderr, "%s: %s: cannot open the log for writing\n", g_who, o->log);
             return EXIT_INPUT;
         }
         if (!o->resume || ftell(R->logf) == 0) fprintf(R->logf, "pass,seconds,photons,rmse,relmse,est_relerr\n");
@@ -654,12 +710,31 @@ static void render_progress(const render_run *R, double el)
     fflush(stderr);
 }
 
+/* After a pass at el seconds: a checkpoint if one is due, then whether to
+ * stop - 0 go on, 1 stop, else the exit code of a failed checkpoint.  Rank 0
+ * of a job decides (its clock, its Ctrl-C) and saves for all. */
+static int render_next(render_run *R, double el)
+{
+    const render_opts *o = &R->o;
+    int code = 0;
+    if (cli_root()) {
+        if (checkpoint_due(o, &R->st, now_seconds(), R->last_ck) &&
+            !save_checkpoint(R->r, o, now_seconds(), R->last_ck))
+            code = EXIT_RUNTIME;
+        else if (g_interrupted || (o->have_time && el >= o->time_limit) ||
+                 (o->have_until && R->st.est_relerr >= 0 && R->st.est_relerr < o->until_error))
+            code = 1;
+    }
+    return g_cli ? g_cli->decide(code) : code;
+}
+
 /* Passes until a stopping rule holds (--passes, --time, --until-error, Ctrl-C)
  * or a pass or a checkpoint fails; EXIT_OK or the exit code. */
 static int render_passes(render_run *R)
 {
     const render_opts *o = &R->o;
     appm_status s;
+    int next;
     R->progress = !o->quiet && appm_isatty(2);
     signal(SIGINT, on_sigint);
     R->t0 = R->last_ck[0] = now_seconds();
@@ -668,8 +743,8 @@ static int render_passes(render_run *R)
     for (;;) {
         double el;
         if (o->have_passes && R->st.passes >= o->passes) break; /* also a checkpoint already past N */
-        if ((s = appm_renderer_pass(R->r)) != APPM_OK) {
-            fprintf(stderr, "appm: pass failed: %s\n",
+        if ((s = appm_renderer_pass(R->r)) != APPM_OK) { /* on every rank of a job alike */
+            fprintf(stderr, "%s: pass failed: %s\n", g_who,
                     appm_renderer_last_error(R->r)[0] ? appm_renderer_last_error(R->r) : appm_status_string(s));
             return EXIT_RUNTIME;
         }
@@ -677,12 +752,7 @@ static int render_passes(render_run *R)
         el = now_seconds() - R->t0;
         render_log_pass(R, el);
         if (R->progress) render_progress(R, el);
-        if (checkpoint_due(o, &R->st, now_seconds(), R->last_ck) &&
-            !save_checkpoint(R->r, o, now_seconds(), R->last_ck))
-            return EXIT_RUNTIME;
-        if (g_interrupted) break;
-        if (o->have_time && el >= o->time_limit) break;
-        if (o->have_until && R->st.est_relerr >= 0 && R->st.est_relerr < o->until_error) break;
+        if ((next = render_next(R, el)) != 0) return next == 1 ? EXIT_OK : next;
     }
     return EXIT_OK;
 }
@@ -717,6 +787,7 @@ static int render_write(render_run *R, int rc)
     appm_diag d;
     appm_status s;
     if (R->progress) fprintf(stderr, "\n");
+    if (!cli_root()) return rc;
     appm_renderer_stats(R->r, &R->st); /* also after a failed pass, even the first */
     if (o->checkpoint && (double)R->st.passes != R->last_ck[1] && !save_checkpoint(R->r, o, now_seconds(), R->last_ck))
         rc = EXIT_RUNTIME;
@@ -755,6 +826,10 @@ static void render_summary(render_run *R)
     if (o->resume) printf(" resumed=%llu", R->resumed);
     if (o->checkpoint) printf(" checkpoint=%s", o->checkpoint);
     if (g_interrupted) printf(" interrupted=1");
+    if (g_cli)
+        printf(" ranks=%u exchange_s=%.3f exchange_bytes_in=%llu exchange_bytes_out=%llu", g_cli->ranks,
+               st->seconds_cluster, (unsigned long long)st->cluster_bytes_in,
+               (unsigned long long)st->cluster_bytes_out);
     printf("\n");
 }
 
@@ -762,7 +837,7 @@ static void render_summary(render_run *R)
 static int render_cleanup(render_run *R, int rc)
 {
     if (R->logf && fclose(R->logf) != 0 && rc == EXIT_OK) {
-        fprintf(stderr, "appm: %s: write error\n", R->o.log);
+        fprintf(stderr, "%s: %s: write error\n", g_who, R->o.log);
         rc = EXIT_RUNTIME;
     }
     appm_renderer_destroy(R->r);
@@ -779,9 +854,9 @@ static int cmd_render(int argc, char **argv)
     R.last_ck[1] = -1.0; /* no checkpoint yet */
     if ((rc = parse_render(argc, argv, &R.o)) >= 0) return rc;
     render_defaults(&R);
-    rc = render_setup(&R);
+    rc = cli_agree(render_setup(&R));
     if (rc == EXIT_OK) rc = render_write(&R, render_passes(&R));
-    if (rc == EXIT_OK) render_summary(&R);
+    if (rc == EXIT_OK && cli_root()) render_summary(&R);
     return render_cleanup(&R, rc);
 }
 
@@ -802,7 +877,7 @@ static unsigned long report_nonfinite(const char *path, const appm_image *img)
         }
     }
     if (n)
-        fprintf(stderr, "appm: %s: %lu pixel%s hold NaN or infinite values; the first is x=%lu y=%lu (row 0 at the top)\n",
+        fprintf(stderr, "%s: %s: %lu pixel%s hold NaN or infinite values; the first is x=%lu y=%lu (row 0 at the top)\n", g_who,
                 path, n, n == 1 ? "" : "s", fx, fy);
     return n;
 }
@@ -824,7 +899,7 @@ static int cmd_compare(int argc, char **argv)
         return EXIT_INPUT;
     }
     if (appm_image_compare(&a, &b, &c) != APPM_OK) {
-        fprintf(stderr, "appm: %s is %lux%lu but %s is %lux%lu\n", argv[2], (unsigned long)a.width,
+        fprintf(stderr, "%s: %s is %lux%lu but %s is %lux%lu\n", g_who, argv[2], (unsigned long)a.width,
                 (unsigned long)a.height, argv[3], (unsigned long)b.width, (unsigned long)b.height);
         appm_image_free(NULL, &a);
         appm_image_free(NULL, &b);
@@ -894,7 +969,7 @@ static int cmd_info(int argc, char **argv)
     return EXIT_OK;
 }
 
-int main(int argc, char **argv)
+static int appm_cli(int argc, char **argv)
 {
     if (argc < 2 || strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
         fputs(HELP, argc < 2 ? stderr : stdout);
@@ -909,3 +984,9 @@ int main(int argc, char **argv)
     if (strcmp(argv[1], "info") == 0) return cmd_info(argc, argv);
     return usage_error("unknown command '%s'", argv[1]);
 }
+#ifndef APPM_CLI_NO_MAIN
+int main(int argc, char **argv)
+{
+    return appm_cli(argc, argv);
+}
+#endif

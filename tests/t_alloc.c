@@ -418,6 +418,55 @@ done:
     CHECK(a.live == 0);
 }
 
+/* appm_renderer_set_cluster: each of its allocations failing gives
+ * APPM_ERR_NOMEM, leaks nothing and leaves the renderer rendering alone; one
+ * more allocation than it needs succeeds.  (Its exchanges: tests/t_cluster.c.) */
+static int never_called(void *user, void *buf, const size_t *lens)
+{
+    (void)buf;
+    (void)lens;
+    ++*(int *)user;
+    return 1;
+}
+
+static void test_cluster(const appm_scene *scene)
+{
+    appm_config cfg;
+    check_alloc a;
+    appm_renderer *r = NULL;
+    appm_cluster cl;
+    appm_diag d;
+    appm_status st = APPM_ERR_NOMEM;
+    long k, live, bad = 0;
+    int calls = 0;
+    render_cfg(&cfg, APPM_METHOD_APPM);
+    cfg.emission = APPM_EMISSION_GUIDED; /* the guided counts' array too */
+    check_use_alloc(&cfg, &a, 0);
+    if (appm_renderer_create(scene, &cfg, &r, &d) != APPM_OK) {
+        CHECK_MSG(0, "cluster: no renderer");
+        return;
+    }
+    cl.rank = 1;
+    cl.ranks = 3;
+    cl.allgather = never_called;
+    cl.user = &calls;
+    for (k = 1; k < 100; ++k) {
+        live = (long)a.live;
+        a.fail_at = a.count + k;
+        st = appm_renderer_set_cluster(r, &cl, &d);
+        a.fail_at = 0;
+        if (st == APPM_OK) break;
+        if ((st != APPM_ERR_NOMEM || (long)a.live != live || r->cluster.ranks != 1 || r->row1 != r->h) && !bad++)
+            fprintf(stderr, "cluster: failing allocation %ld: status %d\n", k, (int)st);
+    }
+    CHECK_MSG(st == APPM_OK && k > 5, "set_cluster: status %d after %ld tries", (int)st, k);
+    CHECK(bad == 0 && r->cluster.ranks == 3 && r->row0 > 0 && r->row1 < r->h);
+    CHECK(appm_renderer_set_cluster(r, NULL, &d) == APPM_OK && r->row0 == 0 && r->row1 == r->h);
+    CHECK(appm_renderer_pass(r) == APPM_OK && calls == 0); /* alone again: the hook is not called */
+    appm_renderer_destroy(r);
+    CHECK(a.live == 0);
+}
+
 /* ---- PFM reading ---------------------------------------------------------------- */
 
 static void test_read_pfm(void)
@@ -473,6 +522,7 @@ int main(void)
         test_renderer(scene, APPM_METHOD_PT, "pt");
         test_renderer(scene, APPM_METHOD_APPM_PAPER, "appm-paper");
         test_checkpoint(scene);
+        test_cluster(scene);
     }
     appm_scene_destroy(scene);
     test_pass_growth();

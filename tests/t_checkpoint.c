@@ -701,12 +701,15 @@ typedef struct known_config {
     unsigned max_depth;  /* compared */
     appm_sampler sampler; /* compared */
     unsigned chains;     /* compared */
+    appm_emission emission; /* compared (as the count of guided lights) */
+    appm_file_reader reader; /* free: where a load's bytes come from */
 } known_config;
 
 static void test_config_tripwire(void)
 {
     CHECK_MSG(sizeof(appm_config) == sizeof(known_config) &&
-                  offsetof(appm_config, chains) == offsetof(known_config, chains),
+                  offsetof(appm_config, chains) == offsetof(known_config, chains) &&
+                  offsetof(appm_config, reader) == offsetof(known_config, reader),
               "appm_config has fields the checkpoint does not know: see the comment above test_config_tripwire");
 }
 

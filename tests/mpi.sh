@@ -1,0 +1,156 @@
+#!/bin/sh
+# tests/mpi.sh - appm-mpi, the command line over MPI (mpi.c), against appm:
+#   1. every method (and appm with guided emission, and with two chains):
+#      the image of N = 1, 2, 3, 4 ranks (1 or 2 threads each) is byte for
+#      byte the image of appm render with the same options;
+#   2. a checkpoint of a job of 3 ranks resumes in a job of 2 (and in appm
+#      alone) and ends in the image of the uninterrupted render;
+#   3. a rank that runs out of memory ends the job: non-zero exit, its message
+#      and rank 0's naming it, within a time limit (no hang);
+#   4. a rank killed by SIGKILL ends the job (non-zero exit, no hang), and the
+#      last checkpoint still loads and resumes;
+#   5. a scene only rank 0 can read (the other rank works in a folder where the
+#      scene's relative path leads nowhere) renders the same image.
+#
+#   sh tests/mpi.sh ./appm ./appm-mpi        (from the repository root)
+#
+# Needs Open MPI's mpirun (ranks beyond the cores: --oversubscribe).  Prints
+# one line per failed check and "N passed, N failed" as its last line.
+
+if [ $# -lt 2 ]; then
+    echo "usage: sh tests/mpi.sh APPM APPM-MPI" >&2
+    exit 2
+fi
+abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd)" "$(basename "$1")"); }
+APPM=$(abspath "$1")
+AMPI=$(abspath "$2")
+ROOT=$(pwd)
+T=$ROOT/tests/out/mpi
+rm -rf "$T"
+mkdir -p "$T"
+# Open MPI refuses root without these (CI runs as root)
+OMPI_ALLOW_RUN_AS_ROOT=1
+OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+OMPI_MCA_rmaps_base_oversubscribe=1
+OMPI_MCA_btl_vader_single_copy_mechanism=none # containers forbid the cross-process copy
+export OMPI_ALLOW_RUN_AS_ROOT OMPI_ALLOW_RUN_AS_ROOT_CONFIRM OMPI_MCA_rmaps_base_oversubscribe OMPI_MCA_btl_vader_single_copy_mechanism
+MPIRUN="mpirun --oversubscribe"
+
+npass=0
+nfail=0
+ok() { npass=$((npass + 1)); }
+bad() {
+    nfail=$((nfail + 1))
+    echo "FAIL: $*"
+}
+# same WHAT A B: the two files hold the same bytes
+same() {
+    if [ -f "$2" ] && [ -f "$3" ] && cmp -s "$2" "$3"; then ok; else bad "$1: $2 and $3 differ"; fi
+}
+
+if ! command -v mpirun >/dev/null 2>&1; then
+    bad "no mpirun (install openmpi-bin)"
+    echo "$npass passed, $nfail failed"
+    exit 1
+fi
+
+BOX=scenes/cornell-sphere.scene
+GLASS=scenes/caustic-glass.scene
+SMALL="--size 40x30 --passes 4 --photons 4000 -q"
+
+# 1. byte identity, every method, N = 1..4
+for case in "appm:$BOX" "appm-paper:$BOX" "ppm:$BOX" "sppm:$BOX" "pt:$BOX" "appm:$GLASS:--emission guided" \
+    "appm:$GLASS:--chains 2"; do
+    m=${case%%:*}
+    rest=${case#*:}
+    scene=${rest%%:*}
+    extra=
+    [ "$rest" != "$scene" ] && extra=${rest#*:}
+    tag=$(printf '%s-%s-%s' "$m" "$(basename "$scene" .scene)" "$extra" | tr -c 'a-z0-9-' '_')
+    # shellcheck disable=SC2086 # the option lists split on purpose
+    "$APPM" render "$scene" $SMALL --method "$m" $extra --threads 2 -o "$T/$tag-1.pfm" >/dev/null 2>&1 ||
+        bad "$tag: appm alone failed"
+    for n in 1 2 3 4; do
+        th=$((1 + n % 2))
+        # shellcheck disable=SC2086
+        timeout 120 $MPIRUN -np $n "$AMPI" render "$scene" $SMALL --method "$m" $extra --threads $th \
+            -o "$T/$tag-n$n.pfm" >"$T/$tag-n$n.out" 2>&1 || bad "$tag: $n ranks failed: $(tail -n 3 "$T/$tag-n$n.out")"
+        same "$tag, $n ranks x $th threads" "$T/$tag-1.pfm" "$T/$tag-n$n.pfm"
+    done
+done
+# the summary line: rank 0's alone, with the job's size and exchange appended
+if grep -q '^passes=4 .* ranks=3 exchange_s=[0-9.]* exchange_bytes_in=[1-9]' "$T/appm-cornell-sphere--n3.out" &&
+    [ "$(grep -c '^passes=' "$T/appm-cornell-sphere--n3.out")" -eq 1 ]; then ok; else
+    bad "summary of 3 ranks: $(cat "$T/appm-cornell-sphere--n3.out")"
+fi
+
+# 2. resume across sizes: 2 passes on 3 ranks, then 2 more on 2 ranks (and alone)
+OPT="--size 40x30 --photons 4000 -q"
+# shellcheck disable=SC2086
+"$APPM" render $BOX $OPT --passes 4 -o "$T/r-ref.pfm" >/dev/null 2>&1
+# shellcheck disable=SC2086
+timeout 120 $MPIRUN -np 3 "$AMPI" render $BOX $OPT --passes 2 --checkpoint "$T/r.ck" -o "$T/r-2.pfm" \
+    >/dev/null 2>&1 || bad "resume: the job of 3 ranks failed"
+cp "$T/r.ck" "$T/r-alone.ck"
+# shellcheck disable=SC2086
+timeout 120 $MPIRUN -np 2 "$AMPI" render $BOX $OPT --passes 4 --resume "$T/r.ck" -o "$T/r-4.pfm" \
+    >"$T/r-4.out" 2>&1 || bad "resume: the job of 2 ranks failed: $(tail -n 3 "$T/r-4.out")"
+same "resume 3 ranks -> 2 ranks" "$T/r-ref.pfm" "$T/r-4.pfm"
+grep -q ' resumed=2' "$T/r-4.out" && ok || bad "resume: no resumed=2 in $(cat "$T/r-4.out")"
+# shellcheck disable=SC2086
+"$APPM" render $BOX $OPT --passes 4 --resume "$T/r-alone.ck" -o "$T/r-alone.pfm" >/dev/null 2>&1
+same "resume 3 ranks -> appm alone" "$T/r-ref.pfm" "$T/r-alone.pfm"
+
+# 3. a rank out of memory in its first pass
+APPM_MPI_FAIL=1 timeout 60 $MPIRUN -np 2 "$AMPI" render $BOX $OPT --passes 3 -o "$T/f.pfm" >"$T/f.out" 2>&1
+rc=$?
+if [ "$rc" -ne 0 ] && [ "$rc" -ne 124 ] && grep -q 'appm: rank 1: pass failed: out of memory' "$T/f.out" &&
+    grep -q 'rank 1 failed in the photon' "$T/f.out"; then ok; else
+    bad "rank out of memory (exit $rc): $(cat "$T/f.out")"
+fi
+[ ! -f "$T/f.pfm" ] && ok || bad "rank out of memory: an image was written without a pass"
+
+# 4. a rank killed while the job checkpoints every pass
+# shellcheck disable=SC2086
+timeout 120 $MPIRUN -np 2 "$AMPI" render $BOX --size 64x48 -q --passes 100000 --time 100 --checkpoint "$T/k.ck" \
+    --checkpoint-every 1 -o "$T/k.pfm" >"$T/k.out" 2>&1 &
+job=$!
+i=0
+while [ ! -f "$T/k.ck" ] && [ $i -lt 200 ]; do
+    sleep 0.1
+    i=$((i + 1))
+done
+sleep 0.5
+victim=
+for p in $(pgrep -f "appm-mpi render $BOX --size 64x48"); do
+    if tr '\0' '\n' <"/proc/$p/environ" 2>/dev/null | grep -q '^OMPI_COMM_WORLD_RANK=1$'; then victim=$p; fi
+done
+if [ -n "$victim" ]; then
+    kill -9 "$victim"
+    wait $job
+    rc=$?
+    if [ "$rc" -ne 0 ] && [ "$rc" -ne 124 ]; then ok; else bad "killed rank: the job ended with $rc"; fi
+    passes=$("$APPM" render $BOX --size 64x48 -q --passes 1 --resume "$T/k.ck" -o "$T/k0.pfm" 2>&1 |
+        sed -n 's/^passes=\([0-9]*\) .*/\1/p')
+    if [ -n "$passes" ] && [ "$passes" -ge 1 ] &&
+        "$APPM" render $BOX --size 64x48 -q --passes $((passes + 1)) --resume "$T/k.ck" -o "$T/k1.pfm" \
+            >/dev/null 2>&1; then ok; else bad "killed rank: the checkpoint did not resume ($passes passes)"; fi
+else
+    kill $job 2>/dev/null
+    wait $job
+    bad "killed rank: rank 1's process not found"
+fi
+
+# 5. a scene only rank 0 can read: rank 1 works in an empty folder
+mkdir -p "$T/seen/scenes" "$T/blind"
+cp scenes/cornell-sphere.scene scenes/CornellBox-Sphere.obj scenes/CornellBox-Sphere.mtl "$T/seen/scenes/"
+(cd "$T/seen" && "$APPM" render scenes/cornell-sphere.scene $OPT --passes 3 -o "$T/s-1.pfm" >/dev/null 2>&1)
+# shellcheck disable=SC2086
+timeout 120 $MPIRUN -np 1 --wdir "$T/seen" "$AMPI" render scenes/cornell-sphere.scene $OPT --passes 3 \
+    -o "$T/s-2.pfm" : -np 1 --wdir "$T/blind" "$AMPI" render scenes/cornell-sphere.scene $OPT --passes 3 \
+    -o "$T/s-2.pfm" >"$T/s.out" 2>&1 || bad "scene on rank 0 only: the job failed: $(tail -n 3 "$T/s.out")"
+[ ! -e "$T/blind/scenes" ] && ok || bad "scene on rank 0 only: rank 1's folder is not empty"
+same "scene on rank 0 only" "$T/s-1.pfm" "$T/s-2.pfm"
+
+echo "$npass passed, $nfail failed"
+[ "$nfail" -eq 0 ]
