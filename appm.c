@@ -7314,6 +7314,8 @@ static appm_status appm__store_realloc(appm_renderer *r, size_t slots, size_t ke
 
 static appm_status appm__photon_pass(appm_renderer *r)
 {
+    uint64_t dropped[APPM__MAX_THREADS];
+    memcpy(dropped, r->dropped, sizeof dropped);
     for (;;) {
         uint32_t t;
         int failed = 0;
@@ -7321,6 +7323,7 @@ static appm_status appm__photon_pass(appm_renderer *r)
         appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
         for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
         if (!failed) return APPM_OK;
+        memcpy(r->dropped, dropped, sizeof dropped); /* the pass is traced again: its drops count once */
         /* grow every region by half and trace again (rare: the first pass, or a
          * pass that stores more photons than any before it) */
         ncap = r->cap + r->cap / 2 + 4096;
@@ -9335,6 +9338,7 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
 {
     appm_diag local;
     const size_t counts = r && r->guide.nslot ? (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1) : 0;
+    unsigned k;
     if (!diag) diag = &local;
     appm__diag_clear(diag);
     if (!r) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no renderer");
@@ -9361,6 +9365,8 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
     memset(r->row_cost, 0, r->h * sizeof *r->row_cost);
     memset(r->chunk_cost, 0, (r->nchunks ? r->nchunks : 1) * sizeof *r->chunk_cost);
     r->cluster = *c;
+    r->dropped_seen = 0; /* what this rank dropped so far is known to all: only new drops are sent */
+    for (k = 0; k < APPM__MAX_THREADS; ++k) r->dropped_seen += r->dropped[k];
     appm__cluster_balance(r->eye_cost, r->h, c->ranks, r->cl_eye); /* nothing measured: even */
     appm__cluster_balance(r->row_cost, r->h, c->ranks, r->cl_rows);
     appm__cluster_balance(r->chunk_cost, r->nchunks, c->ranks, r->cl_chunks);

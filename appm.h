@@ -583,7 +583,9 @@ APPM_API appm_status appm_renderer_load_file(appm_renderer *r, const char *path,
  * offset lens[0] + ... + lens[k-1]), of which this rank's is filled on entry;
  * on return every part must be (MPI_Allgatherv with MPI_IN_PLACE).  A non-zero
  * return fails the pass with APPM_ERR_IO and leaves the renderer's pixel
- * state undefined (destroy it; resume from a checkpoint).  Every rank must call
+ * state undefined (destroy it; resume from a checkpoint); the hook must then
+ * fail on every rank alike, or end the job (as MPI's default error handler
+ * does), since the other ranks would wait in the next exchange.  Every rank must call
  * appm_renderer_pass the same number of times; a pass that fails on one rank
  * for lack of memory fails on all of them (the ranks agree on a status word
  * after each step that can fail), the failing rank's message naming the

@@ -51,6 +51,9 @@ typedef struct cli_hooks {
     int (*agree)(int rc, unsigned *who);
     /* collective: rank 0's code to every rank (0 go on, 1 stop, else an exit code) */
     int (*decide)(int code);
+    /* ends the whole job at once: for a failure on one rank in the middle of
+     * reads that every rank takes part in, where no agreement can follow */
+    void (*abort_job)(int rc);
 } cli_hooks;
 
 static const cli_hooks *g_cli = NULL;
@@ -70,7 +73,7 @@ static int cli_agree(int rc)
     int job;
     if (!g_cli) return rc;
     job = g_cli->agree(rc, &who);
-    if (job != EXIT_OK && who != g_cli->rank && g_cli->rank == 0)
+    if (job != EXIT_OK && rc == EXIT_OK && g_cli->rank == 0) /* said once: rank 0 itself did not fail */
         fprintf(stderr, "%s: rank %u of %u failed (exit code %d; its message is above): the job ends\n", g_who, who,
                 g_cli->ranks, job);
     return job;
@@ -648,13 +651,22 @@ static int render_setup(render_run *R)
     appm_diag d;
     appm_status s;
     int rc;
-    if ((s = appm_scene_load(o->scene, &o->cfg, &R->scene, &d)) != APPM_OK) return lib_error(s, &d, o->scene);
-    if ((rc = add_cli_lights(o, R->scene)) != EXIT_OK) return rc;
+    if ((s = appm_scene_load(o->scene, &o->cfg, &R->scene, &d)) != APPM_OK) {
+        rc = lib_error(s, &d, o->scene);
+        /* a job's ranks parse the same bytes, so they fail alike - except for
+         * memory, where this rank may have left the others reading files */
+        if (g_cli && s == APPM_ERR_NOMEM) g_cli->abort_job(rc);
+        return cli_agree(rc);
+    }
+    if ((rc = cli_agree(add_cli_lights(o, R->scene))) != EXIT_OK) return rc;
+    if ((s = appm_renderer_create(R->scene, &o->cfg, &R->r, &d)) != APPM_OK) rc = lib_error(s, &d, NULL);
+    else if (g_cli && (s = appm_renderer_set_cluster(R->r, &g_cli->cluster, &d)) != APPM_OK)
+        rc = lib_error(s, &d, NULL);
+    if ((rc = cli_agree(rc)) != EXIT_OK) return rc; /* before the --resume read every rank takes part in */
+    if (o->resume && (rc = resume_render(R->r, o, &R->resumed)) != EXIT_OK) return rc;
+    /* what rank 0 alone reads comes after the reads every rank of a job takes part in */
     if (o->reference && cli_root() && (s = appm_image_read_pfm(o->reference, NULL, &R->ref, &d)) != APPM_OK)
         return lib_error(s, &d, o->reference);
-    if ((s = appm_renderer_create(R->scene, &o->cfg, &R->r, &d)) != APPM_OK) return lib_error(s, &d, NULL);
-    if (g_cli && (s = appm_renderer_set_cluster(R->r, &g_cli->cluster, &d)) != APPM_OK) return lib_error(s, &d, NULL);
-    if (o->resume && (rc = resume_render(R->r, o, &R->resumed)) != EXIT_OK) return rc;
     if (R->ref.rgb) {
         appm_renderer_image(R->r, &R->img);
         if (R->ref.width != R->img.width || R->ref.height != R->img.height) {

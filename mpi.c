@@ -10,10 +10,14 @@
  *             checkpoint) is read by rank 0 and broadcast (appm_file_reader),
  *             so the other ranks need not see the files at all;
  *   exchange  the pass's all-gathers (appm_cluster): MPI_Allgatherv in place;
- *   control   after the setup the ranks agree on an exit code (a rank that
- *             failed names itself; rank 0 says which rank ended the job), and
- *             after every pass rank 0 - its clock, its Ctrl-C, its
- *             checkpoint - decides for all whether to go on.
+ *   control   during the setup the ranks agree on an exit code (a rank that
+ *             failed names itself; rank 0 says which rank ended the job; a
+ *             rank short of memory while the others still read the scene's
+ *             files ends the job at once), and after every pass rank 0 - its
+ *             clock, its SIGUSR1 or Ctrl-C, its checkpoint - decides for all
+ *             whether to go on.  Open MPI's mpirun kills the ranks on Ctrl-C;
+ *             `kill -USR1 <mpirun's pid>` stops after the pass in flight and
+ *             writes the image and the checkpoint.
  * Only rank 0 writes images, maps, the log, checkpoints and the summary line;
  * a message from another rank begins "appm: rank K:".  `info`, `compare`,
  * --help and --version run on rank 0 alone.  MPI's default error handler
@@ -21,8 +25,10 @@
  * is gone.  docs/distributed.md: the design, the measured exchange and the
  * model of its scaling.
  *
- * For the tests, APPM_MPI_FAIL=K makes every allocation of rank K fail once
- * its setup is done (its first pass then runs out of memory).
+ * For the tests, APPM_MPI_FAIL=K:WHEN makes every allocation of rank K fail
+ * from WHEN on: `load` (the scene's load runs out of memory while rank 0 still
+ * sends files: the job is ended), `create` (the renderer's creation: the
+ * ranks agree to stop), `pass` (the first pass: the library's agreement).
  */
 #define APPM_CLI_NO_MAIN
 #include "main.c"
@@ -35,8 +41,9 @@ typedef struct mpi_state {
     int rank, ranks;
     int *counts, *displs; /* MPI_Allgatherv's, per rank */
     int *codes;           /* every rank's exit code (mpi_agree) */
-    int fail;             /* APPM_MPI_FAIL names this rank */
-    int armed;            /* ... and the setup is over: allocations fail */
+    int fail;             /* APPM_MPI_FAIL: this rank's allocations fail after `fail - 1` agreements */
+    int agreed;           /* agreements so far */
+    int armed;            /* allocations fail */
 } mpi_state;
 
 /* Pieces of at most 1 GiB: MPI counts are ints. */
@@ -147,8 +154,14 @@ static int mpi_agree(int rc, unsigned *who)
             *who = (unsigned)k;
             break;
         }
-    if (m->fail) m->armed = 1;
+    if (m->fail && ++m->agreed >= m->fail - 1) m->armed = 1;
     return job;
+}
+
+static void mpi_abort_job(int rc)
+{
+    fprintf(stderr, "%s: ending the job\n", g_who);
+    MPI_Abort(g_mpi->comm, rc);
 }
 
 static int mpi_decide(int code)
@@ -168,6 +181,30 @@ static void mpi_free(void *user, void *p, size_t size)
     (void)user;
     (void)size;
     free(p);
+}
+
+/* `render --help` (or -h) anywhere: parse_render would print and exit on every rank. */
+static int wants_help(int argc, char **argv)
+{
+    int i;
+    for (i = 2; i < argc; ++i)
+        if (strcmp(argv[i], "--help") == 0 || strcmp(argv[i], "-h") == 0) return 1;
+    return 0;
+}
+
+/* APPM_MPI_FAIL=K:WHEN for rank `rank`: 0 (not this rank, or not well
+ * formed), else 1 + the agreements of the setup after which its allocations
+ * fail (load: none; create: after the scene's; pass: after the last). */
+static int fail_after(const char *s, int rank)
+{
+    int k = 0, digits = 0;
+    if (!s) return 0;
+    for (; *s >= '0' && *s <= '9' && k < 1000000; ++s, ++digits) k = 10 * k + (*s - '0');
+    if (!digits || k != rank || *s != ':') return 0;
+    if (strcmp(s + 1, "load") == 0) return 1;
+    if (strcmp(s + 1, "create") == 0) return 2;
+    if (strcmp(s + 1, "pass") == 0) return 4; /* render_setup agrees twice, cmd_render once */
+    return 0;
 }
 
 int main(int argc, char **argv)
@@ -190,6 +227,11 @@ int main(int argc, char **argv)
         snprintf(who, sizeof who, "appm: rank %d", m.rank);
         g_who = who;
     }
+    if (argc >= 2 && strcmp(argv[1], "render") == 0 && wants_help(argc, argv)) {
+        if (m.rank == 0) fputs(RENDER_HELP, stdout); /* parse_render would exit before MPI_Finalize */
+        MPI_Finalize();
+        return EXIT_OK;
+    }
     if (argc < 2 || strcmp(argv[1], "render") != 0) { /* help, version, info, compare: rank 0 alone */
         rc = m.rank == 0 ? appm_cli(argc, argv) : EXIT_OK;
         MPI_Finalize();
@@ -202,7 +244,8 @@ int main(int argc, char **argv)
         fprintf(stderr, "%s: out of memory\n", g_who);
         MPI_Abort(m.comm, EXIT_RUNTIME);
     }
-    m.fail = fail && atoi(fail) == m.rank;
+    m.fail = fail_after(fail, m.rank);
+    m.armed = m.fail == 1;
     memset(&h, 0, sizeof h);
     h.rank = (unsigned)m.rank;
     h.ranks = (unsigned)m.ranks;
@@ -215,12 +258,17 @@ int main(int argc, char **argv)
     h.cluster.user = &m;
     h.agree = mpi_agree;
     h.decide = mpi_decide;
+    h.abort_job = mpi_abort_job;
     if (m.fail) {
         h.allocator.alloc = mpi_alloc;
         h.allocator.free = mpi_free;
         h.allocator.user = &m;
     }
     g_cli = &h;
+    /* Open MPI's mpirun answers Ctrl-C by killing the ranks, but passes
+     * SIGUSR1 on: `kill -USR1 <mpirun's pid>` stops the job after the pass in
+     * flight, with the image and the checkpoint written, as Ctrl-C does appm. */
+    signal(SIGUSR1, on_sigint);
     rc = appm_cli(argc, argv);
     free(m.counts);
     free(m.displs);

@@ -5,10 +5,14 @@
 #      byte the image of appm render with the same options;
 #   2. a checkpoint of a job of 3 ranks resumes in a job of 2 (and in appm
 #      alone) and ends in the image of the uninterrupted render;
-#   3. a rank that runs out of memory ends the job: non-zero exit, its message
-#      and rank 0's naming it, within a time limit (no hang);
+#   3. a rank that runs out of memory - in the scene's load, the renderer's
+#      creation or its first pass - ends the job: non-zero exit, its message
+#      (and rank 0's naming it), within a time limit (no hang); so does a file
+#      only rank 0 reads (--reference) that is missing;
 #   4. a rank killed by SIGKILL ends the job (non-zero exit, no hang), and the
-#      last checkpoint still loads and resumes;
+#      last checkpoint still loads and resumes; SIGUSR1 to mpirun stops after
+#      the pass in flight with the image and checkpoint written; render --help
+#      prints once;
 #   5. a scene only rank 0 can read (the other rank works in a folder where the
 #      scene's relative path leads nowhere) renders the same image.
 #
@@ -102,13 +106,34 @@ grep -q ' resumed=2' "$T/r-4.out" && ok || bad "resume: no resumed=2 in $(cat "$
 same "resume 3 ranks -> appm alone" "$T/r-ref.pfm" "$T/r-alone.pfm"
 
 # 3. a rank out of memory in its first pass
-APPM_MPI_FAIL=1 timeout 60 $MPIRUN -np 2 "$AMPI" render $BOX $OPT --passes 3 -o "$T/f.pfm" >"$T/f.out" 2>&1
+APPM_MPI_FAIL=1:pass timeout 60 $MPIRUN -np 2 "$AMPI" render $BOX $OPT --passes 3 -o "$T/f.pfm" >"$T/f.out" 2>&1
 rc=$?
 if [ "$rc" -ne 0 ] && [ "$rc" -ne 124 ] && grep -q 'appm: rank 1: pass failed: out of memory' "$T/f.out" &&
     grep -q 'rank 1 failed in the photon' "$T/f.out"; then ok; else
     bad "rank out of memory (exit $rc): $(cat "$T/f.out")"
 fi
 [ ! -f "$T/f.pfm" ] && ok || bad "rank out of memory: an image was written without a pass"
+# ... in its renderer's creation: the ranks agree to stop, rank 0 names the rank
+APPM_MPI_FAIL=1:create timeout 60 $MPIRUN -np 2 "$AMPI" render $BOX $OPT --passes 3 -o "$T/f3.pfm" >"$T/f3.out" 2>&1
+rc=$?
+if [ "$rc" -eq 3 ] && grep -q 'appm: rank 1 of 2 failed (exit code 3' "$T/f3.out" &&
+    grep -q 'appm: rank 1: out of memory' "$T/f3.out"; then ok; else
+    bad "rank out of memory at creation (exit $rc): $(cat "$T/f3.out")"
+fi
+# ... while the scene's files are still being sent: the job is ended at once
+APPM_MPI_FAIL=1:load timeout 60 $MPIRUN -np 2 "$AMPI" render $BOX $OPT --passes 3 -o "$T/f4.pfm" >"$T/f4.out" 2>&1
+rc=$?
+if [ "$rc" -ne 0 ] && [ "$rc" -ne 124 ] && grep -q 'appm: rank 1: .*out of memory' "$T/f4.out" &&
+    grep -q 'appm: rank 1: ending the job' "$T/f4.out"; then ok; else
+    bad "rank out of memory in the load (exit $rc): $(cat "$T/f4.out")"
+fi
+
+# a file only rank 0 reads (--reference) missing, with a --resume that every rank reads: exit 2, no hang
+# shellcheck disable=SC2086
+timeout 60 $MPIRUN -np 2 "$AMPI" render $BOX $OPT --passes 3 --resume "$T/r-alone.ck" --reference "$T/none.pfm" \
+    -o "$T/f2.pfm" >"$T/f2.out" 2>&1
+rc=$?
+if [ "$rc" -eq 2 ] && grep -q 'none.pfm' "$T/f2.out"; then ok; else bad "missing reference (exit $rc): $(cat "$T/f2.out")"; fi
 
 # 4. a rank killed while the job checkpoints every pass
 # shellcheck disable=SC2086
@@ -122,7 +147,7 @@ while [ ! -f "$T/k.ck" ] && [ $i -lt 200 ]; do
 done
 sleep 0.5
 victim=
-for p in $(pgrep -f "appm-mpi render $BOX --size 64x48"); do
+for p in $(pgrep -P "$(pgrep -P $job mpirun)"); do # this job's ranks: children of its mpirun
     if tr '\0' '\n' <"/proc/$p/environ" 2>/dev/null | grep -q '^OMPI_COMM_WORLD_RANK=1$'; then victim=$p; fi
 done
 if [ -n "$victim" ]; then
@@ -139,6 +164,26 @@ else
     kill $job 2>/dev/null
     wait $job
     bad "killed rank: rank 1's process not found"
+fi
+
+# SIGUSR1 to mpirun (which Open MPI passes on; Ctrl-C kills the ranks): the pass in flight
+# ends, the image and the checkpoint are written, exit 0
+rm -f "$T/u.pfm" "$T/u.ck"
+timeout 120 $MPIRUN -np 2 "$AMPI" render $BOX --size 64x48 --passes 100000 --time 100 --checkpoint "$T/u.ck" \
+    -o "$T/u.pfm" >"$T/u.out" 2>&1 &
+job=$!
+sleep 3
+pkill -USR1 -P $job mpirun
+wait $job
+rc=$?
+if [ "$rc" -eq 0 ] && grep -q ' interrupted=1' "$T/u.out" && [ -f "$T/u.pfm" ] && [ -f "$T/u.ck" ]; then ok; else
+    bad "SIGUSR1 (exit $rc): $(cat "$T/u.out")"
+fi
+# render --help: once, exit 0
+out=$(timeout 60 $MPIRUN -np 2 "$AMPI" render --help 2>&1)
+rc=$?
+if [ "$rc" -eq 0 ] && [ "$(printf '%s\n' "$out" | grep -c '^usage: appm render')" -eq 1 ]; then ok; else
+    bad "render --help (exit $rc): $out"
 fi
 
 # 5. a scene only rank 0 can read: rank 1 works in an empty folder
