@@ -12,7 +12,7 @@ set -u
 out=${1:-bench/out}
 scene=${MPI_SCENE:-scenes/cornell-sphere.scene}
 size=${MPI_SIZE:-800x640}
-passes=${MPI_PASSES:-12}
+passes=${MPI_PASSES:-30}
 rounds=${MPI_ROUNDS:-3}
 ranks=${MPI_RANKS:-2}
 OMPI_ALLOW_RUN_AS_ROOT=1
