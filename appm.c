@@ -2158,9 +2158,8 @@ APPM_API appm_status appm_image_write(const char *path, const appm_image *img, d
     return appm_image_write_ex(path, img, &opt, NULL, diag);
 }
 
-/* Reads a whole file through the allocator; one extra zero byte is appended so
- * that callers can print from it, but no parser relies on that terminator. */
-/* The file through the user's reader (appm_config.reader), copied as above. */
+/* The file through the user's reader (appm_config.reader), copied as
+ * appm__read_file copies. */
 static appm_status appm__read_hooked(appm__mem *m, const char *path, char **out, size_t *len, appm_diag *diag)
 {
     const void *data = NULL;
@@ -2178,6 +2177,8 @@ static appm_status appm__read_hooked(appm__mem *m, const char *path, char **out,
     return APPM_OK;
 }
 
+/* Reads a whole file through the allocator; one extra zero byte is appended so
+ * that callers can print from it, but no parser relies on that terminator. */
 static appm_status appm__read_file(appm__mem *m, const char *path, char **out, size_t *len,
                                    appm_diag *diag)
 {
@@ -6839,6 +6840,15 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
     }
 }
 
+/* The samples this renderer's workers dropped (in a cluster: this rank's). */
+static uint64_t appm__dropped_own(const appm_renderer *r)
+{
+    uint64_t n = 0;
+    unsigned k;
+    for (k = 0; k < APPM__MAX_THREADS; ++k) n += r->dropped[k];
+    return n;
+}
+
 static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
@@ -9306,7 +9316,7 @@ static void appm__cluster_mine(appm_renderer *r)
 static appm_status appm__cluster_pixels(appm_renderer *r)
 {
     const size_t w = r->w;
-    uint64_t own = 0;
+    const uint64_t own = appm__dropped_own(r);
     appm_status st;
     unsigned k;
     if ((st = appm__cluster_share(r, r->pix, r->cl_rows, w * sizeof *r->pix)) != APPM_OK) return st;
@@ -9316,7 +9326,6 @@ static appm_status appm__cluster_pixels(appm_renderer *r)
         (st = appm__cluster_share(r, r->chain_sum, r->cl_rows, w * r->chains * sizeof *r->chain_sum)) != APPM_OK)
         return st;
     if (r->guide.nslot && r->guide.ref > 0.0 && (st = appm__cluster_guide(r)) != APPM_OK) return st;
-    for (k = 0; k < APPM__MAX_THREADS; ++k) own += r->dropped[k];
     if ((st = appm__cluster_words(r, own - r->dropped_seen)) != APPM_OK) return st;
     r->dropped_seen = own;
     for (k = 0; k < r->cluster.ranks; ++k)
@@ -9338,7 +9347,6 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
 {
     appm_diag local;
     const size_t counts = r && r->guide.nslot ? (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1) : 0;
-    unsigned k;
     if (!diag) diag = &local;
     appm__diag_clear(diag);
     if (!r) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no renderer");
@@ -9365,8 +9373,7 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
     memset(r->row_cost, 0, r->h * sizeof *r->row_cost);
     memset(r->chunk_cost, 0, (r->nchunks ? r->nchunks : 1) * sizeof *r->chunk_cost);
     r->cluster = *c;
-    r->dropped_seen = 0; /* what this rank dropped so far is known to all: only new drops are sent */
-    for (k = 0; k < APPM__MAX_THREADS; ++k) r->dropped_seen += r->dropped[k];
+    r->dropped_seen = appm__dropped_own(r); /* known to all already: only new drops are sent */
     appm__cluster_balance(r->eye_cost, r->h, c->ranks, r->cl_eye); /* nothing measured: even */
     appm__cluster_balance(r->row_cost, r->h, c->ranks, r->cl_rows);
     appm__cluster_balance(r->chunk_cost, r->nchunks, c->ranks, r->cl_chunks);
@@ -9438,7 +9445,6 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
 {
     double t0, t[3], t4;
     appm_status st;
-    unsigned k;
     if (!r) return APPM_ERR_INVALID_ARG;
     appm__diag_clear(&r->diag);
     t0 = appm__seconds();
@@ -9466,8 +9472,7 @@ APPM_API appm_status appm_renderer_pass(appm_renderer *r)
     r->stats.seconds_photons += t[1] - t[0];
     r->stats.seconds_grid += t[2] - t[1];
     r->stats.seconds_gather += t4 - t[2];
-    r->stats.dropped_samples = r->dropped_other;
-    for (k = 0; k < APPM__MAX_THREADS; ++k) r->stats.dropped_samples += r->dropped[k];
+    r->stats.dropped_samples = r->dropped_other + appm__dropped_own(r);
     r->stats.memory_bytes = r->mem.live;
     r->stats.peak_bytes = r->mem.peak;
     appm__estimate_error(r);
@@ -9893,13 +9898,11 @@ static void appm__ck_head_of(const appm_renderer *r, appm__ck_head *h)
 
 static void appm__ck_glob_of(const appm_renderer *r, appm__ck_glob *g)
 {
-    unsigned k;
     g->pass = r->pass;
     g->emitted = r->stats.photons_emitted;
     g->stored = r->stats.photons_stored;
     g->eye = r->stats.eye_paths;
-    g->dropped = r->dropped_other;
-    for (k = 0; k < APPM__MAX_THREADS; ++k) g->dropped += r->dropped[k];
+    g->dropped = r->dropped_other + appm__dropped_own(r);
     g->r1 = r->r1;
     g->r_auto = r->r_auto;
     g->ppm_R2 = r->ppm.R2;
@@ -10411,6 +10414,16 @@ APPM_API appm_status appm_renderer_load_file(appm_renderer *r, const char *path,
     appm__diag_clear(diag);
     if (!r || !path) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no renderer or no path");
     appm__ck_layout_of(r, &L);
+    if (r->mem.reader.read) { /* appm_config.reader: its bytes, loaded as they are lent */
+        const void *data = NULL;
+        size_t len = 0;
+        appm_status st;
+        if (r->mem.reader.read(r->mem.reader.user, path, &data, &len) != 0 || (!data && len))
+            return appm__fail(diag, APPM_ERR_IO, path, 0, "cannot open the checkpoint");
+        st = appm__ck_load_mem(r, &L, data, len, diag);
+        if (r->mem.reader.release) r->mem.reader.release(r->mem.reader.user, data);
+        return st;
+    }
     return appm__ck_load_file(r, &L, path, diag);
 }
 

@@ -306,7 +306,8 @@ typedef struct appm_config {
     unsigned chains;
     appm_emission emission;   /* APPM_EMISSION_LIGHT                                 */
     appm_file_reader reader;  /* every file a load reads (scenes, meshes, materials,
-                               * PFM images): NULL read hook: the file system        */
+                               * PFM images, a renderer's checkpoints): NULL read
+                               * hook: the file system                              */
 } appm_config;
 
 /* The defaults spelled out (every field set to the value 0 stands for, where that
@@ -546,7 +547,8 @@ APPM_API const float *appm_renderer_emission_map(appm_renderer *r, unsigned k, u
  * appm_renderer_load reads a checkpoint from memory (it allocates nothing);
  * appm_renderer_load_file from `path`, through a 64 KiB buffer from
  * cfg.allocator; if the file changes between its two readings, the load fails
- * with APPM_ERR_IO and the renderer is back at its state after creation. */
+ * with APPM_ERR_IO and the renderer is back at its state after creation.
+ * With cfg.reader set, load_file loads the bytes the reader lends instead. */
 APPM_API appm_status appm_renderer_save(const appm_renderer *r, void *buf, size_t cap, size_t *size,
                                         appm_diag *diag);
 APPM_API appm_status appm_renderer_save_file(appm_renderer *r, const char *path, appm_diag *diag);

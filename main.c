@@ -586,19 +586,7 @@ static int resume_render(appm_renderer *r, const render_opts *o, unsigned long l
 {
     appm_diag d;
     appm_stats st;
-    appm_status s;
-    if (g_cli) { /* the checkpoint as rank 0 reads it */
-        const void *data;
-        size_t len;
-        if (g_cli->reader.read(g_cli->reader.user, o->resume, &data, &len) != 0) {
-            fprintf(stderr, "%s: %s: cannot open file\n", g_who, o->resume);
-            return EXIT_INPUT;
-        }
-        s = appm_renderer_load(r, data, len, &d);
-        g_cli->reader.release(g_cli->reader.user, data);
-    } else {
-        s = appm_renderer_load_file(r, o->resume, &d);
-    }
+    appm_status s = appm_renderer_load_file(r, o->resume, &d); /* in a job, through cfg.reader */
     if (s != APPM_OK) return lib_error(s, &d, o->resume);
     appm_renderer_stats(r, &st);
     *resumed = (unsigned long long)st.passes;

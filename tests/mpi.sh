@@ -194,7 +194,10 @@ cp scenes/cornell-sphere.scene scenes/CornellBox-Sphere.obj scenes/CornellBox-Sp
 timeout 120 $MPIRUN -np 1 --wdir "$T/seen" "$AMPI" render scenes/cornell-sphere.scene $OPT --passes 3 \
     -o "$T/s-2.pfm" : -np 1 --wdir "$T/blind" "$AMPI" render scenes/cornell-sphere.scene $OPT --passes 3 \
     -o "$T/s-2.pfm" >"$T/s.out" 2>&1 || bad "scene on rank 0 only: the job failed: $(tail -n 3 "$T/s.out")"
-[ ! -e "$T/blind/scenes" ] && ok || bad "scene on rank 0 only: rank 1's folder is not empty"
+# the premise: from rank 1's folder the scene cannot be read
+# shellcheck disable=SC2086
+(cd "$T/blind" && "$APPM" render scenes/cornell-sphere.scene $OPT --passes 1 -o "$T/s-0.pfm" >/dev/null 2>&1)
+[ $? -eq 2 ] && ok || bad "scene on rank 0 only: appm in rank 1's folder read the scene"
 same "scene on rank 0 only" "$T/s-1.pfm" "$T/s-2.pfm"
 
 echo "$npass passed, $nfail failed"

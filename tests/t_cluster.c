@@ -20,6 +20,11 @@
  *      a message that names that rank - none waits forever; an exchange hook
  *      that fails fails the pass with APPM_ERR_IO.
  *   5. Arguments: rank >= ranks, more than 65536 ranks, no hook are refused.
+ *   6. Files through appm_config.reader (how a job's ranks get rank 0's
+ *      files): a scene under a name only the reader knows loads, every lent
+ *      buffer is released, and without the reader the name is a missing file;
+ *      appm_renderer_load_file loads a checkpoint the reader lends, and a
+ *      reader that fails gives APPM_ERR_IO.
  */
 #include "../appm.c"
 #include "check.h"
@@ -402,6 +407,93 @@ static void check_arguments(const appm_scene *s, const appm_config *cfg)
     appm_renderer_destroy(r);
 }
 
+/* ---- case 6: a reader that serves "virtual/NAME" from scenes/NAME, or one buffer */
+
+typedef struct test_reader {
+    int reads, releases;
+    const void *buf; /* non-NULL: every read lends this */
+    size_t len;
+} test_reader;
+
+static int test_read(void *user, const char *path, const void **data, size_t *len)
+{
+    test_reader *t = (test_reader *)user;
+    char real[512];
+    FILE *f;
+    char *b;
+    long n;
+    t->reads++;
+    if (t->buf) {
+        *data = t->buf;
+        *len = t->len;
+        return 0;
+    }
+    if (strncmp(path, "virtual/", 8) != 0) return 1;
+    snprintf(real, sizeof real, "scenes/%s", path + 8);
+    if (!(f = fopen(real, "rb"))) return 1;
+    fseek(f, 0, SEEK_END);
+    n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    b = (char *)malloc(n > 0 ? (size_t)n : 1);
+    if (!b || fread(b, 1, (size_t)n, f) != (size_t)n) {
+        free(b);
+        fclose(f);
+        return 1;
+    }
+    fclose(f);
+    *data = b;
+    *len = (size_t)n;
+    return 0;
+}
+
+static void test_release(void *user, const void *data)
+{
+    test_reader *t = (test_reader *)user;
+    t->releases++;
+    if (!t->buf) free((void *)data);
+}
+
+static void check_reader(const appm_scene *box, const appm_config *base)
+{
+    appm_config cfg = *base;
+    test_reader t;
+    appm_scene *s = NULL;
+    appm_renderer *r = NULL, *fresh = NULL;
+    appm_diag d;
+    unsigned char *ck = NULL;
+    size_t n = 0;
+    memset(&t, 0, sizeof t);
+    cfg.reader.read = test_read;
+    cfg.reader.release = test_release;
+    cfg.reader.user = &t;
+    CHECK_MSG(appm_scene_load("virtual/cornell-sphere.scene", &cfg, &s, &d) == APPM_OK, "%s", d.message);
+    CHECK_MSG(t.reads >= 3 && t.releases == t.reads, "%d reads, %d releases", t.reads, t.releases);
+    appm_scene_destroy(s);
+    CHECK(appm_scene_load("virtual/cornell-sphere.scene", base, &s, &d) == APPM_ERR_IO);
+    if (appm_renderer_create(box, base, &r, NULL) != APPM_OK) {
+        CHECK(0);
+        return;
+    }
+    appm_renderer_pass(r);
+    appm_renderer_pass(r);
+    if (appm_renderer_save(r, NULL, 0, &n, NULL) == APPM_OK && (ck = (unsigned char *)malloc(n)) != NULL &&
+        appm_renderer_save(r, ck, n, &n, NULL) == APPM_OK) {
+        memset(&t, 0, sizeof t);
+        t.buf = ck;
+        t.len = n;
+        CHECK(appm_renderer_create(box, &cfg, &fresh, NULL) == APPM_OK);
+        CHECK(fresh && appm_renderer_load_file(fresh, "nowhere/lent.ck", &d) == APPM_OK && fresh->pass == 2);
+        CHECK(t.reads == 1 && t.releases == 1);
+        t.buf = NULL; /* "nowhere/..." is not virtual: the read fails */
+        CHECK(fresh && appm_renderer_load_file(fresh, "nowhere/lent.ck", &d) == APPM_ERR_IO);
+    } else {
+        CHECK(0);
+    }
+    free(ck);
+    appm_renderer_destroy(r);
+    appm_renderer_destroy(fresh);
+}
+
 int main(void)
 {
     appm_scene *box = NULL, *glass = NULL;
@@ -416,6 +508,7 @@ int main(void)
     cfg.height = 19; /* rows do not split evenly over 2, 3 or 4 ranks */
     cfg.photons = 3000; /* 3 chunks: a rank may trace none */
     check_arguments(box, &cfg);
+    check_reader(box, &cfg);
 #if APPM_THREADS == 1
     {
         static const appm_method methods[] = {APPM_METHOD_APPM, APPM_METHOD_APPM_PAPER, APPM_METHOD_PPM,
