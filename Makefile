@@ -9,6 +9,8 @@
 #   make bench        the speed/accuracy suite (bench/run.sh); make bench-quick: a subset;
 #                     make bench-glossy: CornellBox-Glossy alone
 #                     make bench-sampler: --sampler qmc against random on every scene
+#                     make bench-envmap: environment-map sampling against uniform directions
+#                     make bench-studio: the bare bunny's studio (form and noise at 10 s)
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
@@ -26,7 +28,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h tests/fuzz/targets.h
 
-.PHONY: all mpi test-mpi bench-mpi test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler fuzz web \
+.PHONY: all mpi test-mpi bench-mpi test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-studio fuzz web \
         test-web clean
 
 all: appm
@@ -100,6 +102,12 @@ bench-bvh:
 
 bench-sampler: appm
 	sh bench/sampler.sh
+
+bench-envmap:
+	sh bench/envmap.sh
+
+bench-studio: appm
+	sh bench/studio.sh
 
 fuzz:
 	sh tests/fuzz/run.sh

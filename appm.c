@@ -568,6 +568,25 @@ static inline double appm__lumd(const double *c) { return 0.2126 * c[0] + 0.7152
 
 /* Orthonormal basis (t, b) around unit n without a branch on a "pick an axis"
  * heuristic (Duff et al., "Building an Orthonormal Basis, Revisited", 2017). */
+/* Inverts the piecewise-constant CDF c[0..n] (c[0] = 0, c[n] = 1, strictly
+ * increasing) at u in [0,1): the cell *i with c[i] <= u < c[i+1], and the point
+ * (i + t) / n, t the position of u within the cell. */
+static float appm__cdf_invert(const double *c, int n, float u, int *cell)
+{
+    int lo = 0, hi = n;
+    double t, x;
+    while (hi - lo > 1) {
+        int mid = lo + (hi - lo) / 2;
+        if (c[mid] <= (double)u) lo = mid;
+        else hi = mid;
+    }
+    t = ((double)u - c[lo]) / (c[lo + 1] - c[lo]);
+    t = t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+    x = ((double)lo + t) / (double)n;
+    *cell = lo;
+    return (float)x < 1.0f ? (float)x : 0.99999994f;
+}
+
 static void appm__basis(appm__v3 n, appm__v3 *t, appm__v3 *b)
 {
     float sign = n.z >= 0.0f ? 1.0f : -1.0f;
@@ -2314,6 +2333,3073 @@ APPM_API appm_status appm_image_read_pfm(const char *path, const appm_config *cf
     return s;
 }
 
+/* ---- 3.4 Reading images: textures and environment maps ---------------------
+ *
+ * Every decoder turns a file held in memory into appm__pixels: the samples as
+ * the file stores them (8-bit colour is sRGB-encoded, alpha linear; float
+ * samples are linear radiance), row 0 at the top.  appm__image_decode picks
+ * the decoder by the file's first bytes (TGA, which has no magic, by its
+ * name), so a texture named .png that is really a JPEG still loads.  Every
+ * decoder checks each read against the end of its buffer, refuses sizes above
+ * APPM__IMAGE_MAX a side and sizes its input could not hold (a 100-byte file
+ * never makes it allocate gigabytes), and gives APPM_ERR_PARSE with the file's
+ * name and what was wrong, or APPM_ERR_NOMEM; on failure nothing is held. */
+#define APPM__IMAGE_MAX 32768u /* the largest width or height any decoder accepts */
+
+typedef struct appm__pixels {
+    uint32_t w, h;
+    unsigned channels; /* 1 grey, 2 grey + alpha, 3 RGB, 4 RGBA, interleaved */
+    unsigned depth;    /* 8: uint8_t; 16: uint16_t (host order); 32: float, linear */
+    void *data;        /* w * h * channels samples, one block from appm__alloc */
+} appm__pixels;
+
+/* ---- 3.5 Small image decoders: TGA, PGM/PPM, Radiance HDR ------------------
+ *
+ * Texture and environment maps arrive as whole files in memory (p, len).  Each
+ * decoder fills an appm__pixels with row 0 = the TOP of the picture and column
+ * 0 = its left edge, whatever order the file stores them in.
+ *
+ * The three decoders share one discipline, because these bytes come from
+ * anywhere:
+ *   - every read is preceded by a check of how many bytes remain, so a short
+ *     or lying file is a parse error, never a read past the buffer;
+ *   - sizes are bounded (1..APPM__IMAGE_MAX) and multiplied in 64 bits;
+ *   - before allocating, the image must be one the remaining bytes could
+ *     possibly encode: for raw data, exactly enough bytes; for run-length data,
+ *     a bound from the best compression the format allows.  So a 20-byte file
+ *     claiming 32768 x 32768 pixels is refused without touching the allocator;
+ *   - on any failure out->data is NULL and everything allocated is freed.
+ * Errors are APPM_ERR_PARSE with a message naming the format and the fault,
+ * or APPM_ERR_NOMEM when the allocator says no. */
+
+static void appm__dec_reset(appm__pixels *out)
+{
+    out->w = out->h = 0;
+    out->channels = out->depth = 0;
+    out->data = NULL;
+}
+
+static void appm__dec_drop(appm__mem *m, appm__pixels *out)
+{
+    appm__free(m, out->data);
+    appm__dec_reset(out);
+}
+
+/* One block for w*h*channels samples of depth bits (8, 16 or 32).  w and h are
+ * at most 2^15 and channels*bytes at most 16, so the product fits 64 bits; it
+ * may still not fit a 32-bit size_t, which is an out-of-memory condition. */
+static appm_status appm__dec_alloc(appm__mem *m, appm__pixels *out, uint32_t w, uint32_t h,
+                                   unsigned channels, unsigned depth, const char *fmt,
+                                   const char *name, appm_diag *diag)
+{
+    uint64_t n = (uint64_t)w * h * channels;
+    size_t bytes = depth / 8;
+    if (n > (uint64_t)(SIZE_MAX / bytes))
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "%s: a %lux%lu image does not fit in memory",
+                          fmt, (unsigned long)w, (unsigned long)h);
+    out->data = appm__alloc(m, (size_t)n, bytes);
+    if (!out->data)
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "%s: out of memory for a %lux%lu image",
+                          fmt, (unsigned long)w, (unsigned long)h);
+    out->w = w;
+    out->h = h;
+    out->channels = channels;
+    out->depth = depth;
+    return APPM_OK;
+}
+
+/* Reverses the order of the rows (vflip) and/or of the pixels within each row
+ * (hflip) of 8-bit pixels in place, by swapping bytes: no scratch row needed. */
+static void appm__dec_flip8(appm__pixels *img, int vflip, int hflip)
+{
+    unsigned char *d = (unsigned char *)img->data, t;
+    size_t c = img->channels, row = (size_t)img->w * c, y, x, k;
+    if (vflip)
+        for (y = 0; y < img->h / 2; ++y) {
+            unsigned char *a = d + y * row, *b = d + (img->h - 1 - y) * row;
+            for (k = 0; k < row; ++k) { t = a[k]; a[k] = b[k]; b[k] = t; }
+        }
+    if (hflip)
+        for (y = 0; y < img->h; ++y)
+            for (x = 0; x < img->w / 2; ++x) {
+                unsigned char *a = d + y * row + x * c, *b = d + y * row + (img->w - 1 - x) * c;
+                for (k = 0; k < c; ++k) { t = a[k]; a[k] = b[k]; b[k] = t; }
+            }
+}
+
+/* -- TGA --------------------------------------------------------------------
+ *
+ * Truevision TGA (1989 spec, version 2.0).  An 18-byte little-endian header:
+ *   0 id length   1 colour-map type (0 none, 1 present)   2 image type
+ *   3 first colour-map entry index (16)   5 colour-map length (16)
+ *   7 colour-map entry size in bits   8,10 x/y origin (unused here)
+ *   12 width (16)   14 height (16)   16 bits per pixel   17 descriptor:
+ *      bits 0-3 attribute (alpha) bits per pixel, bit 4 set = rows run right
+ *      to left, bit 5 set = first row is the TOP (clear: the bottom, the
+ *      default), bits 6-7 interleaving (obsolete; refused).
+ * then the image ID (skipped), the colour map, and the pixels.  Image types:
+ * 1 colour-mapped, 2 true colour, 3 grey; +8 for run-length encoding, where
+ * each packet starts with a byte h: h & 0x80 -> one pixel value repeated
+ * (h & 0x7f) + 1 times, else (h & 0x7f) + 1 literal pixels.  Packets follow
+ * the pixel stream, so a run may cross from one row into the next (the 2.0
+ * spec discourages it, writers do it).  A TGA 2.0 footer or extension area
+ * after the pixels is ignored.
+ *
+ * Stored colours: 8-bit grey; 15/16-bit little-endian words A RRRRR GGGGG
+ * BBBBB, expanded to 8 bits as (v << 3) | (v >> 2) so 31 -> 255 and 0 -> 0;
+ * 24-bit B,G,R; 32-bit B,G,R,A.  Alpha exists only when the descriptor's
+ * attribute bits say so (many 16-bit files leave the top bit as garbage, and
+ * a 32-bit file with 0 attribute bits has an unused fourth byte); then the
+ * output has 4 channels.  A 24-bit or grey image with attribute bits set has
+ * no room for alpha and the bits are ignored.  For colour-mapped images the
+ * map entries (15/16/24/32 bits) carry the colour and the pixels are 8- or
+ * 16-bit indices; pixel value v names entry v - first, and an index outside
+ * the map is an error. */
+
+static unsigned appm__le16(const unsigned char *q)
+{
+    return (unsigned)q[0] | (unsigned)q[1] << 8;
+}
+
+static void appm__tga_color(const unsigned char *q, unsigned bits, int alpha, unsigned char c[4])
+{
+    unsigned v, r, g, b;
+    switch (bits) {
+    case 8:
+        c[0] = c[1] = c[2] = q[0];
+        c[3] = 255;
+        break;
+    case 15:
+    case 16:
+        v = appm__le16(q);
+        r = (v >> 10) & 31u;
+        g = (v >> 5) & 31u;
+        b = v & 31u;
+        c[0] = (unsigned char)(r << 3 | r >> 2);
+        c[1] = (unsigned char)(g << 3 | g >> 2);
+        c[2] = (unsigned char)(b << 3 | b >> 2);
+        c[3] = (unsigned char)(!alpha || (v & 0x8000u) ? 255 : 0);
+        break;
+    case 24:
+        c[0] = q[2]; c[1] = q[1]; c[2] = q[0]; c[3] = 255;
+        break;
+    default: /* 32 */
+        c[0] = q[2]; c[1] = q[1]; c[2] = q[0];
+        c[3] = alpha ? q[3] : 255;
+        break;
+    }
+}
+
+/* The header facts of one TGA file, as appm__tga_header and appm__tga_layout
+ * leave them: a supported type, bit depth and size, and every offset inside
+ * the file. */
+typedef struct appm__tga_info {
+    unsigned idlen, cmtype, type, cmfirst, cmlen, cmbits, cmbpp; /* cmbpp: bytes per map entry */
+    unsigned w, h, bits, bpp, desc;                              /* bpp: bytes per stored pixel */
+    unsigned channels;                                           /* out: 1 grey, 3 RGB, 4 RGBA */
+    int rle, mapped, alpha;
+    size_t pos; /* where the pixel data starts */
+} appm__tga_info;
+
+/* Reads the 18-byte header into t and refuses what this reader does not
+ * decode: an unknown image type, interleaving, a size outside
+ * 1..APPM__IMAGE_MAX, a pixel or colour-map depth the type does not allow.
+ * The checks run in header order, so a file with several faults always names
+ * the same one. */
+static appm_status appm__tga_header(const unsigned char *p, size_t len, const char *name, appm__tga_info *t,
+                                    appm_diag *diag)
+{
+    if (len < 18)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: file is shorter than the 18-byte header");
+    t->idlen = p[0];
+    t->cmtype = p[1];
+    t->type = p[2];
+    t->cmfirst = appm__le16(p + 3);
+    t->cmlen = appm__le16(p + 5);
+    t->cmbits = p[7];
+    t->w = appm__le16(p + 12);
+    t->h = appm__le16(p + 14);
+    t->bits = p[16];
+    t->desc = p[17];
+    t->rle = t->type >= 8;
+    if (t->type != 1 && t->type != 2 && t->type != 3 && t->type != 9 && t->type != 10 && t->type != 11)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "TGA: image type %u is not supported (1-3 and RLE 9-11 are; 0 has no "
+                          "image, 32/33 are Huffman-coded)", t->type);
+    if (t->cmtype > 1)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: colour-map type %u is not 0 or 1", t->cmtype);
+    t->mapped = (t->type & 7u) == 1;
+    if (t->mapped && t->cmtype != 1)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: colour-mapped image has no colour map");
+    if (t->desc & 0xC0u)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "TGA: interleaved rows (descriptor bits 6-7) are not supported");
+    if (t->w == 0 || t->h == 0 || t->w > APPM__IMAGE_MAX || t->h > APPM__IMAGE_MAX)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: size %ux%u is outside 1..%u", t->w, t->h,
+                          APPM__IMAGE_MAX);
+    if (t->mapped) {
+        if (t->cmbits != 15 && t->cmbits != 16 && t->cmbits != 24 && t->cmbits != 32)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                              "TGA: colour-map entries of %u bits are not supported (15/16/24/32)", t->cmbits);
+        if (t->cmlen == 0)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: colour map is empty");
+        if (t->bits != 8 && t->bits != 16)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                              "TGA: colour-map indices of %u bits are not supported (8 or 16)", t->bits);
+    } else if ((t->type & 7u) == 2) {
+        if (t->bits != 15 && t->bits != 16 && t->bits != 24 && t->bits != 32)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                              "TGA: true-colour pixels of %u bits are not supported (15/16/24/32)", t->bits);
+    } else if (t->bits != 8) {
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "TGA: grey pixels of %u bits are not supported (only 8; 16-bit grey+alpha "
+                          "is refused)", t->bits);
+    }
+    return APPM_OK;
+}
+
+/* Derives the output channels and the offsets from a checked header, and
+ * refuses a file too short for its image before anything is allocated: raw
+ * data must all be there, and an RLE packet of 1 + bpp bytes covers at most
+ * 128 pixels, so fewer bytes than that bound cannot hold the image. */
+static appm_status appm__tga_layout(size_t len, const char *name, appm__tga_info *t, appm_diag *diag)
+{
+    size_t rest, mapbytes;
+    uint64_t npix;
+    unsigned colbits;
+    /* A colour map on a true-colour or grey image is legal and unused: skip it. */
+    t->cmbpp = (t->cmbits + 7) / 8;
+    mapbytes = t->cmtype ? (size_t)t->cmlen * t->cmbpp : 0;
+    colbits = t->mapped ? t->cmbits : t->bits;
+    t->alpha = (t->desc & 15u) != 0 && (colbits == 16 || colbits == 32);
+    t->channels = (t->type & 7u) == 3 ? 1 : t->alpha ? 4 : 3;
+    t->bpp = (t->bits + 7) / 8;
+    if (len - 18 < t->idlen || len - 18 - t->idlen < mapbytes)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: file ends inside the image ID or colour map");
+    t->pos = 18 + t->idlen + mapbytes;
+    rest = len - t->pos;
+    npix = (uint64_t)t->w * t->h;
+    if (!t->rle && npix * t->bpp > rest)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "TGA: pixel data is truncated (%lu bytes for %ux%u pixels of %u bytes)",
+                          (unsigned long)rest, t->w, t->h, t->bpp);
+    if (t->rle && npix * (1 + t->bpp) > (uint64_t)rest * 128)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: %lu bytes of RLE data cannot hold %ux%u pixels",
+                          (unsigned long)rest, t->w, t->h);
+    return APPM_OK;
+}
+
+/* Decodes the pixel stream into dst (w*h pixels of t->channels bytes, rows in
+ * file order: appm__tga_decode flips them after).  An RLE packet may cross
+ * rows but not the end of the image; each packet's bytes are checked before
+ * it is read.  pal holds the colour map as RGBA when t->mapped.  On failure
+ * the message is set and dst is left for the caller to free. */
+static appm_status appm__tga_pixels(const unsigned char *p, size_t len, const char *name, const appm__tga_info *t,
+                                    const unsigned char *pal, unsigned char *dst, appm_diag *diag)
+{
+    const uint64_t npix = (uint64_t)t->w * t->h;
+    size_t pos = t->pos;
+    uint64_t i;
+    unsigned k;
+    for (i = 0; i < npix;) {
+        uint64_t count = npix - i, j;
+        int run = 0;
+        if (t->rle) {
+            unsigned hdr;
+            if (pos >= len) goto truncated;
+            hdr = p[pos++];
+            count = (hdr & 0x7Fu) + 1;
+            run = (hdr & 0x80u) != 0;
+            if (count > npix - i)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: RLE packet runs past the end of the image");
+        }
+        if ((uint64_t)(len - pos) < (run ? 1 : count) * t->bpp) goto truncated;
+        for (j = 0; j < count; ++j, ++i) {
+            unsigned char cbuf[4];
+            const unsigned char *c = cbuf;
+            const unsigned char *q = p + pos + (run ? 0 : j * t->bpp);
+            if (t->mapped) {
+                unsigned idx = t->bpp == 1 ? q[0] : appm__le16(q);
+                if (idx < t->cmfirst || idx - t->cmfirst >= t->cmlen)
+                    return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                                      "TGA: colour index %u is outside the colour map (%u..%u)", idx, t->cmfirst,
+                                      t->cmfirst + t->cmlen - 1);
+                c = pal + 4 * (idx - t->cmfirst);
+            } else {
+                appm__tga_color(q, t->bits, t->alpha, cbuf);
+            }
+            for (k = 0; k < t->channels; ++k) dst[i * t->channels + k] = c[k];
+        }
+        pos += (size_t)((run ? 1 : count) * t->bpp);
+    }
+    return APPM_OK;
+truncated:
+    return appm__fail(diag, APPM_ERR_PARSE, name, 0, "TGA: pixel data ends after %lu of %lu pixels",
+                      (unsigned long)i, (unsigned long)npix);
+}
+
+static appm_status appm__tga_decode(appm__mem *m, const unsigned char *p, size_t len,
+                                    const char *name, appm__pixels *out, appm_diag *diag)
+{
+    appm__tga_info t;
+    unsigned char *pal = NULL;
+    unsigned k;
+    appm_status s;
+
+    appm__dec_reset(out);
+    memset(&t, 0, sizeof t);
+    if ((s = appm__tga_header(p, len, name, &t, diag)) != APPM_OK) return s;
+    if ((s = appm__tga_layout(len, name, &t, diag)) != APPM_OK) return s;
+    if (t.mapped) {
+        const unsigned char *q = p + 18 + t.idlen;
+        pal = (unsigned char *)appm__alloc(m, t.cmlen, 4);
+        if (!pal) return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "TGA: out of memory for the colour map");
+        for (k = 0; k < t.cmlen; ++k) appm__tga_color(q + (size_t)k * t.cmbpp, t.cmbits, t.alpha, pal + 4 * k);
+    }
+    s = appm__dec_alloc(m, out, t.w, t.h, t.channels, 8, "TGA", name, diag);
+    if (s != APPM_OK) {
+        appm__free(m, pal);
+        return s;
+    }
+    s = appm__tga_pixels(p, len, name, &t, pal, (unsigned char *)out->data, diag);
+    appm__free(m, pal);
+    if (s != APPM_OK) {
+        appm__dec_drop(m, out);
+        return s;
+    }
+    appm__dec_flip8(out, !(t.desc & 0x20u), (t.desc & 0x10u) != 0);
+    return APPM_OK;
+}
+
+/* -- PGM / PPM --------------------------------------------------------------
+ *
+ * Netpbm greymaps and pixmaps: "P2" (grey) or "P3" (RGB) with decimal samples,
+ * "P5"/"P6" with binary ones.  The header is the magic, width, height and
+ * maxval as decimal numbers separated by whitespace (space, tab, CR, LF, VT,
+ * FF), where '#' starts a comment that runs to the end of the line.  A binary
+ * raster starts after exactly ONE whitespace byte following maxval (the raster
+ * may itself begin with a whitespace-valued byte, so no more may be skipped);
+ * netpbm's reader also lets a comment stand there, and so do we.  Binary
+ * samples are 1 byte when maxval < 256, else 2 bytes big-endian.  Samples
+ * above maxval are invalid.  Rows run top to bottom.  Bytes after the raster
+ * (a further image of a multi-image stream) are ignored.
+ *
+ * Output: maxval 255 or 65535 keeps the stored values (depth 8 or 16); other
+ * maxvals are rescaled to the full range of the smaller depth that holds them,
+ * rounding to nearest: (v * full + maxval / 2) / maxval.  In 32 bits this is at
+ * most 65535 * 65534 + 32767 < 2^32. */
+
+static int appm__pnm_space(unsigned char c)
+{
+    return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\v' || c == '\f';
+}
+
+/* Skips whitespace and comments (netpbm's plain-format reader also accepts
+ * comments between raster samples, so P2/P3 rasters use this too). */
+static size_t appm__pnm_skip(const unsigned char *p, size_t len, size_t pos)
+{
+    while (pos < len) {
+        if (p[pos] == '#') {
+            while (pos < len && p[pos] != '\n') pos++;
+        } else if (appm__pnm_space(p[pos])) {
+            pos++;
+        } else {
+            break;
+        }
+    }
+    return pos;
+}
+
+/* Reads a decimal number at *pos that must end at whitespace, '#' or the end
+ * of the data.  Values saturate at 10^9 so a long digit string cannot
+ * overflow; callers range-check.  Returns 0 if there is no such number. */
+static int appm__pnm_uint(const unsigned char *p, size_t len, size_t *pos, uint32_t *v)
+{
+    size_t i = *pos;
+    uint32_t x = 0;
+    if (i >= len || p[i] < '0' || p[i] > '9') return 0;
+    for (; i < len && p[i] >= '0' && p[i] <= '9'; ++i) {
+        x = x * 10 + (uint32_t)(p[i] - '0');
+        if (x > 1000000000u) x = 1000000000u;
+    }
+    if (i < len && !appm__pnm_space(p[i]) && p[i] != '#') return 0;
+    *pos = i;
+    *v = x;
+    return 1;
+}
+
+/* Reads the n = w*h*channels raster samples starting at pos into out (already
+ * allocated at the depth maxval needs), rescaling them to the depth's full
+ * range.  The caller has checked that a binary raster is all there, so only
+ * plain (ascii) samples can run out.  On failure the message is set and out
+ * is left for the caller to drop. */
+static appm_status appm__pnm_raster(const unsigned char *p, size_t len, size_t pos, int ascii, uint32_t maxval,
+                                    appm__pixels *out, const char *name, appm_diag *diag)
+{
+    const unsigned depth = out->depth;
+    const uint32_t full = maxval > 255 ? 65535u : 255u;
+    const uint64_t n = (uint64_t)out->w * out->h * out->channels;
+    uint64_t i;
+    uint32_t x;
+    for (i = 0; i < n; ++i) {
+        if (ascii) {
+            /* appm__pnm_uint() stopped the previous number at a separator. */
+            pos = appm__pnm_skip(p, len, pos);
+            if (!appm__pnm_uint(p, len, &pos, &x)) {
+                if (pos >= len)
+                    return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNM: pixel data ends after %lu of %lu samples",
+                                      (unsigned long)i, (unsigned long)n);
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNM: sample %lu is not a decimal number",
+                                  (unsigned long)i);
+            }
+        } else if (depth == 8) {
+            x = p[pos++];
+        } else {
+            x = (uint32_t)p[pos] << 8 | p[pos + 1];
+            pos += 2;
+        }
+        if (x > maxval)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNM: sample %lu is %lu, above maxval %lu",
+                              (unsigned long)i, (unsigned long)x, (unsigned long)maxval);
+        if (maxval != full) x = (x * full + maxval / 2) / maxval;
+        if (depth == 8) ((unsigned char *)out->data)[i] = (unsigned char)x;
+        else ((uint16_t *)out->data)[i] = (uint16_t)x;
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__pnm_decode(appm__mem *m, const unsigned char *p, size_t len,
+                                    const char *name, appm__pixels *out, appm_diag *diag)
+{
+    static const char *const field[3] = {"width", "height", "maxval"};
+    uint32_t v[3], maxval;
+    unsigned channels, depth;
+    int ascii, k;
+    size_t pos = 2, rest;
+    uint64_t n;
+    appm_status s;
+
+    appm__dec_reset(out);
+    if (len < 2 || p[0] != 'P' || (p[1] != '2' && p[1] != '3' && p[1] != '5' && p[1] != '6'))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "PNM: not a PGM/PPM file (magic must be P2, P3, P5 or P6; PBM and PAM are "
+                          "not supported)");
+    ascii = p[1] == '2' || p[1] == '3';
+    channels = p[1] == '3' || p[1] == '6' ? 3 : 1;
+    for (k = 0; k < 3; ++k) {
+        size_t start = pos;
+        pos = appm__pnm_skip(p, len, pos);
+        if (pos == start && pos < len)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNM: no whitespace before the %s", field[k]);
+        if (!appm__pnm_uint(p, len, &pos, &v[k]))
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                              pos >= len ? "PNM: file ends before the %s" : "PNM: %s is not a decimal number",
+                              field[k]);
+    }
+    if (v[0] < 1 || v[0] > APPM__IMAGE_MAX || v[1] < 1 || v[1] > APPM__IMAGE_MAX)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNM: size %lux%lu is outside 1..%u",
+                          (unsigned long)v[0], (unsigned long)v[1], APPM__IMAGE_MAX);
+    maxval = v[2];
+    if (maxval < 1 || maxval > 65535)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNM: maxval %lu is outside 1..65535",
+                          (unsigned long)maxval);
+    depth = maxval > 255 ? 16 : 8;
+    n = (uint64_t)v[0] * v[1] * channels;
+    if (!ascii) {
+        if (pos < len && p[pos] == '#')
+            while (pos < len && p[pos] != '\n') pos++;
+        if (pos >= len) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNM: file ends before the pixel data");
+        pos++; /* the single whitespace byte after maxval (or the comment's newline) */
+    }
+    rest = len - pos;
+    /* Binary: exactly n samples of 1 or 2 bytes.  Plain: every sample needs a
+     * separator before it and at least one digit, so at least 2n bytes. */
+    if (ascii ? n > rest / 2 : n * (depth / 8) > rest)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "PNM: pixel data is truncated (%lu bytes for %lux%lu pixels)", (unsigned long)rest,
+                          (unsigned long)v[0], (unsigned long)v[1]);
+    s = appm__dec_alloc(m, out, v[0], v[1], channels, depth, "PNM", name, diag);
+    if (s != APPM_OK) return s;
+    s = appm__pnm_raster(p, len, pos, ascii, maxval, out, name, diag);
+    if (s != APPM_OK) appm__dec_drop(m, out);
+    return s;
+}
+
+/* -- Radiance HDR (RGBE) -------------------------------------------------------
+ *
+ * Greg Ward's Radiance picture format (.hdr, .pic).  A text header: the magic
+ * line "#?RADIANCE" (or "#?RGBE", written by some tools), then "NAME=value"
+ * lines and comments up to an empty line; then the resolution line, then
+ * scanlines of 4-byte pixels R,G,B,E: a shared exponent E and three 8-bit
+ * mantissas.
+ *
+ * Header: FORMAT=32-bit_rle_rgbe is the only FORMAT accepted (absent means
+ * RGBE too); 32-bit_rle_xyze (CIE XYZ primaries) is refused rather than shown
+ * with the wrong colours.  EXPOSURE= is deliberately ignored: it records a
+ * multiplier some tool (pfilt, a camera pipeline) already applied, and
+ * dividing by it would recover the "original" radiance, but every common
+ * reader (stb_image, ImageMagick, OpenImageIO's default, Blender) uses the
+ * stored values as they are, and environment maps are authored and exchanged
+ * on that basis; honouring it would make appm's lighting disagree with every
+ * other renderer given the same file.  Other variables (PRIMARIES, PIXASPECT,
+ * COLORCORR, VIEW, SOFTWARE, ...) are likewise ignored.
+ *
+ * Resolution line: "-Y h +X w" is the standard orientation (first scanline
+ * at the top, pixels left to right).  "+Y h +X w" stores the bottom scanline
+ * first and is accepted, flipped on the way in.  The other six orientations
+ * (mirrored or column-major) are refused.
+ *
+ * Scanlines come in three encodings, told apart by their first four bytes
+ * exactly as Radiance's freadcolrs() does:
+ *   - new ("adaptive") RLE: only when 8 <= w <= 32767 and the scanline starts
+ *     with 2, 2, hi, lo where hi < 128 and hi:lo == w.  Then the four channel
+ *     planes follow one after another (all R, all G, all B, all E), each as
+ *     packets: a count c > 128 means the next byte repeated c - 128 times,
+ *     else c literal bytes (c == 0 is malformed and refused, as stb_image
+ *     does; Radiance would skip it);
+ *   - otherwise flat 4-byte pixels, with old-style RLE mixed in: a pixel
+ *     1,1,1,n repeats the previous pixel n << shift times, shift growing by 8
+ *     for each consecutive repeat pixel (so 1,1,1,44 then 1,1,1,1 is 300).
+ *     A real pixel 1,1,1,n can therefore never be stored: the reference reader
+ *     always reads it as a repeat, and so do we.  A repeat with no pixel
+ *     before it in its scanline, or one running past the scanline, is an error
+ *     (Radiance's reader would read or write outside its buffer).
+ *
+ * Conversion (Radiance's colr_color()): E == 0 is black; otherwise each
+ * channel is (m + 0.5) * 2^(E - 136), i.e. ldexp(m + 0.5, E - 136); 136 is the
+ * exponent bias 128 plus 8 for the mantissa's 8 bits.  We follow Ward's
+ * reference rather than stb_image and ImageMagick (which use m * 2^(E-136)
+ * without the +0.5): the reference writer setcolr() truncates when it
+ * quantises, so a stored m stands for the interval [m, m+1) and its midpoint
+ * is the unbiased reconstruction; the alternative darkens every value by up to
+ * one mantissa step (0.4% to 50% depending on magnitude).  Every result is
+ * exact in float (9 significant bits, exponents within float's range down
+ * into its subnormals).
+ *
+ * Size check: new RLE covers at most 127 bytes of one plane in a 2-byte
+ * packet, so a pixel needs at least 8/127 byte; old RLE can do much better in
+ * principle (12 bytes for a uniform 32767-pixel scanline), but an image that
+ * claims more than 128 pixels per byte of data is refused as corrupt rather
+ * than allocated; every scanline needs at least 4 bytes whatever its coding. */
+
+/* Decodes one scanline of w RGBE pixels into sc[4*w]; returns NULL or what is
+ * wrong. */
+static const char *appm__hdr_scanline(const unsigned char *p, size_t len, size_t *ppos,
+                                      unsigned char *sc, uint32_t w)
+{
+    size_t pos = *ppos;
+    uint32_t x = 0, c;
+    unsigned shift = 0;
+    if (len - pos < 4) return "file ends inside a scanline";
+    if (w >= 8 && w <= 0x7FFF && p[pos] == 2 && p[pos + 1] == 2 && !(p[pos + 2] & 0x80)) {
+        if (((uint32_t)p[pos + 2] << 8 | p[pos + 3]) != w) return "RLE scanline length does not match the width";
+        pos += 4;
+        for (c = 0; c < 4; ++c)
+            for (x = 0; x < w;) {
+                uint32_t count, j;
+                if (pos >= len) return "file ends inside an RLE scanline";
+                count = p[pos++];
+                if (count == 0) return "RLE packet of length 0";
+                if (count > 128) {
+                    count -= 128;
+                    if (count > w - x) return "RLE run goes past the end of the scanline";
+                    if (pos >= len) return "file ends inside an RLE scanline";
+                    for (j = 0; j < count; ++j) sc[4 * (x + j) + c] = p[pos];
+                    pos++;
+                } else {
+                    if (count > w - x) return "RLE literal goes past the end of the scanline";
+                    if (len - pos < count) return "file ends inside an RLE scanline";
+                    for (j = 0; j < count; ++j) sc[4 * (x + j) + c] = p[pos + j];
+                    pos += count;
+                }
+                x += count;
+            }
+        *ppos = pos;
+        return NULL;
+    }
+    while (x < w) {
+        const unsigned char *q = p + pos;
+        if (len - pos < 4) return "file ends inside a scanline";
+        pos += 4;
+        if (q[0] == 1 && q[1] == 1 && q[2] == 1) {
+            uint64_t count = (uint64_t)q[3] << shift, j;
+            if (x == 0) return "old-style RLE repeat with no pixel before it";
+            if (count > w - x) return "old-style RLE repeat goes past the end of the scanline";
+            for (j = 0; j < count; ++j, ++x) memcpy(sc + 4 * x, sc + 4 * (x - 1), 4);
+            if (shift < 32) shift += 8; /* beyond 24 any nonzero count exceeds w */
+        } else {
+            memcpy(sc + 4 * x, q, 4);
+            x++;
+            shift = 0;
+        }
+    }
+    *ppos = pos;
+    return NULL;
+}
+
+/* Reads the line at *pos (without its '\n') into [*start, *end); advances past
+ * the newline.  Returns 0 if there is no newline before the end of the data. */
+static int appm__hdr_line(const unsigned char *p, size_t len, size_t *pos, size_t *start, size_t *end)
+{
+    const unsigned char *nl = *pos < len ? (const unsigned char *)memchr(p + *pos, '\n', len - *pos) : NULL;
+    if (!nl) return 0;
+    *start = *pos;
+    *end = (size_t)(nl - p);
+    *pos = *end + 1;
+    return 1;
+}
+
+/* Does the line [a, b) equal s, ignoring trailing blanks (and a CR)? */
+static int appm__hdr_is(const unsigned char *p, size_t a, size_t b, const char *s)
+{
+    size_t n = strlen(s);
+    while (b > a && (p[b - 1] == ' ' || p[b - 1] == '\t' || p[b - 1] == '\r')) b--;
+    return b - a == n && memcmp(p + a, s, n) == 0;
+}
+
+/* Parses "<sign><axis> <n>" at *i of line [.., b): one or more spaces before,
+ * a sign, an axis letter, spaces, a decimal number in 1..APPM__IMAGE_MAX. */
+static int appm__hdr_axis(const unsigned char *p, size_t *i, size_t b, char *sign, char *axis, uint32_t *n)
+{
+    size_t k = *i;
+    uint32_t v = 0;
+    while (k < b && p[k] == ' ') k++;
+    if (b - k < 2 || (p[k] != '-' && p[k] != '+') || (p[k + 1] != 'X' && p[k + 1] != 'Y')) return 0;
+    *sign = (char)p[k];
+    *axis = (char)p[k + 1];
+    k += 2;
+    if (k >= b || p[k] != ' ') return 0;
+    while (k < b && p[k] == ' ') k++;
+    if (k >= b || p[k] < '0' || p[k] > '9') return 0;
+    for (; k < b && p[k] >= '0' && p[k] <= '9'; ++k) {
+        v = v * 10 + (uint32_t)(p[k] - '0');
+        if (v > APPM__IMAGE_MAX) return 0;
+    }
+    if (v < 1) return 0;
+    *i = k;
+    *n = v;
+    return 1;
+}
+
+static appm_status appm__hdr_decode(appm__mem *m, const unsigned char *p, size_t len,
+                                    const char *name, appm__pixels *out, appm_diag *diag)
+{
+    size_t pos = 0, a, b, i;
+    char s1, a1, s2, a2;
+    uint32_t h, w, y, x;
+    unsigned char *sc;
+    float *rows;
+    appm_status s;
+
+    appm__dec_reset(out);
+    if (!appm__hdr_line(p, len, &pos, &a, &b) ||
+        (!appm__hdr_is(p, a, b, "#?RADIANCE") && !appm__hdr_is(p, a, b, "#?RGBE")))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "HDR: not a Radiance picture (first line must be #?RADIANCE or #?RGBE)");
+    for (;;) {
+        if (!appm__hdr_line(p, len, &pos, &a, &b))
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "HDR: file ends inside the header");
+        if (a == b) break;
+        if (b - a >= 7 && memcmp(p + a, "FORMAT=", 7) == 0) {
+            if (appm__hdr_is(p, a + 7, b, "32-bit_rle_xyze"))
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                                  "HDR: XYZE pictures (FORMAT=32-bit_rle_xyze) are not supported");
+            if (!appm__hdr_is(p, a + 7, b, "32-bit_rle_rgbe"))
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                                  "HDR: unknown FORMAT (only 32-bit_rle_rgbe is supported)");
+        }
+    }
+    if (!appm__hdr_line(p, len, &pos, &a, &b))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "HDR: file ends before the resolution line");
+    i = a;
+    while (b > a && (p[b - 1] == ' ' || p[b - 1] == '\r')) b--;
+    if (!appm__hdr_axis(p, &i, b, &s1, &a1, &h) || !appm__hdr_axis(p, &i, b, &s2, &a2, &w) || i != b)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "HDR: malformed resolution line (expected \"-Y height +X width\", sizes 1..%u)",
+                          APPM__IMAGE_MAX);
+    if (a1 != 'Y' || a2 != 'X' || s2 != '+')
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "HDR: orientation \"%c%c .. %c%c ..\" is not supported (only -Y h +X w and "
+                          "+Y h +X w)", s1, a1, s2, a2);
+    if ((uint64_t)h * 4 > len - pos || (uint64_t)w * h > (uint64_t)(len - pos) * 128)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "HDR: %lu bytes of pixel data cannot hold %lux%lu pixels",
+                          (unsigned long)(len - pos), (unsigned long)w, (unsigned long)h);
+    sc = (unsigned char *)appm__alloc(m, w, 4);
+    if (!sc) return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "HDR: out of memory for a scanline");
+    s = appm__dec_alloc(m, out, w, h, 3, 32, "HDR", name, diag);
+    if (s != APPM_OK) {
+        appm__free(m, sc);
+        return s;
+    }
+    rows = (float *)out->data;
+    for (y = 0; y < h; ++y) {
+        const char *why = appm__hdr_scanline(p, len, &pos, sc, w);
+        float *row = rows + (size_t)(s1 == '-' ? y : h - 1 - y) * w * 3;
+        if (why) {
+            appm__fail(diag, APPM_ERR_PARSE, name, 0, "HDR: scanline %lu: %s", (unsigned long)y, why);
+            appm__free(m, sc);
+            appm__dec_drop(m, out);
+            return APPM_ERR_PARSE;
+        }
+        for (x = 0; x < w; ++x) {
+            const unsigned char *q = sc + 4 * x;
+            unsigned k;
+            for (k = 0; k < 3; ++k)
+                row[3 * x + k] = q[3] == 0 ? 0.0f : (float)ldexp(q[k] + 0.5, (int)q[3] - 136);
+        }
+    }
+    appm__free(m, sc);
+    return APPM_OK;
+}
+
+/* ---- 3.6 Inflate (RFC 1950 zlib, RFC 1951 deflate) ---------------------------
+ *
+ * One zlib stream is inflated into a caller-owned buffer that must come out
+ * exactly full: PNG and EXR both know the decompressed size before they start,
+ * so there is no window to manage - the output buffer IS the window, and a
+ * back-reference may reach anywhere into what has been written so far.
+ *
+ * Bits are read least significant first (RFC 1951, 3.1.1) from a 64-bit
+ * buffer refilled whole bytes at a time; a refill tops it up to at least 56
+ * bits while input lasts, which covers the longest symbol pair - a 15-bit
+ * length code, 5 extra bits, a 15-bit distance code and 13 extra bits - so the
+ * decode loop refills once per symbol.  Near the end of the input fewer bits
+ * are present, and every take checks the count: reading past src + n is an
+ * error, never an access.
+ *
+ * Huffman codes are canonical (3.2.2): a code is fully described by its code
+ * lengths.  Decoding looks up the next APPM__INF_FAST bits in a table whose
+ * entry holds the symbol and its code length; codes longer than that (rare:
+ * only symbols with frequency below about 1/1024) fall back to walking the
+ * canonical code one bit at a time from the per-length counts, as zlib's
+ * "puff" does.  All tables live on the stack of appm__zlib_inflate. */
+#define APPM__INF_FAST 10
+#define APPM__INF_FASTN (1u << APPM__INF_FAST)
+
+typedef struct appm__inf_huff {
+    uint16_t fast[APPM__INF_FASTN]; /* symbol << 4 | length; 0: longer code or no code */
+    uint16_t count[16];             /* codes of each length */
+    uint16_t symbol[288];           /* symbols ordered by code */
+} appm__inf_huff;
+
+typedef struct appm__inf_bits {
+    const unsigned char *src;
+    size_t n, pos; /* src[pos] is the first byte not yet in buf */
+    uint64_t buf;  /* the next nb bits of the stream, low bit first */
+    unsigned nb;
+} appm__inf_bits;
+
+/* Tops buf up to >= 56 bits, or to whatever the input still holds.  The
+ * eight-byte step ORs in bits beyond the counted ones too; they are the very
+ * bytes the next refill ORs in again at the same place, so they do no harm. */
+static void appm__inf_refill(appm__inf_bits *b)
+{
+    if (b->nb < 56 && b->n - b->pos >= 8) {
+        const unsigned char *q = b->src + b->pos;
+        uint64_t v = (uint64_t)q[0] | (uint64_t)q[1] << 8 | (uint64_t)q[2] << 16 | (uint64_t)q[3] << 24 |
+                     (uint64_t)q[4] << 32 | (uint64_t)q[5] << 40 | (uint64_t)q[6] << 48 |
+                     (uint64_t)q[7] << 56;
+        b->buf |= v << b->nb;
+        b->pos += (63u - b->nb) >> 3;
+        b->nb |= 56u;
+        return;
+    }
+    while (b->nb <= 56 && b->pos < b->n) {
+        b->buf |= (uint64_t)b->src[b->pos++] << b->nb;
+        b->nb += 8;
+    }
+}
+
+/* Builds the decoding tables for code lengths len[0..n).  Over-subscribed
+ * lengths are always an error; an incomplete code is allowed only when it is
+ * a single code of one bit (RFC 1951 3.2.7 permits one distance code), the
+ * same rule as zlib's inflate.  An empty code (no lengths at all) builds, and
+ * fails only if a symbol is ever decoded from it. */
+static const char *appm__inf_build(appm__inf_huff *h, const unsigned char *len, unsigned n)
+{
+    uint16_t offs[16], next[16];
+    unsigned s, l, used = 0;
+    int left = 1;
+    memset(h->count, 0, sizeof h->count);
+    memset(h->fast, 0, sizeof h->fast);
+    for (s = 0; s < n; ++s) h->count[len[s]]++;
+    h->count[0] = 0;
+    for (l = 1; l < 16; ++l) {
+        left = (left << 1) - h->count[l];
+        if (left < 0) return "deflate: over-subscribed Huffman code";
+        used += h->count[l];
+    }
+    if (left > 0 && !(used == 1 && h->count[1] == 1) && used != 0) return "deflate: incomplete Huffman code";
+    offs[1] = 0;
+    for (l = 1; l < 15; ++l) offs[l + 1] = (uint16_t)(offs[l] + h->count[l]);
+    /* next[l]: the first canonical code of length l (3.2.2, step 2) */
+    next[0] = 0;
+    next[1] = 0;
+    for (l = 2; l < 16; ++l) next[l] = (uint16_t)((next[l - 1] + h->count[l - 1]) << 1);
+    for (s = 0; s < n; ++s) {
+        unsigned L = len[s], code, rev = 0, i;
+        if (!L) continue;
+        h->symbol[offs[L]++] = (uint16_t)s;
+        code = next[L]++;
+        if (L > APPM__INF_FAST) continue;
+        for (i = 0; i < L; ++i) rev |= ((code >> i) & 1u) << (L - 1 - i); /* codes go out MSB first */
+        for (i = rev; i < APPM__INF_FASTN; i += 1u << L) h->fast[i] = (uint16_t)(s << 4 | L);
+    }
+    return NULL;
+}
+
+/* The next symbol of code h, or -1 with *err set. */
+static int appm__inf_decode(appm__inf_bits *b, const appm__inf_huff *h, const char **err)
+{
+    unsigned e = h->fast[b->buf & (APPM__INF_FASTN - 1u)], l;
+    int code = 0, first = 0, index = 0;
+    if (e && (e & 15u) <= b->nb) {
+        b->buf >>= e & 15u;
+        b->nb -= e & 15u;
+        return (int)(e >> 4);
+    }
+    for (l = 1; l < 16; ++l) { /* canonical walk: the code's bits arrive most significant first */
+        int count = h->count[l];
+        if (l > b->nb) {
+            *err = "deflate: data ends early";
+            return -1;
+        }
+        code |= (int)((b->buf >> (l - 1)) & 1u);
+        if (code - count < first) {
+            b->buf >>= l;
+            b->nb -= l;
+            return h->symbol[index + (code - first)];
+        }
+        index += count;
+        first = (first + count) << 1;
+        code <<= 1;
+    }
+    *err = "deflate: invalid Huffman code";
+    return -1;
+}
+
+/* n (<= 32) bits, or *err set. */
+static unsigned appm__inf_take(appm__inf_bits *b, unsigned n, const char **err)
+{
+    unsigned v;
+    if (n > b->nb) {
+        *err = "deflate: data ends early";
+        return 0;
+    }
+    v = (unsigned)(b->buf & (((uint64_t)1 << n) - 1u));
+    b->buf >>= n;
+    b->nb -= n;
+    return v;
+}
+
+/* Adler-32 (RFC 1950, 8.2): two sums mod 65521, deferred for 5552 bytes, the
+ * most that cannot overflow 32 bits. */
+static uint32_t appm__inf_adler32(const unsigned char *p, size_t n)
+{
+    uint32_t a = 1, b = 0;
+    while (n) {
+        size_t k = n < 5552 ? n : 5552, i;
+        for (i = 0; i < k; ++i) {
+            a += p[i];
+            b += a;
+        }
+        a %= 65521u;
+        b %= 65521u;
+        p += k;
+        n -= k;
+    }
+    return b << 16 | a;
+}
+
+/* Reads the code lengths of a dynamic block (RFC 1951, 3.2.7) and builds both
+ * tables. */
+static const char *appm__inf_dynamic(appm__inf_bits *b, appm__inf_huff *lit, appm__inf_huff *dist)
+{
+    unsigned char lens[286 + 30];
+    unsigned nlit, ndist, ncode, i, k;
+    const char *err = NULL;
+    appm__inf_refill(b);
+    nlit = appm__inf_take(b, 5, &err) + 257;
+    ndist = appm__inf_take(b, 5, &err) + 1;
+    ncode = appm__inf_take(b, 4, &err) + 4;
+    if (err) return err;
+    if (nlit > 286 || ndist > 30) return "deflate: too many length or distance codes";
+    memset(lens, 0, sizeof lens);
+    for (i = 0; i < ncode; ++i) {
+        appm__inf_refill(b);
+        lens[appm__cl_order[i]] = (unsigned char)appm__inf_take(b, 3, &err);
+    }
+    if (err) return err;
+    if ((err = appm__inf_build(lit, lens, 19)) != NULL) return "deflate: bad code-length code";
+    memset(lens, 0, 19);
+    for (i = 0; i < nlit + ndist;) {
+        int sym;
+        unsigned rep, val = 0;
+        appm__inf_refill(b);
+        sym = appm__inf_decode(b, lit, &err);
+        if (sym < 0) return err;
+        if (sym < 16) {
+            lens[i++] = (unsigned char)sym;
+            continue;
+        }
+        if (sym == 16) {
+            if (i == 0) return "deflate: repeat with no previous code length";
+            val = lens[i - 1];
+            rep = 3 + appm__inf_take(b, 2, &err);
+        } else if (sym == 17) {
+            rep = 3 + appm__inf_take(b, 3, &err);
+        } else {
+            rep = 11 + appm__inf_take(b, 7, &err);
+        }
+        if (err) return err;
+        if (i + rep > nlit + ndist) return "deflate: code lengths repeat past the end";
+        for (k = 0; k < rep; ++k) lens[i++] = (unsigned char)val;
+    }
+    if (lens[256] == 0) return "deflate: no end-of-block code";
+    if ((err = appm__inf_build(lit, lens, nlit)) != NULL) return err;
+    return appm__inf_build(dist, lens + nlit, ndist);
+}
+
+/* Decodes one Huffman-coded block (3.2.5) into dst[*at ..). */
+static const char *appm__inf_codes(appm__inf_bits *b, const appm__inf_huff *lit, const appm__inf_huff *dist,
+                                   unsigned char *dst, size_t want, size_t *at)
+{
+    size_t o = *at;
+    const char *err = NULL;
+    for (;;) {
+        int sym;
+        size_t len, d;
+        unsigned e = 0;
+        appm__inf_refill(b);
+        /* the fast path of appm__inf_decode, inlined: this loop is the hot one */
+        e = lit->fast[b->buf & (APPM__INF_FASTN - 1u)];
+        if (e && (e & 15u) <= b->nb) {
+            b->buf >>= e & 15u;
+            b->nb -= e & 15u;
+            sym = (int)(e >> 4);
+        } else if ((sym = appm__inf_decode(b, lit, &err)) < 0) {
+            break;
+        }
+        if (sym < 256) {
+            if (o >= want) {
+                err = "deflate: more data than expected";
+                break;
+            }
+            dst[o++] = (unsigned char)sym;
+            continue;
+        }
+        if (sym == 256) break;
+        sym -= 257;
+        if (sym >= 29) {
+            err = "deflate: invalid length code";
+            break;
+        }
+        len = appm__len_base[sym] + appm__inf_take(b, appm__len_extra[sym], &err);
+        sym = appm__inf_decode(b, dist, &err);
+        if (err) break;
+        if (sym >= 30) {
+            err = "deflate: invalid distance code";
+            break;
+        }
+        d = appm__dist_base[sym] + appm__inf_take(b, appm__dist_extra[sym], &err);
+        if (err) break;
+        if (d > o) {
+            err = "deflate: invalid distance too far back";
+            break;
+        }
+        if (len > want - o) {
+            err = "deflate: more data than expected";
+            break;
+        }
+        if (d >= len) {
+            memcpy(dst + o, dst + o - d, len);
+        } else { /* overlapping copy: a run, byte by byte as the spec defines it */
+            unsigned char *q = dst + o;
+            const unsigned char *r = q - d;
+            size_t i;
+            for (i = 0; i < len; ++i) q[i] = r[i];
+        }
+        o += len;
+    }
+    *at = o;
+    return err;
+}
+
+/* Inflates the zlib stream src[0..n) into dst, which must come out exactly
+ * `want` bytes long.  NULL on success, else what was wrong.  Bytes after the
+ * Adler-32 trailer are ignored, as zlib's inflate does. */
+static const char *appm__zlib_inflate(const unsigned char *src, size_t n, unsigned char *dst, size_t want)
+{
+    appm__inf_huff lit, dist;
+    appm__inf_bits b;
+    size_t o = 0;
+    unsigned final = 0;
+    const char *err = NULL;
+    if (n < 2) return "zlib: data ends early";
+    /* RFC 1950, 2.2: CM 8 (deflate), CINFO <= 7 (window <= 32 KiB), the
+     * 16-bit header a multiple of 31, no preset dictionary */
+    if ((src[0] & 15u) != 8 || (src[0] >> 4) > 7 || ((unsigned)src[0] << 8 | src[1]) % 31u != 0)
+        return "zlib: bad header";
+    if (src[1] & 0x20u) return "zlib: preset dictionary not supported";
+    b.src = src;
+    b.n = n;
+    b.pos = 2;
+    b.buf = 0;
+    b.nb = 0;
+    while (!final) {
+        unsigned type;
+        appm__inf_refill(&b);
+        final = appm__inf_take(&b, 1, &err);
+        type = appm__inf_take(&b, 2, &err);
+        if (err) return err;
+        if (type == 0) { /* stored (3.2.4): skip to a byte boundary, LEN, NLEN, raw bytes */
+            size_t len;
+            unsigned nlen;
+            b.buf >>= b.nb & 7u;
+            b.nb &= ~7u;
+            len = appm__inf_take(&b, 16, &err);
+            nlen = appm__inf_take(&b, 16, &err);
+            if (err) return err;
+            if ((len ^ 0xFFFFu) != nlen) return "deflate: stored block length check fails";
+            b.pos -= b.nb >> 3; /* give the whole bytes still buffered back to the input */
+            b.buf = 0;
+            b.nb = 0;
+            if (len > b.n - b.pos) return "deflate: data ends early";
+            if (len > want - o) return "deflate: more data than expected";
+            memcpy(dst + o, src + b.pos, len);
+            b.pos += len;
+            o += len;
+        } else if (type == 1) { /* fixed codes (3.2.6) */
+            unsigned char lens[288];
+            memset(lens, 8, 144);
+            memset(lens + 144, 9, 112);
+            memset(lens + 256, 7, 24);
+            memset(lens + 280, 8, 8);
+            appm__inf_build(&lit, lens, 288);
+            memset(lens, 5, 32); /* 30 and 31 complete the code but never occur (3.2.6) */
+            appm__inf_build(&dist, lens, 32);
+            if ((err = appm__inf_codes(&b, &lit, &dist, dst, want, &o)) != NULL) return err;
+        } else if (type == 2) {
+            if ((err = appm__inf_dynamic(&b, &lit, &dist)) != NULL) return err;
+            if ((err = appm__inf_codes(&b, &lit, &dist, dst, want, &o)) != NULL) return err;
+        } else {
+            return "deflate: invalid block type";
+        }
+    }
+    if (o != want) return "deflate: data ends early";
+    b.pos -= b.nb >> 3; /* the trailer starts at the next byte boundary */
+    if (b.n - b.pos < 4) return "zlib: data ends early";
+    {
+        const unsigned char *t = src + b.pos;
+        uint32_t stored = (uint32_t)t[0] << 24 | (uint32_t)t[1] << 16 | (uint32_t)t[2] << 8 | t[3];
+        if (stored != appm__inf_adler32(dst, want)) return "zlib: Adler-32 mismatch";
+    }
+    return NULL;
+}
+
+/* ---- 3.7 PNG reader -----------------------------------------------------------
+ *
+ * PNG specification (ISO/IEC 15948, W3C 2nd edition).  The file is the 8-byte
+ * signature then chunks: length (big-endian, < 2^31), four letter type, data,
+ * CRC-32 of type and data (5.3).  A lower-case first letter marks an ancillary
+ * chunk a reader may skip; an upper-case one a critical chunk it must
+ * understand.  IHDR comes first, PLTE and tRNS before the IDAT chunks, which
+ * are consecutive and together hold one zlib stream, and IEND last.
+ *
+ * The stream inflates to the filtered rows - of each Adam7 pass in turn for
+ * an interlaced image (8.2) - each led by a filter type byte (9.2).  We inflate
+ * all of it into one scratch buffer, undo the filters in place, and spread the
+ * samples into the output.  Two allocations: the output and the scratch
+ * (which also holds the IDAT data joined together when it is split). */
+
+/* Adam7 (8.2): each pass's first column and row, and steps. */
+static const unsigned char appm__png_adam7[7][4] = {
+    {0, 0, 8, 8}, {4, 0, 8, 8}, {0, 4, 4, 8}, {2, 0, 4, 4}, {0, 2, 2, 4}, {1, 0, 2, 2}, {0, 1, 1, 2}};
+
+static uint32_t appm__png_be32(const unsigned char *p)
+{
+    return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
+}
+
+/* Pixels of a pass along an axis of n pixels: those at start, start + step, ... */
+static uint32_t appm__png_pass_count(uint32_t n, unsigned start, unsigned step)
+{
+    return n > start ? (n - start + step - 1) / step : 0;
+}
+
+/* Undoes filter type `f` on row cur[0..n) given the unfiltered row above
+ * (NULL above the first row of a pass: all zeros, 9.2) and bpp bytes per
+ * complete pixel (at least 1). */
+static void appm__png_unfilter(unsigned f, unsigned char *cur, const unsigned char *up, size_t n, size_t bpp)
+{
+    size_t i;
+    if (!up) { /* with zeros above, Up is None, Paeth is Sub, Average halves the left byte */
+        if (f == 1 || f == 4)
+            for (i = bpp; i < n; ++i) cur[i] = (unsigned char)(cur[i] + cur[i - bpp]);
+        else if (f == 3)
+            for (i = bpp; i < n; ++i) cur[i] = (unsigned char)(cur[i] + (cur[i - bpp] >> 1));
+        return;
+    }
+    switch (f) {
+    case 1:
+        for (i = bpp; i < n; ++i) cur[i] = (unsigned char)(cur[i] + cur[i - bpp]);
+        break;
+    case 2:
+        for (i = 0; i < n; ++i) cur[i] = (unsigned char)(cur[i] + up[i]);
+        break;
+    case 3:
+        for (i = 0; i < bpp && i < n; ++i) cur[i] = (unsigned char)(cur[i] + (up[i] >> 1));
+        for (; i < n; ++i) cur[i] = (unsigned char)(cur[i] + ((cur[i - bpp] + up[i]) >> 1));
+        break;
+    case 4:
+        for (i = 0; i < bpp && i < n; ++i) cur[i] = (unsigned char)(cur[i] + up[i]);
+        for (; i < n; ++i) { /* Paeth (9.4): the neighbour nearest a + b - c, ties a, b, c */
+            int a = cur[i - bpp], b = up[i], c = up[i - bpp];
+            int pa = b - c, pb = a - c, pc;
+            pc = pa + pb;
+            pa = pa < 0 ? -pa : pa;
+            pb = pb < 0 ? -pb : pb;
+            pc = pc < 0 ? -pc : pc;
+            cur[i] = (unsigned char)(cur[i] + (pa <= pb && pa <= pc ? a : pb <= pc ? b : c));
+        }
+        break;
+    default:
+        break;
+    }
+}
+
+/* What one decode needs to turn filtered rows into output samples. */
+typedef struct appm__png_info {
+    uint32_t w, h;
+    unsigned depth, type, interlace;
+    unsigned in_ch;  /* samples per pixel in the file */
+    unsigned out_ch; /* channels out: palette 3 or 4, + 1 for tRNS alpha */
+    unsigned char pal[256][4];
+    unsigned npal;
+    int trns;          /* a tRNS chunk was seen */
+    uint16_t key[4];   /* tRNS colour key for grey (key[0]) or RGB; with no tRNS unused */
+} appm__png_info;
+
+/* Spreads one unfiltered row of a pass (row `py` of it, `pw` pixels wide) into
+ * the output.  Returns 0, or the offending palette index + 1. */
+static unsigned appm__png_spread(const appm__png_info *in, const unsigned char *row, uint32_t pw, uint32_t py,
+                                 const unsigned char *pass, void *outp)
+{
+    const uint32_t y = pass[1] + py * pass[3];
+    const unsigned oc = in->out_ch, d = in->depth;
+    uint32_t i, x;
+    if (d == 16) {
+        uint16_t *o = (uint16_t *)outp;
+        for (i = 0, x = pass[0]; i < pw; ++i, x += pass[2]) {
+            uint16_t *q = o + ((size_t)y * in->w + x) * oc;
+            const unsigned char *s = row + (size_t)i * in->in_ch * 2;
+            unsigned c, match = 1;
+            for (c = 0; c < in->in_ch; ++c) {
+                q[c] = (uint16_t)(s[2 * c] << 8 | s[2 * c + 1]);
+                if (q[c] != in->key[c]) match = 0;
+            }
+            if (in->trns) q[in->in_ch] = match ? 0 : 65535;
+        }
+        return 0;
+    }
+    {
+        unsigned char *o = (unsigned char *)outp;
+        const unsigned mask = (1u << d) - 1u;
+        const unsigned scale = d == 1 ? 255 : d == 2 ? 85 : d == 4 ? 17 : 1; /* 255 / (2^d - 1), exact */
+        for (i = 0, x = pass[0]; i < pw; ++i, x += pass[2]) {
+            unsigned char *q = o + ((size_t)y * in->w + x) * oc;
+            unsigned v, c;
+            if (d < 8) { /* packed, leftmost pixel in the high bits (7.2) */
+                size_t bit = (size_t)i * d;
+                v = (unsigned)(row[bit >> 3] >> (8u - d - (unsigned)(bit & 7u))) & mask;
+            } else {
+                v = row[(size_t)i * in->in_ch];
+            }
+            if (in->type == 3) {
+                if (v >= in->npal) return v + 1;
+                memcpy(q, in->pal[v], oc);
+                continue;
+            }
+            if (d < 8) { /* grey only */
+                q[0] = (unsigned char)(v * scale);
+                if (in->trns) q[1] = v == in->key[0] ? 0 : 255;
+                continue;
+            }
+            {
+                const unsigned char *s = row + (size_t)i * in->in_ch;
+                unsigned match = 1;
+                for (c = 0; c < in->in_ch; ++c) {
+                    q[c] = s[c];
+                    if (s[c] != in->key[c]) match = 0;
+                }
+                if (in->trns) q[in->in_ch] = match ? 0 : 255;
+            }
+        }
+    }
+    return 0;
+}
+
+/* Where pass 1 over the chunks has got to: which chunks it has seen, and
+ * where the IDAT data lies (the chunks from idat_first up to idat_end, all
+ * consecutive, idat_total data bytes in idat_count chunks). */
+typedef struct appm__png_scan {
+    size_t idat_first, idat_total, idat_count;
+    uint64_t idat_end;
+    int seen_ihdr, seen_plte, seen_idat, idat_done, seen_iend;
+} appm__png_scan;
+
+/* Checks the framing of the chunk at p[at]: a whole 12-byte frame, a type of
+ * four ASCII letters (5.4), data inside the file, and the CRC.  Leaves its
+ * data length in *n and its type, NUL-terminated, in ty. */
+static appm_status appm__png_frame(const unsigned char *p, size_t len, size_t at, uint32_t *n, char ty[5],
+                                   const char *name, appm_diag *diag)
+{
+    const unsigned char *t;
+    uint32_t crc;
+    int k;
+    if (len - at < 12) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: file ends early (no IEND chunk)");
+    *n = appm__png_be32(p + at);
+    t = p + at + 4;
+    for (k = 0; k < 4; ++k) { /* 5.4: type bytes are ASCII letters */
+        if (!((t[k] >= 'A' && t[k] <= 'Z') || (t[k] >= 'a' && t[k] <= 'z')))
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: bad chunk type at byte %lu", (unsigned long)at);
+        ty[k] = (char)t[k];
+    }
+    ty[4] = 0;
+    if (*n > 0x7FFFFFFFu || *n > len - at - 12)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: chunk %s runs past the end of the file", ty);
+    crc = appm__crc32_update(0xFFFFFFFFu, t, 4 + (size_t)*n) ^ 0xFFFFFFFFu;
+    if (crc != appm__png_be32(t + 4 + *n))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: CRC mismatch in chunk %s", ty);
+    return APPM_OK;
+}
+
+/* IHDR (11.2.2): n bytes at d.  Exactly one, 13 bytes long, with a size in
+ * 1..APPM__IMAGE_MAX, a legal colour type / bit depth pair, and the only
+ * compression, filter and interlace methods there are. */
+static appm_status appm__png_ihdr(appm__png_info *in, appm__png_scan *sc, const unsigned char *d, uint32_t n,
+                                  const char *name, appm_diag *diag)
+{
+    static const unsigned char ok_depth[7] = {1 | 2 | 4 | 8 | 16, 0, 8 | 16, 1 | 2 | 4 | 8, 8 | 16, 0, 8 | 16};
+    if (sc->seen_ihdr) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: second IHDR chunk");
+    if (n != 13) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: IHDR is %lu bytes, not 13", (unsigned long)n);
+    sc->seen_ihdr = 1;
+    in->w = appm__png_be32(d);
+    in->h = appm__png_be32(d + 4);
+    in->depth = d[8];
+    in->type = d[9];
+    in->interlace = d[12];
+    if (in->w == 0 || in->h == 0 || in->w > APPM__IMAGE_MAX || in->h > APPM__IMAGE_MAX)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: size %lux%lu is outside 1..%u",
+                          (unsigned long)in->w, (unsigned long)in->h, APPM__IMAGE_MAX);
+    if (in->type > 6 || !ok_depth[in->type] || in->depth > 16 || (in->depth & (in->depth - 1)) != 0 ||
+        !(ok_depth[in->type] & in->depth))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: colour type %u with bit depth %u is not legal",
+                          in->type, in->depth);
+    if (d[10] != 0 || d[11] != 0)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: unknown compression or filter method");
+    if (in->interlace > 1)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: unknown interlace method %u", in->interlace);
+    return APPM_OK;
+}
+
+/* PLTE (11.2.3): n bytes at d.  It comes once, before tRNS and IDAT, never in
+ * a grey image, with 1..256 entries, each opaque until tRNS says otherwise. */
+static appm_status appm__png_plte(appm__png_info *in, appm__png_scan *sc, const unsigned char *d, uint32_t n,
+                                  const char *name, appm_diag *diag)
+{
+    unsigned i;
+    if (sc->seen_plte || sc->seen_idat || in->trns)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: PLTE chunk out of place");
+    if (in->type == 0 || in->type == 4)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: PLTE chunk in a greyscale image");
+    if (n == 0 || n % 3 != 0 || n > 768)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: PLTE chunk of %lu bytes", (unsigned long)n);
+    sc->seen_plte = 1;
+    in->npal = n / 3;
+    for (i = 0; i < in->npal; ++i) {
+        memcpy(in->pal[i], d + 3 * i, 3);
+        in->pal[i][3] = 255;
+    }
+    return APPM_OK;
+}
+
+/* tRNS (11.3.2.1): n bytes at d.  It comes once, before IDAT (and after PLTE
+ * in a palette image): alphas for the first palette entries, or the 16-bit
+ * colour key of a grey or RGB image; an image with an alpha channel may not
+ * have one. */
+static appm_status appm__png_trns(appm__png_info *in, const appm__png_scan *sc, const unsigned char *d, uint32_t n,
+                                  const char *name, appm_diag *diag)
+{
+    unsigned i;
+    if (in->trns || sc->seen_idat) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: tRNS chunk out of place");
+    if (in->type == 3) {
+        if (!sc->seen_plte) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: tRNS chunk before PLTE");
+        if (n > in->npal)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: tRNS has more entries than PLTE");
+        for (i = 0; i < n; ++i) in->pal[i][3] = d[i];
+    } else if (in->type == 0 || in->type == 2) {
+        unsigned nc = in->type == 0 ? 1 : 3;
+        if (n != 2 * nc)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: tRNS chunk of %lu bytes", (unsigned long)n);
+        for (i = 0; i < nc; ++i) in->key[i] = (uint16_t)(d[2 * i] << 8 | d[2 * i + 1]);
+    } else {
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: tRNS chunk in an image with alpha");
+    }
+    in->trns = 1;
+    return APPM_OK;
+}
+
+/* Pass 1 over the chunks, from the one after the signature to IEND: checks
+ * every chunk's framing and order, fills in from IHDR, PLTE and tRNS, and
+ * notes in sc where the IDAT data is.  Unknown ancillary chunks are skipped;
+ * an unknown critical one is refused.  Reads nothing, allocates nothing. */
+static appm_status appm__png_chunks(const unsigned char *p, size_t len, appm__png_info *in, appm__png_scan *sc,
+                                    const char *name, appm_diag *diag)
+{
+    size_t at;
+    appm_status st;
+    for (at = 8; !sc->seen_iend;) {
+        uint32_t n = 0;
+        const unsigned char *d;
+        char ty[5];
+        if ((st = appm__png_frame(p, len, at, &n, ty, name, diag)) != APPM_OK) return st;
+        d = p + at + 8;
+        if (!sc->seen_ihdr && memcmp(ty, "IHDR", 4) != 0)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: first chunk is %s, not IHDR", ty);
+        if (sc->seen_idat && memcmp(ty, "IDAT", 4) != 0) sc->idat_done = 1;
+        if (memcmp(ty, "IHDR", 4) == 0) {
+            if ((st = appm__png_ihdr(in, sc, d, n, name, diag)) != APPM_OK) return st;
+        } else if (memcmp(ty, "PLTE", 4) == 0) {
+            if ((st = appm__png_plte(in, sc, d, n, name, diag)) != APPM_OK) return st;
+        } else if (memcmp(ty, "tRNS", 4) == 0) {
+            if ((st = appm__png_trns(in, sc, d, n, name, diag)) != APPM_OK) return st;
+        } else if (memcmp(ty, "IDAT", 4) == 0) {
+            if (sc->idat_done)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: IDAT chunks are not consecutive");
+            if (in->type == 3 && !sc->seen_plte)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: palette image without PLTE");
+            if (!sc->seen_idat) sc->idat_first = at;
+            sc->seen_idat = 1;
+            sc->idat_total += n;
+            sc->idat_count++;
+            sc->idat_end = at + 12 + (uint64_t)n;
+        } else if (memcmp(ty, "IEND", 4) == 0) {
+            sc->seen_iend = 1;
+        } else if (!((unsigned char)ty[0] & 0x20u)) { /* 5.4: bit 5 of the first byte clear: critical */
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: unknown critical chunk %s", ty);
+        }
+        at += 12 + (size_t)n;
+    }
+    if (!sc->seen_idat) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: no IDAT chunk");
+    return APPM_OK;
+}
+
+/* Sets the channel counts and the sizes, all in 64 bits: *raw, the filtered
+ * rows of every pass as the zlib stream must inflate to, and *outbytes, the
+ * output.  Refuses sizes the IDAT data could not inflate to, and sizes that do
+ * not fit this machine's size_t, before anything is allocated. */
+static appm_status appm__png_sizes(appm__png_info *in, size_t idat_total, uint64_t *raw, uint64_t *outbytes,
+                                   const char *name, appm_diag *diag)
+{
+    const unsigned npass = in->interlace ? 7 : 1;
+    unsigned pass, bpp_bits;
+    in->in_ch = in->type == 0 ? 1 : in->type == 2 ? 3 : in->type == 3 ? 1 : in->type == 4 ? 2 : 4;
+    in->out_ch = in->type == 3 ? (in->trns ? 4 : 3) : in->in_ch + (in->trns ? 1 : 0);
+    bpp_bits = in->in_ch * in->depth;
+    *raw = 0;
+    for (pass = 0; pass < npass; ++pass) {
+        static const unsigned char whole[4] = {0, 0, 1, 1};
+        const unsigned char *ps = in->interlace ? appm__png_adam7[pass] : whole;
+        uint64_t pw = appm__png_pass_count(in->w, ps[0], ps[2]), ph = appm__png_pass_count(in->h, ps[1], ps[3]);
+        if (pw && ph) *raw += ph * (1 + (pw * bpp_bits + 7) / 8);
+    }
+    *outbytes = (uint64_t)in->w * in->h * in->out_ch * (in->depth == 16 ? 2 : 1);
+    /* Deflate codes a 258-byte match in as little as 2 bits: at most 1032
+     * bytes out per byte in.  More than that (plus the zlib framing) cannot be
+     * real, and refusing it here keeps a tiny file from claiming gigabytes. */
+    if (*raw > 1032u * (uint64_t)idat_total + 64)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "PNG: %lux%lu image cannot come from %lu bytes of IDAT data (corrupt or truncated)",
+                          (unsigned long)in->w, (unsigned long)in->h, (unsigned long)idat_total);
+    if (*raw + idat_total > (uint64_t)SIZE_MAX || *outbytes > (uint64_t)SIZE_MAX)
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "PNG: image too large for this machine");
+    return APPM_OK;
+}
+
+/* Undoes the filters of the inflated rows in scratch, pass by pass, in place,
+ * and spreads the pixels into pix.  A row's filter needs the row above it
+ * unfiltered, which in-place decoding in row order guarantees.  Refuses an
+ * unknown filter type and a palette index past the palette. */
+static appm_status appm__png_rows(const appm__png_info *in, unsigned char *scratch, unsigned char *pix,
+                                  const char *name, appm_diag *diag)
+{
+    const unsigned npass = in->interlace ? 7 : 1, bpp_bits = in->in_ch * in->depth;
+    const size_t bpp = bpp_bits >= 8 ? bpp_bits / 8 : 1; /* 9.2: bytes per complete pixel, at least 1 */
+    unsigned char *row = scratch;
+    unsigned pass;
+    for (pass = 0; pass < npass; ++pass) {
+        static const unsigned char whole[4] = {0, 0, 1, 1};
+        const unsigned char *ps = in->interlace ? appm__png_adam7[pass] : whole;
+        uint32_t pw = appm__png_pass_count(in->w, ps[0], ps[2]), ph = appm__png_pass_count(in->h, ps[1], ps[3]), y;
+        size_t rb = ((size_t)pw * bpp_bits + 7) / 8;
+        const unsigned char *up = NULL;
+        if (!pw || !ph) continue;
+        for (y = 0; y < ph; ++y) {
+            unsigned f = row[0], bad;
+            if (f > 4)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: bad filter type %u in row %lu%s", f,
+                                  (unsigned long)y, in->interlace ? " of an Adam7 pass" : "");
+            appm__png_unfilter(f, row + 1, up, rb, bpp);
+            if (!in->interlace && in->depth == 8 && in->type != 3 && !in->trns) /* the common case: as stored */
+                memcpy(pix + (size_t)y * rb, row + 1, rb);
+            else if ((bad = appm__png_spread(in, row + 1, pw, y, ps, pix)) != 0)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: palette index %u out of range", bad - 1);
+            up = row + 1;
+            row += rb + 1;
+        }
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__png_decode(appm__mem *m, const unsigned char *p, size_t len, const char *name,
+                                    appm__pixels *out, appm_diag *diag)
+{
+    static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
+    appm__png_info in;
+    appm__png_scan sc;
+    uint64_t raw, outbytes;
+    unsigned char *scratch = NULL, *pix = NULL;
+    const unsigned char *zsrc;
+    const char *err;
+    appm_status st;
+    memset(out, 0, sizeof *out);
+    memset(&in, 0, sizeof in);
+    memset(&sc, 0, sizeof sc);
+    if (len < 8 || memcmp(p, sig, 8) != 0) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: bad signature");
+    if ((st = appm__png_chunks(p, len, &in, &sc, name, diag)) != APPM_OK) return st;
+    if ((st = appm__png_sizes(&in, sc.idat_total, &raw, &outbytes, name, diag)) != APPM_OK) return st;
+
+    /* The scratch: the filtered rows, then (when split over several chunks)
+     * the IDAT data joined. */
+    scratch = (unsigned char *)appm__alloc(m, (size_t)raw + (sc.idat_count > 1 ? sc.idat_total : 0), 1);
+    if (scratch) pix = (unsigned char *)appm__alloc(m, (size_t)outbytes, 1);
+    if (!scratch || !pix) {
+        appm__free(m, scratch);
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "PNG: out of memory");
+    }
+    if (sc.idat_count > 1) {
+        unsigned char *q = scratch + raw;
+        size_t at;
+        for (at = sc.idat_first; at < sc.idat_end;) {
+            uint32_t n = appm__png_be32(p + at);
+            memcpy(q, p + at + 8, n);
+            q += n;
+            at += 12 + (size_t)n;
+        }
+        zsrc = scratch + raw;
+    } else {
+        zsrc = p + sc.idat_first + 8;
+    }
+    if ((err = appm__zlib_inflate(zsrc, sc.idat_total, scratch, (size_t)raw)) != NULL)
+        st = appm__fail(diag, APPM_ERR_PARSE, name, 0, "PNG: IDAT: %s", err);
+    else
+        st = appm__png_rows(&in, scratch, pix, name, diag);
+    appm__free(m, scratch);
+    if (st != APPM_OK) {
+        appm__free(m, pix);
+        return st;
+    }
+    out->w = in.w;
+    out->h = in.h;
+    out->channels = in.out_ch;
+    out->depth = in.depth == 16 ? 16 : 8;
+    out->data = pix;
+    return APPM_OK;
+}
+
+/* ---- 3.8 OpenEXR reader ---------------------------------------------------------
+ *
+ * Single-part scanline files, as "The OpenEXR File Layout" describes them
+ * (and 3.3 writes them): magic, version 2 with no flags we do not know, the
+ * header attributes, the line offset table (one 64-bit file offset per block,
+ * in increasing-y order whatever the lineOrder), then the blocks, each
+ * "int32 y of its first line, int32 byte count, data".  A block holds its lines
+ * one after the other; a line holds every channel's samples for the dataWindow
+ * width, channel after channel in the order of the channel list (sorted by
+ * name).  Everything is little-endian.
+ *
+ * ZIP (16 lines a block) and ZIPS (1) deflate the block after two reversible
+ * steps; RLE runs a byte-wise run-length code before the same two steps: the
+ * bytes are split into the even ones then the odd ones, and each stored as the
+ * difference from the byte before, + 128.  Any compressor stores a block raw
+ * when compression would not make it smaller, which shows as a byte count
+ * equal to the raw size.
+ *
+ * Samples become 32-bit floats: HALF exactly (every half is a float), FLOAT as
+ * its bits, UINT rounded to the nearest float. */
+
+/* The file header facts we use. */
+typedef struct appm__exr_info {
+    int64_t x0, y0;
+    uint32_t w, h;
+    unsigned compression, line_order, lines; /* lines per block */
+    unsigned nch;
+    size_t line_bytes;       /* one line of every channel */
+    size_t off[5];           /* R G B A Y: byte offset of the channel within a line */
+    unsigned type[5];        /* its pixel type */
+    int has[5];
+} appm__exr_info;
+
+static uint32_t appm__exr_rd32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+/* IEEE half to float, exact: normal halves re-bias the exponent (15 -> 127),
+ * subnormal ones (exponent 0) are normalised, since every one is a normal
+ * float; infinities and NaNs keep their payload. */
+static float appm__exr_half(unsigned h)
+{
+    uint32_t sign = (uint32_t)(h & 0x8000u) << 16, e = (h >> 10) & 31u, mant = h & 0x3FFu, bits;
+    float f;
+    if (e == 31) bits = sign | 0x7F800000u | mant << 13;
+    else if (e != 0) bits = sign | (e + 112u) << 23 | mant << 13;
+    else if (mant == 0) bits = sign;
+    else {
+        e = 113; /* 2^-14, the exponent of the smallest normal half, biased for float */
+        while (!(mant & 0x400u)) {
+            mant <<= 1;
+            --e;
+        }
+        bits = sign | e << 23 | (mant & 0x3FFu) << 13;
+    }
+    memcpy(&f, &bits, 4);
+    return f;
+}
+
+/* Reads the NUL-terminated string at p[*at..end) of at most `max` characters
+ * (plus the NUL); NULL when it does not end in time. */
+static const char *appm__exr_str(const unsigned char *p, size_t end, size_t *at, size_t max)
+{
+    size_t i;
+    for (i = *at; i < end && i - *at <= max; ++i)
+        if (p[i] == 0) {
+            const char *s = (const char *)p + *at;
+            *at = i + 1;
+            return s;
+        }
+    return NULL;
+}
+
+/* The channel list (chlist): entries of name, int32 pixel type, uint8 pLinear,
+ * 3 reserved bytes, int32 x and y sampling; a NUL ends it. */
+static appm_status appm__exr_channels(appm__exr_info *e, const unsigned char *v, size_t n, const char *name,
+                                      appm_diag *diag)
+{
+    static const unsigned char bytes[3] = {4, 2, 4}; /* UINT, HALF, FLOAT */
+    size_t at = 0, line = 0; /* bytes per pixel of all channels so far */
+    for (;;) {
+        const char *cn;
+        uint32_t type, xs, ys;
+        int slot;
+        if (at >= n) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: channel list ends early");
+        if (v[at] == 0) break;
+        if (!(cn = appm__exr_str(v, n, &at, 255)) || n - at < 16)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: channel list ends early");
+        type = appm__exr_rd32(v + at);
+        xs = appm__exr_rd32(v + at + 8);
+        ys = appm__exr_rd32(v + at + 12);
+        at += 16;
+        if (type > 2) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: channel %s has unknown pixel type %lu", cn, (unsigned long)type);
+        if (xs != 1 || ys != 1)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: subsampled channel %s is not supported", cn);
+        if (++e->nch > 1024) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: too many channels");
+        slot = !strcmp(cn, "R") ? 0 : !strcmp(cn, "G") ? 1 : !strcmp(cn, "B") ? 2 : !strcmp(cn, "A") ? 3 : !strcmp(cn, "Y") ? 4 : -1;
+        if (slot >= 0) {
+            if (e->has[slot]) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: channel %s listed twice", cn);
+            e->has[slot] = 1;
+            e->off[slot] = line; /* scaled by the width once it is known */
+            e->type[slot] = type;
+        }
+        line += bytes[type];
+    }
+    e->line_bytes = line;
+    return APPM_OK;
+}
+
+/* Undoes the ZIP/RLE predictor and byte split (t -> o, n bytes). */
+static void appm__exr_unpredict(unsigned char *t, unsigned char *o, size_t n)
+{
+    size_t i, half = (n + 1) / 2;
+    for (i = 1; i < n; ++i) t[i] = (unsigned char)(t[i - 1] + t[i] - 128);
+    for (i = 0; i < n; ++i) o[i] = (i & 1u) ? t[half + i / 2] : t[i / 2];
+}
+
+/* OpenEXR RLE: a signed count byte c; c < 0: -c bytes follow as they are;
+ * c >= 0: the next byte, c + 1 times.  Returns 0 unless dst comes out exactly full. */
+static int appm__exr_unrle(const unsigned char *s, size_t n, unsigned char *d, size_t want)
+{
+    size_t i = 0, o = 0;
+    while (i < n) {
+        int c = s[i] < 128 ? s[i] : (int)s[i] - 256;
+        ++i;
+        if (c < 0) {
+            size_t k = (size_t)-c;
+            if (k > n - i || k > want - o) return 0;
+            memcpy(d + o, s + i, k);
+            i += k;
+            o += k;
+        } else {
+            size_t k = (size_t)c + 1;
+            if (i >= n || k > want - o) return 0;
+            memset(d + o, s[i++], k);
+            o += k;
+        }
+    }
+    return o == want;
+}
+
+/* What the block pass needs besides the header: the output channels, where
+ * the line offset table is, and the raw size of the largest block. */
+typedef struct appm__exr_plan {
+    unsigned nout, slot[4]; /* output channels; the i-th is appm__exr_info slot slot[i] (0-4: R G B A Y) */
+    size_t table, nblock;   /* the line offset table: its file offset, its entries (one per block) */
+    size_t maxblock;        /* raw bytes of the largest block */
+} appm__exr_plan;
+
+/* The magic number and the version field: version 2, single-part scanline,
+ * no flag this reader does not know (bit 10, long names, is harmless). */
+static appm_status appm__exr_version(const unsigned char *p, size_t len, const char *name, appm_diag *diag)
+{
+    uint32_t version;
+    if (len < 8 || appm__exr_rd32(p) != 20000630u) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: bad magic number");
+    version = appm__exr_rd32(p + 4);
+    if ((version & 0xFFu) != 2) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: unknown version %lu", (unsigned long)(version & 0xFFu));
+    if (version & 0x200u) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: tiled files are not supported");
+    if (version & 0x800u) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: deep data files are not supported");
+    if (version & 0x1000u) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: multi-part files are not supported");
+    if (version & ~0x4FFu) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: unknown version flags 0x%lx", (unsigned long)version);
+    return APPM_OK;
+}
+
+/* The dataWindow box2i at v (int32 xmin, ymin, xmax, ymax, inclusive): its
+ * origin and a size in 1..APPM__IMAGE_MAX, computed in 64 bits so that no
+ * pair of int32 corners overflows. */
+static appm_status appm__exr_window(appm__exr_info *e, const unsigned char *v, const char *name, appm_diag *diag)
+{
+    int32_t b[4];
+    int i;
+    for (i = 0; i < 4; ++i) {
+        uint32_t u = appm__exr_rd32(v + 4 * i);
+        b[i] = u < 0x80000000u ? (int32_t)u : -(int32_t)(0xFFFFFFFFu - u) - 1;
+    }
+    if ((int64_t)b[2] - b[0] + 1 < 1 || (int64_t)b[2] - b[0] + 1 > APPM__IMAGE_MAX ||
+        (int64_t)b[3] - b[1] + 1 < 1 || (int64_t)b[3] - b[1] + 1 > APPM__IMAGE_MAX)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: dataWindow size is outside 1..%u", APPM__IMAGE_MAX);
+    e->x0 = b[0];
+    e->y0 = b[1];
+    e->w = (uint32_t)((int64_t)b[2] - b[0] + 1);
+    e->h = (uint32_t)((int64_t)b[3] - b[1] + 1);
+    return APPM_OK;
+}
+
+/* The header from p[*at] (just after the version): attributes of name, type,
+ * int32 size and value, until an empty name, which *at is left just past.
+ * channels, compression and dataWindow must each come exactly once; a
+ * lineOrder or part type is checked; other attributes are skipped. */
+static appm_status appm__exr_attrs(appm__exr_info *e, const unsigned char *p, size_t len, size_t *at,
+                                    const char *name, appm_diag *diag)
+{
+    int seen_ch = 0, seen_cmp = 0, seen_dw = 0;
+    appm_status st;
+    for (;;) {
+        const char *an, *at_type;
+        const unsigned char *v;
+        uint32_t n;
+        if (*at >= len) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: header ends early");
+        if (p[*at] == 0) {
+            ++*at;
+            break;
+        }
+        if (!(an = appm__exr_str(p, len, at, 255)) || !(at_type = appm__exr_str(p, len, at, 255)) || len - *at < 4)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: header ends early");
+        n = appm__exr_rd32(p + *at);
+        *at += 4;
+        if (n > len - *at) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: attribute %s runs past the end", an);
+        v = p + *at;
+        *at += n;
+        if (!strcmp(an, "channels")) {
+            if (strcmp(at_type, "chlist") || seen_ch)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: bad channels attribute");
+            seen_ch = 1;
+            if ((st = appm__exr_channels(e, v, n, name, diag)) != APPM_OK) return st;
+        } else if (!strcmp(an, "compression")) {
+            if (strcmp(at_type, "compression") || n != 1 || seen_cmp)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: bad compression attribute");
+            seen_cmp = 1;
+            e->compression = v[0];
+        } else if (!strcmp(an, "dataWindow")) {
+            if (strcmp(at_type, "box2i") || n != 16 || seen_dw)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: bad dataWindow attribute");
+            seen_dw = 1;
+            if ((st = appm__exr_window(e, v, name, diag)) != APPM_OK) return st;
+        } else if (!strcmp(an, "lineOrder")) {
+            if (strcmp(at_type, "lineOrder") || n != 1 || v[0] > 1)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: lineOrder must be INCREASING_Y or DECREASING_Y");
+            e->line_order = v[0];
+        } else if (!strcmp(an, "type")) {
+            if (n < 13 || memcmp(v, "scanlineimage", 13) != 0)
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: part type %.*s is not supported (only scanlineimage)",
+                                  (int)(n < 32 ? n : 32), (const char *)v);
+        }
+    }
+    if (!seen_ch || !seen_cmp || !seen_dw)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: header lacks %s", !seen_ch ? "channels" : !seen_cmp ? "compression" : "dataWindow");
+    return APPM_OK;
+}
+
+/* From a complete header: refuses the compressions this reader lacks, picks
+ * the output channels (R, G, B and maybe A, else Y) into pl, and turns e's
+ * per-pixel channel offsets and line size into per-line ones, once a block
+ * of lines is known to fit a quarter of size_t's range. */
+static appm_status appm__exr_select(appm__exr_info *e, appm__exr_plan *pl, const char *name, appm_diag *diag)
+{
+    static const char *const cname[10] = {"NONE", "RLE", "ZIPS", "ZIP", "PIZ", "PXR24", "B44", "B44A", "DWAA", "DWAB"};
+    static const unsigned char clines[4] = {1, 1, 1, 16};
+    int c;
+    if (e->compression > 3)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: %s compression is not supported (only NONE, RLE, ZIPS, ZIP)",
+                          e->compression < 10 ? cname[e->compression] : "unknown");
+    if (e->has[0] || e->has[1] || e->has[2]) {
+        for (c = 0; c < 3; ++c)
+            if (!e->has[c])
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: channel %c is missing (R, G and B go together)", "RGB"[c]);
+        pl->nout = e->has[3] ? 4 : 3;
+        pl->slot[0] = 0, pl->slot[1] = 1, pl->slot[2] = 2, pl->slot[3] = 3;
+    } else if (e->has[4]) {
+        pl->nout = 1;
+        pl->slot[0] = 4;
+    } else {
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: no R, G, B or Y channel");
+    }
+    e->lines = clines[e->compression];
+    /* one line is at most 32768 pixels x 1024 channels x 4 bytes: 2^37, fine in 64 bits */
+    if ((uint64_t)e->line_bytes * e->w * e->lines > (uint64_t)SIZE_MAX / 4)
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "EXR: image too large for this machine");
+    for (c = 0; c < 5; ++c) e->off[c] *= e->w;
+    e->line_bytes *= e->w;
+    return APPM_OK;
+}
+
+/* The line offset table at p[at], and a look at every block before anything
+ * is allocated: each must start after the table and lie wholly inside the
+ * file.  Sets pl->table and pl->nblock, and *packed to the blocks' data bytes. */
+static appm_status appm__exr_table(const appm__exr_info *e, appm__exr_plan *pl, const unsigned char *p, size_t len,
+                                   size_t at, uint64_t *packed, const char *name, appm_diag *diag)
+{
+    size_t k;
+    *packed = 0;
+    pl->nblock = (e->h + e->lines - 1) / e->lines;
+    pl->table = at;
+    if ((uint64_t)pl->nblock * 8 > len - at) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: line offset table runs past the end");
+    at += pl->nblock * 8;
+    for (k = 0; k < pl->nblock; ++k) {
+        const unsigned char *q = p + pl->table + 8 * k;
+        uint64_t off = appm__exr_rd32(q) | (uint64_t)appm__exr_rd32(q + 4) << 32;
+        uint32_t size;
+        if (off < at || off > len || len - off < 8)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: block %lu offset is outside the file", (unsigned long)k);
+        size = appm__exr_rd32(p + off + 4);
+        if (size > len - off - 8)
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: block %lu runs past the end of the file", (unsigned long)k);
+        *packed += size;
+    }
+    return APPM_OK;
+}
+
+/* Converts nl raw lines at data (each e->line_bytes, channel after channel)
+ * into the float rows of pix from row `row` on, interleaving the chosen
+ * channels: HALF exactly, FLOAT as its bits, UINT to the nearest float. */
+static void appm__exr_lines(const appm__exr_info *e, const appm__exr_plan *pl, const unsigned char *data, size_t nl,
+                            size_t row, float *pix)
+{
+    const unsigned nout = pl->nout;
+    size_t j;
+    for (j = 0; j < nl; ++j) {
+        const unsigned char *line = data + j * e->line_bytes;
+        float *o = pix + (row + j) * e->w * nout;
+        unsigned ci;
+        for (ci = 0; ci < nout; ++ci) {
+            const unsigned char *s = line + e->off[pl->slot[ci]];
+            unsigned type = e->type[pl->slot[ci]];
+            uint32_t x;
+            for (x = 0; x < e->w; ++x) {
+                float f;
+                if (type == 1) {
+                    f = appm__exr_half((unsigned)s[2 * x] | (unsigned)s[2 * x + 1] << 8);
+                } else {
+                    uint32_t bits = appm__exr_rd32(s + 4 * (size_t)x);
+                    if (type == 2) memcpy(&f, &bits, 4);
+                    else f = (float)bits;
+                }
+                o[(size_t)x * nout + ci] = f;
+            }
+        }
+    }
+}
+
+/* Decodes every block into pix.  scratch holds, when the file is compressed,
+ * the unpacked block (at maxblock) and its unpredicted copy (at 0), then one
+ * flag per block.  A block is placed by its own y, which must start a block
+ * and come once; a block whose byte count is its raw size is stored raw. */
+static appm_status appm__exr_blocks(const appm__exr_info *e, const appm__exr_plan *pl, const unsigned char *p,
+                                    unsigned char *scratch, float *pix, const char *name, appm_diag *diag)
+{
+    const size_t maxblock = pl->maxblock;
+    unsigned char *seen = scratch + (e->compression ? 2 * maxblock : 0);
+    size_t k;
+    for (k = 0; k < pl->nblock; ++k) {
+        const unsigned char *q = p + pl->table + 8 * k, *data;
+        size_t off = (size_t)(appm__exr_rd32(q) | (uint64_t)appm__exr_rd32(q + 4) << 32);
+        uint32_t yu = appm__exr_rd32(p + off), size = appm__exr_rd32(p + off + 4);
+        int64_t y = yu < 0x80000000u ? (int64_t)yu : (int64_t)yu - 4294967296;
+        int64_t rel = y - e->y0;
+        size_t nl, want;
+        if (rel < 0 || rel >= (int64_t)e->h || rel % e->lines != 0 || seen[rel / e->lines])
+            return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: block %lu has a bad or repeated line number %ld",
+                              (unsigned long)k, (long)y);
+        seen[rel / e->lines] = 1;
+        nl = (size_t)(e->h - rel < e->lines ? e->h - rel : e->lines);
+        want = nl * e->line_bytes;
+        data = p + off + 8;
+        if (size != want) {
+            const char *err = NULL;
+            if (e->compression == 0) err = "uncompressed block has the wrong size";
+            else if (e->compression == 1) {
+                if (!appm__exr_unrle(data, size, scratch + maxblock, want)) err = "bad RLE data";
+            } else {
+                err = appm__zlib_inflate(data, size, scratch + maxblock, want);
+            }
+            if (err) return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: block at line %ld: %s", (long)y, err);
+            appm__exr_unpredict(scratch + maxblock, scratch, want);
+            data = scratch;
+        }
+        appm__exr_lines(e, pl, data, nl, (size_t)rel, pix);
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__exr_decode(appm__mem *m, const unsigned char *p, size_t len, const char *name,
+                                    appm__pixels *out, appm_diag *diag)
+{
+    appm__exr_info e;
+    appm__exr_plan pl;
+    size_t at = 8, scratch_n;
+    uint64_t raw_total, packed_total, outcount;
+    unsigned char *scratch = NULL;
+    float *pix = NULL;
+    appm_status st;
+    memset(out, 0, sizeof *out);
+    memset(&e, 0, sizeof e);
+    memset(&pl, 0, sizeof pl);
+    if ((st = appm__exr_version(p, len, name, diag)) != APPM_OK) return st;
+    if ((st = appm__exr_attrs(&e, p, len, &at, name, diag)) != APPM_OK) return st;
+    if ((st = appm__exr_select(&e, &pl, name, diag)) != APPM_OK) return st;
+    if ((st = appm__exr_table(&e, &pl, p, len, at, &packed_total, name, diag)) != APPM_OK) return st;
+    raw_total = (uint64_t)e.line_bytes * e.h;
+    if (raw_total > 1032u * packed_total + 64u * pl.nblock)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "EXR: %lux%lu image cannot come from %lu bytes of data (corrupt or truncated)",
+                          (unsigned long)e.w, (unsigned long)e.h, (unsigned long)packed_total);
+    outcount = (uint64_t)e.w * e.h * pl.nout;
+    if (outcount > (uint64_t)SIZE_MAX / 4)
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "EXR: image too large for this machine");
+    pl.maxblock = e.line_bytes * (e.h < e.lines ? e.h : e.lines);
+    scratch_n = (e.compression ? 2 * pl.maxblock : 0) + pl.nblock;
+    scratch = (unsigned char *)appm__alloc(m, scratch_n, 1);
+    if (scratch) pix = (float *)appm__alloc(m, (size_t)outcount, sizeof(float));
+    if (!scratch || !pix) {
+        appm__free(m, scratch);
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "EXR: out of memory");
+    }
+    st = appm__exr_blocks(&e, &pl, p, scratch, pix, name, diag);
+    appm__free(m, scratch);
+    if (st != APPM_OK) {
+        appm__free(m, pix);
+        return st;
+    }
+    out->w = e.w;
+    out->h = e.h;
+    out->channels = pl.nout;
+    out->depth = 32;
+    out->data = pix;
+    return APPM_OK;
+}
+
+/* ---- 3.9 JPEG (ITU T.81 | ISO/IEC 10918-1) --------------------------------
+ *
+ * Reads the Huffman-coded DCT processes of T.81 at 8-bit precision: baseline
+ * (SOF0), extended sequential (SOF1) and progressive (SOF2), with one grey or
+ * three colour components.  Lossless, hierarchical and arithmetic-coded files,
+ * 12-bit samples, CMYK/YCCK and DNL are refused with a message.
+ *
+ * The output matches libjpeg-turbo's default decode (djpeg) sample for
+ * sample, because every step after entropy decoding copies its arithmetic:
+ *   - the accurate integer inverse DCT ("islow": Loeffler-Ligtenberg-Moschytz
+ *     with 13-bit constants and 2 extra bits between the passes);
+ *   - "fancy" chroma upsampling (a triangle filter, 3/4 of the nearer sample
+ *     and 1/4 of the further one, with libjpeg's alternating rounding biases);
+ *   - the 16-bit fixed-point YCbCr -> RGB conversion of JFIF.
+ * A different rounding anywhere shifts some samples by one level.
+ *
+ * Memory: a sequential file whose first scan carries every component (the
+ * usual case) is decoded MCU row by MCU row straight into the output; each
+ * component keeps a ring of three MCU rows of samples, because upsampling an
+ * output row needs the sample rows above and below it.  A progressive file
+ * (or a sequential one split into several scans) needs every coefficient
+ * before any block is final, so it keeps all of them and runs the same
+ * row pipeline at EOI.
+ *
+ * Hostile input: every count read from the file is checked before it is used,
+ * all sizes are computed in 64 bits, and an image must not claim more blocks
+ * than its file has bits (each block costs at least one bit of DC code), so a
+ * small file cannot ask for gigabytes.  A scan that runs out of data is an
+ * error, never silently padded: the bit reader feeds zero bits past the end of
+ * a segment (the Huffman decoder peeks ahead) but counts them, and any MCU
+ * that consumes one fails.
+ */
+#define APPM__JPEG_FAST 9 /* Huffman codes up to this long decode with one table look-up */
+
+/* Zig-zag order (T.81 figure A.6): the natural (row-major) index of the k-th
+ * coefficient in the coded order. */
+static const unsigned char appm__jpeg_zigzag[64] = {
+    0,  1,  8,  16, 9,  2,  3,  10, 17, 24, 32, 25, 18, 11, 4,  5,  12, 19, 26, 33, 40, 48,
+    41, 34, 27, 20, 13, 6,  7,  14, 21, 28, 35, 42, 49, 56, 57, 50, 43, 36, 29, 22, 15, 23,
+    30, 37, 44, 51, 58, 59, 52, 45, 38, 31, 39, 46, 53, 60, 61, 54, 47, 55, 62, 63};
+
+/* A canonical Huffman code (T.81 annex C): `fast` maps the next FAST bits to
+ * (length << 8 | symbol), 0 where the code is longer; longer codes are found
+ * with maxcode[l], the largest code of length l (-1 if none), as in F.2.2.3. */
+typedef struct appm__jpeg_huff {
+    uint16_t fast[1 << APPM__JPEG_FAST];
+    int32_t maxcode[17];
+    int32_t valptr[17]; /* symbol index of a length-l code c: valptr[l] + c */
+    unsigned char vals[256];
+    int defined;
+} appm__jpeg_huff;
+
+/* How a component's samples are brought to full resolution: the choice
+ * libjpeg makes from the ratio of the largest sampling factor to its own. */
+enum { APPM__JPEG_UP_FULL, APPM__JPEG_UP_H2V1, APPM__JPEG_UP_H1V2, APPM__JPEG_UP_H2V2, APPM__JPEG_UP_REPL };
+
+/* The kinds of scan: sequential, and the four progressive refinements of G.1.2. */
+enum { APPM__JPEG_SEQ, APPM__JPEG_DC_FIRST, APPM__JPEG_DC_REFINE, APPM__JPEG_AC_FIRST, APPM__JPEG_AC_REFINE };
+
+typedef struct appm__jpeg_comp {
+    int id, h, v, tq;        /* from SOF; h = v = 1 forced for a grey image */
+    int hr, vr, up;          /* upsampling ratios (max / own) and method */
+    int td, ta;              /* Huffman tables of the current scan */
+    int latched, scanned;
+    uint16_t q[64];          /* quantisation table in natural order, latched at the first scan */
+    uint32_t cw, ch;         /* samples actually present: ceil(W * h / hmax) x ceil(H * v / vmax) */
+    uint32_t bw, bh;         /* blocks, padded to whole MCUs */
+    int32_t dc;              /* DC predictor (F.2.1.3.1), kept to 16 bits as libjpeg's JCOEF */
+    int16_t *coef;           /* all bw x bh blocks, or only the current MCU row's v block rows */
+    unsigned char *rows;     /* ring of `nrows` sample rows of `stride` bytes */
+    size_t stride;
+    uint32_t nrows;
+    unsigned char *upbuf;    /* one upsampled output row */
+} appm__jpeg_comp;
+
+typedef struct appm__jpeg {
+    appm__mem *m;
+    const char *name;
+    appm_diag *diag;
+    const unsigned char *p;
+    size_t len, pos;
+    /* frame */
+    int frame;               /* 0 none yet, 1 sequential, 2 progressive */
+    uint32_t w, h, mcux, mcuy;
+    int nc, hmax, vmax, rgb;
+    appm__jpeg_comp comp[3];
+    uint64_t blocks;         /* blocks the scans must cover, without MCU padding */
+    uint16_t qt[4][64];
+    int qt_defined[4];
+    appm__jpeg_huff dc[4], ac[4];
+    unsigned restart_interval;
+    int jfif, adobe, adobe_transform;
+    /* decoding state */
+    int streaming, full, scans, complete;
+    uint64_t visits;         /* blocks visited by all scans so far */
+    unsigned char *out;
+    /* current scan */
+    int ns, kind, ss, se, ah, al;
+    appm__jpeg_comp *sc[4];
+    /* entropy-coded segment reader (F.2.2.5): bits MSB first in `acc` */
+    uint64_t acc;
+    int nbits, pad;          /* bits in acc; of them, zero bits made up past the segment's end */
+    int hit;                 /* the segment's end (a marker or the end of the file) was reached */
+    size_t marker_pos;
+    unsigned eobrun;
+} appm__jpeg;
+
+#define APPM__JPEG_BAD(d, ...) appm__fail((d)->diag, APPM_ERR_PARSE, (d)->name, 0, __VA_ARGS__)
+
+static appm_status appm__jpeg_nomem(appm__jpeg *d)
+{
+    return appm__fail(d->diag, APPM_ERR_NOMEM, d->name, 0, "JPEG: out of memory");
+}
+
+static unsigned appm__jpeg_u16(const unsigned char *b)
+{
+    return (unsigned)b[0] << 8 | b[1];
+}
+
+/* Two's-complement wrap to 16 bits, as libjpeg stores coefficients (JCOEF);
+ * only corrupt files reach values that need it. */
+static int16_t appm__jpeg_i16(int32_t v)
+{
+    uint32_t u = (uint32_t)v & 0xFFFFu;
+    return (int16_t)((int32_t)u - (u >= 0x8000u ? 0x10000 : 0));
+}
+
+/* -- Marker segments (T.81 B.2) */
+
+/* Builds the decoding tables of one DHT table (T.81 C.2, F.2.2.3). */
+static appm_status appm__jpeg_build_huff(appm__jpeg *d, appm__jpeg_huff *t, const unsigned char *counts,
+                                         const unsigned char *vals, int nvals, int is_dc, int id)
+{
+    int32_t code = 0;
+    int l, k = 0, i;
+    memset(t, 0, sizeof *t);
+    memcpy(t->vals, vals, (size_t)nvals);
+    for (l = 1; l <= 16; ++l) {
+        t->valptr[l] = k - code;
+        for (i = 0; i < counts[l - 1]; ++i, ++k, ++code) {
+            if (code >= (int32_t)1 << l) break; /* reported below */
+            if (is_dc && vals[k] > 15)
+                return APPM__JPEG_BAD(d, "JPEG: DC Huffman table %d has symbol %d (above 15)", id, vals[k]);
+            if (l <= APPM__JPEG_FAST) {
+                int shift = APPM__JPEG_FAST - l, j;
+                for (j = 0; j < 1 << shift; ++j)
+                    t->fast[(code << shift) + j] = (uint16_t)(l << 8 | vals[k]);
+            }
+        }
+        t->maxcode[l] = counts[l - 1] ? code - 1 : -1;
+        /* The code after the last one of length l must still fit in l bits:
+         * the all-ones code is reserved (C.2), and more would overflow. */
+        if (code >= (int32_t)1 << l)
+            return APPM__JPEG_BAD(d, "JPEG: Huffman table %d has more codes than fit their lengths", id);
+        code <<= 1;
+    }
+    t->defined = 1;
+    return APPM_OK;
+}
+
+static appm_status appm__jpeg_dht(appm__jpeg *d, const unsigned char *s, size_t n)
+{
+    while (n > 0) {
+        int tc, th, total = 0, i;
+        appm_status st;
+        if (n < 17) return APPM__JPEG_BAD(d, "JPEG: truncated Huffman table (DHT)");
+        tc = s[0] >> 4;
+        th = s[0] & 15;
+        if (tc > 1 || th > 3) return APPM__JPEG_BAD(d, "JPEG: bad Huffman table class/id 0x%02X", s[0]);
+        for (i = 1; i <= 16; ++i) total += s[i];
+        if (total > 256) return APPM__JPEG_BAD(d, "JPEG: Huffman table %d has %d codes (at most 256)", th, total);
+        if ((size_t)total > n - 17) return APPM__JPEG_BAD(d, "JPEG: truncated Huffman table (DHT)");
+        st = appm__jpeg_build_huff(d, tc ? &d->ac[th] : &d->dc[th], s + 1, s + 17, total, tc == 0, th);
+        if (st != APPM_OK) return st;
+        s += 17 + total;
+        n -= 17 + (size_t)total;
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__jpeg_dqt(appm__jpeg *d, const unsigned char *s, size_t n)
+{
+    while (n > 0) {
+        int pq = s[0] >> 4, tq = s[0] & 15, k;
+        if (pq > 1 || tq > 3) return APPM__JPEG_BAD(d, "JPEG: bad quantisation table precision/id 0x%02X", s[0]);
+        if (n < (size_t)(1 + 64 * (pq + 1))) return APPM__JPEG_BAD(d, "JPEG: truncated quantisation table (DQT)");
+        /* Table values come in zig-zag order; 16-bit ones (Pq = 1) are big-endian. */
+        for (k = 0; k < 64; ++k)
+            d->qt[tq][appm__jpeg_zigzag[k]] = (uint16_t)(pq ? appm__jpeg_u16(s + 1 + 2 * k) : s[1 + k]);
+        d->qt_defined[tq] = 1;
+        s += 1 + 64 * (pq + 1);
+        n -= (size_t)(1 + 64 * (pq + 1));
+    }
+    return APPM_OK;
+}
+
+static appm_status appm__jpeg_sof(appm__jpeg *d, int marker, const unsigned char *s, size_t n)
+{
+    int i, j;
+    uint64_t blocks = 0;
+    if (d->frame) return APPM__JPEG_BAD(d, "JPEG: more than one frame header (SOF)");
+    if (n < 6) return APPM__JPEG_BAD(d, "JPEG: truncated frame header (SOF)");
+    if (s[0] != 8) return APPM__JPEG_BAD(d, "JPEG: %d-bit samples not supported (only 8-bit)", s[0]);
+    d->h = appm__jpeg_u16(s + 1);
+    d->w = appm__jpeg_u16(s + 3);
+    d->nc = s[5];
+    if (d->h == 0) return APPM__JPEG_BAD(d, "JPEG: height 0 (defined later by a DNL marker) not supported");
+    if (d->w == 0) return APPM__JPEG_BAD(d, "JPEG: image width is 0");
+    if (d->w > APPM__IMAGE_MAX || d->h > APPM__IMAGE_MAX)
+        return APPM__JPEG_BAD(d, "JPEG: %ux%u image is larger than %u", (unsigned)d->w, (unsigned)d->h, APPM__IMAGE_MAX);
+    if (d->nc == 2 || d->nc == 4)
+        return APPM__JPEG_BAD(d, "JPEG: %d components not supported (only grey or YCbCr/RGB)%s", d->nc,
+                              d->nc == 4 ? ", CMYK/YCCK" : "");
+    if (d->nc != 1 && d->nc != 3) return APPM__JPEG_BAD(d, "JPEG: %d components not supported", d->nc);
+    if (n != 6 + 3 * (size_t)d->nc) return APPM__JPEG_BAD(d, "JPEG: frame header (SOF) has the wrong length");
+    d->frame = marker == 0xC2 ? 2 : 1;
+    d->hmax = d->vmax = 1;
+    for (i = 0; i < d->nc; ++i) {
+        appm__jpeg_comp *c = &d->comp[i];
+        const unsigned char *q = s + 6 + 3 * i;
+        c->id = q[0];
+        c->h = q[1] >> 4;
+        c->v = q[1] & 15;
+        c->tq = q[2];
+        if (c->h < 1 || c->h > 4 || c->v < 1 || c->v > 4)
+            return APPM__JPEG_BAD(d, "JPEG: component %d has sampling factors %dx%d (1..4 allowed)", c->id, c->h, c->v);
+        if (c->tq > 3) return APPM__JPEG_BAD(d, "JPEG: component %d uses quantisation table %d (0..3)", c->id, c->tq);
+        for (j = 0; j < i; ++j)
+            if (d->comp[j].id == c->id) return APPM__JPEG_BAD(d, "JPEG: two components with id %d", c->id);
+        /* A single component's scan is never interleaved, so its sampling
+         * factors do not matter (A.2.2): treat it as 1x1, as libjpeg does. */
+        if (d->nc == 1) c->h = c->v = 1;
+        if (c->h > d->hmax) d->hmax = c->h;
+        if (c->v > d->vmax) d->vmax = c->v;
+    }
+    d->mcux = (d->w + 8u * (unsigned)d->hmax - 1) / (8u * (unsigned)d->hmax);
+    d->mcuy = (d->h + 8u * (unsigned)d->vmax - 1) / (8u * (unsigned)d->vmax);
+    for (i = 0; i < d->nc; ++i) {
+        appm__jpeg_comp *c = &d->comp[i];
+        /* libjpeg upsamples by integral ratios only (jdsample.c); 2:1 gets the
+         * triangle filter, other ratios plain replication. */
+        if (d->hmax % c->h || d->vmax % c->v)
+            return APPM__JPEG_BAD(d, "JPEG: component %d: sampling %dx%d against %dx%d is a fractional ratio (not supported)",
+                                  c->id, c->h, c->v, d->hmax, d->vmax);
+        c->hr = d->hmax / c->h;
+        c->vr = d->vmax / c->v;
+        c->cw = (uint32_t)(((uint64_t)d->w * (unsigned)c->h + (unsigned)d->hmax - 1) / (unsigned)d->hmax);
+        c->ch = (uint32_t)(((uint64_t)d->h * (unsigned)c->v + (unsigned)d->vmax - 1) / (unsigned)d->vmax);
+        c->bw = d->mcux * (uint32_t)c->h;
+        c->bh = d->mcuy * (uint32_t)c->v;
+        if (c->hr == 1 && c->vr == 1) c->up = APPM__JPEG_UP_FULL;
+        else if (c->hr == 2 && c->vr == 1) c->up = c->cw > 2 ? APPM__JPEG_UP_H2V1 : APPM__JPEG_UP_REPL;
+        else if (c->hr == 1 && c->vr == 2) c->up = APPM__JPEG_UP_H1V2;
+        else if (c->hr == 2 && c->vr == 2) c->up = c->cw > 2 ? APPM__JPEG_UP_H2V2 : APPM__JPEG_UP_REPL;
+        else c->up = APPM__JPEG_UP_REPL;
+        blocks += (uint64_t)((c->cw + 7) / 8) * ((c->ch + 7) / 8);
+    }
+    /* Every block costs at least one bit in the scan that carries its DC
+     * coefficient, so more blocks than bits in the file means a corrupt
+     * header (and would make us allocate for nothing). */
+    if (blocks > 8 * (uint64_t)d->len + 64)
+        return APPM__JPEG_BAD(d, "JPEG: %ux%u image (%.0f blocks) cannot fit in a %.0f-byte file", (unsigned)d->w,
+                              (unsigned)d->h, (double)blocks, (double)d->len);
+    d->blocks = blocks;
+    return APPM_OK;
+}
+
+/* -- Entropy-coded segments (T.81 F.2.2, G.2) */
+
+static void appm__jpeg_reset_bits(appm__jpeg *d)
+{
+    d->acc = 0;
+    d->nbits = d->pad = d->hit = 0;
+}
+
+/* Tops the bit buffer up to more than 56 bits.  0xFF 0x00 is a stuffed 0xFF
+ * data byte (F.1.2.3); 0xFF followed by anything else is a marker (extra 0xFF
+ * are fill bytes, B.1.1.2), which ends the segment: from there on zero bits
+ * are fed and counted in `pad`. */
+static void appm__jpeg_refill(appm__jpeg *d)
+{
+    while (d->nbits <= 56) {
+        unsigned b = 0;
+        if (!d->hit) {
+            if (d->pos >= d->len) {
+                d->hit = 1;
+                d->marker_pos = d->len;
+            } else if ((b = d->p[d->pos]) != 0xFF) {
+                d->pos++;
+            } else {
+                size_t q = d->pos + 1;
+                while (q < d->len && d->p[q] == 0xFF) q++;
+                if (q < d->len && d->p[q] == 0) {
+                    d->pos = q + 1;
+                } else {
+                    d->hit = 1;
+                    d->marker_pos = d->pos;
+                    b = 0;
+                }
+            }
+        }
+        if (d->hit) d->pad += 8;
+        d->acc |= (uint64_t)b << (56 - d->nbits);
+        d->nbits += 8;
+    }
+}
+
+static unsigned appm__jpeg_bits(appm__jpeg *d, int n)
+{
+    unsigned v;
+    if (d->nbits < n) appm__jpeg_refill(d);
+    v = (unsigned)(d->acc >> (64 - n));
+    d->acc <<= n;
+    d->nbits -= n;
+    return v;
+}
+
+/* The value of an n-bit magnitude field (F.2.2.1, EXTEND): codes below
+ * 2^(n-1) are negative. */
+static int32_t appm__jpeg_extend(unsigned v, int n)
+{
+    return v < (1u << (n - 1)) ? (int32_t)v - ((int32_t)1 << n) + 1 : (int32_t)v;
+}
+
+/* Decodes one Huffman symbol; -1 for a bit pattern that is no code. */
+static int appm__jpeg_symbol(appm__jpeg *d, const appm__jpeg_huff *t)
+{
+    unsigned f;
+    int l;
+    if (d->nbits < 16) appm__jpeg_refill(d);
+    f = t->fast[d->acc >> (64 - APPM__JPEG_FAST)];
+    if (f) {
+        d->acc <<= f >> 8;
+        d->nbits -= (int)(f >> 8);
+        return (int)(f & 255u);
+    }
+    for (l = APPM__JPEG_FAST + 1; l <= 16; ++l) {
+        int32_t c = (int32_t)(d->acc >> (64 - l));
+        if (c <= t->maxcode[l]) {
+            d->acc <<= l;
+            d->nbits -= l;
+            return t->vals[t->valptr[l] + c];
+        }
+    }
+    return -1;
+}
+
+static appm_status appm__jpeg_bad_code(appm__jpeg *d)
+{
+    return APPM__JPEG_BAD(d, "JPEG: corrupt scan data (invalid Huffman code)");
+}
+
+/* A sequential block (F.2.2.1, F.2.2.2): the DC difference, then run/size
+ * pairs for the AC coefficients up to EOB. */
+static appm_status appm__jpeg_block_seq(appm__jpeg *d, appm__jpeg_comp *c, int16_t *blk)
+{
+    const appm__jpeg_huff *ac = &d->ac[c->ta];
+    int t = appm__jpeg_symbol(d, &d->dc[c->td]), k;
+    if (t < 0) return appm__jpeg_bad_code(d);
+    c->dc = appm__jpeg_i16(c->dc + (t ? appm__jpeg_extend(appm__jpeg_bits(d, t), t) : 0));
+    blk[0] = (int16_t)c->dc;
+    for (k = 1; k < 64; ++k) {
+        int rs = appm__jpeg_symbol(d, ac), r, s;
+        if (rs < 0) return appm__jpeg_bad_code(d);
+        r = rs >> 4;
+        s = rs & 15;
+        if (s) {
+            k += r;
+            if (k > 63) return APPM__JPEG_BAD(d, "JPEG: corrupt scan data (AC run past the end of a block)");
+            blk[appm__jpeg_zigzag[k]] = (int16_t)appm__jpeg_extend(appm__jpeg_bits(d, s), s);
+        } else if (r == 15) {
+            k += 15; /* ZRL: sixteen zeros */
+        } else {
+            break; /* EOB */
+        }
+    }
+    return APPM_OK;
+}
+
+/* Progressive DC scans (G.1.2.1): the first carries the difference of the
+ * point-transformed DC (shifted left by Al), each refinement one more bit. */
+static appm_status appm__jpeg_block_dc(appm__jpeg *d, appm__jpeg_comp *c, int16_t *blk)
+{
+    if (d->ah == 0) {
+        int t = appm__jpeg_symbol(d, &d->dc[c->td]);
+        if (t < 0) return appm__jpeg_bad_code(d);
+        c->dc = appm__jpeg_i16(c->dc + (t ? appm__jpeg_extend(appm__jpeg_bits(d, t), t) : 0));
+        blk[0] = appm__jpeg_i16(c->dc * ((int32_t)1 << d->al));
+    } else if (appm__jpeg_bits(d, 1)) {
+        blk[0] = appm__jpeg_i16(blk[0] | ((int32_t)1 << d->al));
+    }
+    return APPM_OK;
+}
+
+/* First AC scan of a band Ss..Se (G.1.2.2): like sequential AC coding, with
+ * EOBn codes that end this block and the next EOBRUN - 1 blocks at once. */
+static appm_status appm__jpeg_block_ac_first(appm__jpeg *d, appm__jpeg_comp *c, int16_t *blk)
+{
+    const appm__jpeg_huff *ac = &d->ac[c->ta];
+    int k;
+    if (d->eobrun > 0) {
+        d->eobrun--;
+        return APPM_OK;
+    }
+    for (k = d->ss; k <= d->se; ++k) {
+        int rs = appm__jpeg_symbol(d, ac), r, s;
+        if (rs < 0) return appm__jpeg_bad_code(d);
+        r = rs >> 4;
+        s = rs & 15;
+        if (s) {
+            k += r;
+            if (k > d->se) return APPM__JPEG_BAD(d, "JPEG: corrupt scan data (AC run past the end of the band)");
+            blk[appm__jpeg_zigzag[k]] = appm__jpeg_i16(appm__jpeg_extend(appm__jpeg_bits(d, s), s) * ((int32_t)1 << d->al));
+        } else if (r == 15) {
+            k += 15;
+        } else {
+            d->eobrun = 1u << r;
+            if (r) d->eobrun += appm__jpeg_bits(d, r);
+            d->eobrun--; /* this block is the first of the run */
+            break;
+        }
+    }
+    return APPM_OK;
+}
+
+/* Appends a correction bit to a coefficient that is already non-zero: a 1
+ * moves it one step of 2^Al away from zero (G.1.2.3). */
+static void appm__jpeg_correct(appm__jpeg *d, int16_t *coef)
+{
+    if (appm__jpeg_bits(d, 1) && (*coef & (1 << d->al)) == 0)
+        *coef = appm__jpeg_i16(*coef + (*coef >= 0 ? 1 : -1) * ((int32_t)1 << d->al));
+}
+
+/* AC successive-approximation refinement (G.1.2.3).  Each symbol is a run of
+ * zero-history coefficients to skip and at most one newly non-zero
+ * coefficient (+-2^Al); every already non-zero coefficient passed on the way
+ * takes a correction bit.  In an EOB run only the correction bits remain. */
+static appm_status appm__jpeg_block_ac_refine(appm__jpeg *d, appm__jpeg_comp *c, int16_t *blk)
+{
+    const appm__jpeg_huff *ac = &d->ac[c->ta];
+    int k = d->ss;
+    if (d->eobrun == 0) {
+        for (; k <= d->se; ++k) {
+            int rs = appm__jpeg_symbol(d, ac), r, s;
+            int16_t nz = 0;
+            if (rs < 0) return appm__jpeg_bad_code(d);
+            r = rs >> 4;
+            s = rs & 15;
+            if (s) {
+                if (s != 1) return APPM__JPEG_BAD(d, "JPEG: corrupt scan data (refinement coefficient of size %d)", s);
+                nz = appm__jpeg_i16(appm__jpeg_bits(d, 1) ? (int32_t)1 << d->al : -((int32_t)1 << d->al));
+            } else if (r != 15) {
+                d->eobrun = 1u << r;
+                if (r) d->eobrun += appm__jpeg_bits(d, r);
+                break;
+            }
+            for (; k <= d->se; ++k) {
+                int16_t *coef = blk + appm__jpeg_zigzag[k];
+                if (*coef) appm__jpeg_correct(d, coef);
+                else if (r-- == 0) break;
+            }
+            if (s) {
+                if (k > d->se) return APPM__JPEG_BAD(d, "JPEG: corrupt scan data (AC run past the end of the band)");
+                blk[appm__jpeg_zigzag[k]] = nz;
+            }
+        }
+    }
+    if (d->eobrun > 0) {
+        for (; k <= d->se; ++k)
+            if (blk[appm__jpeg_zigzag[k]]) appm__jpeg_correct(d, blk + appm__jpeg_zigzag[k]);
+        d->eobrun--;
+    }
+    return APPM_OK;
+}
+
+/* -- Inverse DCT, upsampling, colour (libjpeg-turbo's arithmetic) */
+
+/* Fixed-point constants of jidctint.c: round(x * 2^13). */
+#define APPM__JPEG_F0_298 2446
+#define APPM__JPEG_F0_390 3196
+#define APPM__JPEG_F0_541 4433
+#define APPM__JPEG_F0_765 6270
+#define APPM__JPEG_F0_899 7373
+#define APPM__JPEG_F1_175 9633
+#define APPM__JPEG_F1_501 12299
+#define APPM__JPEG_F1_847 15137
+#define APPM__JPEG_F1_961 16069
+#define APPM__JPEG_F2_053 16819
+#define APPM__JPEG_F2_562 20995
+#define APPM__JPEG_F3_072 25172
+/* Rounded division by 2^n for a value of either sign.  C99 leaves the right
+ * shift of a negative number to the implementation, so a bias of 2^62 (all
+ * values here stay below 2^59 in magnitude, even for corrupt coefficients)
+ * makes it non-negative first: floor((x + 2^(n-1)) / 2^n) exactly. */
+#define APPM__JPEG_BIAS ((int64_t)1 << 62)
+#define APPM__JPEG_DESCALE(x, n) \
+    ((((x) + ((int64_t)1 << ((n) - 1)) + APPM__JPEG_BIAS) >> (n)) - (APPM__JPEG_BIAS >> (n)))
+
+static unsigned char appm__jpeg_clamp(int64_t v)
+{
+    return (unsigned char)(v < 0 ? 0 : v > 255 ? 255 : v);
+}
+
+/* One 1-D 8-point inverse DCT (jidctint.c): the even part is a rotation by
+ * sqrt(2) c6 plus butterflies, the odd part figure 8 of Loeffler et al.
+ * in[i * step] holds the dequantised inputs, o[] gets the 8 outputs still
+ * scaled by 2^13 (the caller descales). */
+static void appm__jpeg_idct_1d(const int64_t *in, int step, int64_t *o)
+{
+    int64_t z1, z2, z3, z4, z5, t0, t1, t2, t3, t10, t11, t12, t13;
+    z2 = in[2 * step];
+    z3 = in[6 * step];
+    z1 = (z2 + z3) * APPM__JPEG_F0_541;
+    t2 = z1 - z3 * APPM__JPEG_F1_847;
+    t3 = z1 + z2 * APPM__JPEG_F0_765;
+    t0 = (in[0] + in[4 * step]) * 8192;
+    t1 = (in[0] - in[4 * step]) * 8192;
+    t10 = t0 + t3;
+    t13 = t0 - t3;
+    t11 = t1 + t2;
+    t12 = t1 - t2;
+    t0 = in[7 * step];
+    t1 = in[5 * step];
+    t2 = in[3 * step];
+    t3 = in[1 * step];
+    z1 = t0 + t3;
+    z2 = t1 + t2;
+    z3 = t0 + t2;
+    z4 = t1 + t3;
+    z5 = (z3 + z4) * APPM__JPEG_F1_175;
+    t0 *= APPM__JPEG_F0_298;
+    t1 *= APPM__JPEG_F2_053;
+    t2 *= APPM__JPEG_F3_072;
+    t3 *= APPM__JPEG_F1_501;
+    z1 *= -APPM__JPEG_F0_899;
+    z2 *= -APPM__JPEG_F2_562;
+    z3 = z3 * -APPM__JPEG_F1_961 + z5;
+    z4 = z4 * -APPM__JPEG_F0_390 + z5;
+    t0 += z1 + z3;
+    t1 += z2 + z4;
+    t2 += z2 + z3;
+    t3 += z1 + z4;
+    o[0] = t10 + t3;
+    o[7] = t10 - t3;
+    o[1] = t11 + t2;
+    o[6] = t11 - t2;
+    o[2] = t12 + t1;
+    o[5] = t12 - t1;
+    o[3] = t13 + t0;
+    o[4] = t13 - t0;
+}
+
+/* Dequantises and inverse-transforms one block into 8 rows of `out`.  Pass 1
+ * (columns) keeps 2 fraction bits (PASS1_BITS), pass 2 (rows) removes them
+ * together with the 2^13 of the constants and the 8 of the DCT's scale; the
+ * +128 level shift (A.3.1) and the clamp to 0..255 come last.  A column or
+ * row whose AC terms are all zero is constant, so it is filled directly (the
+ * same values the full transform would give). */
+static void appm__jpeg_idct(const int16_t *blk, const uint16_t *q, unsigned char *out, size_t stride)
+{
+    int64_t in[64], ws[64], o[8];
+    int i, j;
+    for (i = 0; i < 64; ++i) in[i] = (int64_t)blk[i] * q[i];
+    for (j = 0; j < 8; ++j) {
+        const int64_t *c = in + j;
+        if (!c[8] && !c[16] && !c[24] && !c[32] && !c[40] && !c[48] && !c[56]) {
+            for (i = 0; i < 8; ++i) ws[8 * i + j] = c[0] * 4;
+            continue;
+        }
+        appm__jpeg_idct_1d(c, 8, o);
+        for (i = 0; i < 8; ++i) ws[8 * i + j] = APPM__JPEG_DESCALE(o[i], 13 - 2);
+    }
+    for (i = 0; i < 8; ++i) {
+        const int64_t *r = ws + 8 * i;
+        unsigned char *dst = out + (size_t)i * stride;
+        if (!r[1] && !r[2] && !r[3] && !r[4] && !r[5] && !r[6] && !r[7]) {
+            unsigned char v = appm__jpeg_clamp(APPM__JPEG_DESCALE(r[0], 2 + 3) + 128);
+            memset(dst, v, 8);
+            continue;
+        }
+        appm__jpeg_idct_1d(r, 1, o);
+        for (j = 0; j < 8; ++j) dst[j] = appm__jpeg_clamp(APPM__JPEG_DESCALE(o[j], 13 + 2 + 3) + 128);
+    }
+}
+
+static unsigned char *appm__jpeg_row(appm__jpeg_comp *c, uint32_t r)
+{
+    return c->rows + (size_t)(r % c->nrows) * c->stride;
+}
+
+/* Component c's samples for output row y, at full resolution (jdsample.c).
+ * The triangle filters weigh the nearer input sample 3/4 and the further
+ * 1/4; libjpeg alternates the rounding bias between the two outputs of each
+ * input so that errors do not all lean one way.  At the image's edges the
+ * outermost real row or column stands in for its missing neighbour. */
+static const unsigned char *appm__jpeg_upsample(appm__jpeg *d, appm__jpeg_comp *c, uint32_t y)
+{
+    unsigned char *u = c->upbuf;
+    uint32_t x, n = c->cw;
+    const unsigned char *a, *b;
+    if (c->up == APPM__JPEG_UP_FULL) return appm__jpeg_row(c, y);
+    if (c->up == APPM__JPEG_UP_REPL) {
+        a = appm__jpeg_row(c, y / (uint32_t)c->vr);
+        for (x = 0; x < d->w; ++x) u[x] = a[x / (uint32_t)c->hr];
+        return u;
+    }
+    if (c->up == APPM__JPEG_UP_H2V1) {
+        a = appm__jpeg_row(c, y);
+        u[0] = a[0];
+        u[1] = (unsigned char)((a[0] * 3 + a[1] + 2) >> 2);
+        for (x = 1; x + 1 < n; ++x) {
+            int v = a[x] * 3;
+            u[2 * x] = (unsigned char)((v + a[x - 1] + 1) >> 2);
+            u[2 * x + 1] = (unsigned char)((v + a[x + 1] + 2) >> 2);
+        }
+        u[2 * x] = (unsigned char)((a[x] * 3 + a[x - 1] + 1) >> 2);
+        u[2 * x + 1] = a[x];
+        return u;
+    }
+    /* Vertical 2:1: output row y lies in input row y/2, nearer its upper
+     * neighbour when y is even. */
+    a = appm__jpeg_row(c, y >> 1);
+    if (y & 1) b = appm__jpeg_row(c, (y >> 1) + 1 < c->ch ? (y >> 1) + 1 : c->ch - 1);
+    else b = appm__jpeg_row(c, (y >> 1) > 0 ? (y >> 1) - 1 : 0);
+    if (c->up == APPM__JPEG_UP_H1V2) {
+        int bias = (y & 1) ? 2 : 1;
+        for (x = 0; x < n; ++x) u[x] = (unsigned char)((a[x] * 3 + b[x] + bias) >> 2);
+        return u;
+    } else {
+        /* h2v2: column sums 3 near + far first, then the same 3:1 across with
+         * the 1/16 scale, biases 8 and 7. */
+        int last = a[0] * 3 + b[0], cur = last, next;
+        for (x = 0; x < n; ++x) {
+            next = x + 1 < n ? a[x + 1] * 3 + b[x + 1] : cur;
+            u[2 * x] = (unsigned char)((cur * 3 + last + 8) >> 4);
+            u[2 * x + 1] = (unsigned char)((cur * 3 + next + 7) >> 4);
+            last = cur;
+            cur = next;
+        }
+        return u;
+    }
+}
+
+/* YCbCr -> RGB as JFIF defines it, in libjpeg's 16-bit fixed point
+ * (jdcolor.c): R = Y + 1.402 Cr, G = Y - 0.34414 Cb - 0.71414 Cr,
+ * B = Y + 1.772 Cb with Cb, Cr centred on 128, each product rounded half up.
+ * The +512 * 2^16 keeps the shifted value non-negative (see DESCALE). */
+#define APPM__JPEG_FLOOR16(v) ((((v) + ((int32_t)512 << 16)) >> 16) - 512)
+
+static void appm__jpeg_emit_row(appm__jpeg *d, uint32_t y)
+{
+    const unsigned char *s[3];
+    unsigned char *o = d->out + (size_t)y * d->w * (unsigned)d->nc;
+    uint32_t x;
+    int i;
+    for (i = 0; i < d->nc; ++i) s[i] = appm__jpeg_upsample(d, &d->comp[i], y);
+    if (d->nc == 1) {
+        memcpy(o, s[0], d->w);
+    } else if (d->rgb) {
+        for (x = 0; x < d->w; ++x, o += 3) {
+            o[0] = s[0][x];
+            o[1] = s[1][x];
+            o[2] = s[2][x];
+        }
+    } else {
+        for (x = 0; x < d->w; ++x, o += 3) {
+            int32_t yy = s[0][x], cb = s[1][x] - 128, cr = s[2][x] - 128;
+            o[0] = appm__jpeg_clamp(yy + APPM__JPEG_FLOOR16(91881 * cr + 32768));
+            o[1] = appm__jpeg_clamp(yy + APPM__JPEG_FLOOR16(-22554 * cb - 46802 * cr + 32768));
+            o[2] = appm__jpeg_clamp(yy + APPM__JPEG_FLOOR16(116130 * cb + 32768));
+        }
+    }
+}
+
+static int16_t *appm__jpeg_block(appm__jpeg *d, appm__jpeg_comp *c, uint32_t brow, uint32_t bcol)
+{
+    uint32_t r = d->streaming ? brow % (uint32_t)c->v : brow;
+    return c->coef + ((size_t)r * c->bw + bcol) * 64;
+}
+
+/* MCU row k is in: transform its blocks into the sample rings, then write
+ * the output rows of MCU row k - 1, whose upsampling may look one sample row
+ * into row k (and row k itself when it is the last). */
+static void appm__jpeg_mcu_row_done(appm__jpeg *d, uint32_t k)
+{
+    uint32_t rowh = 8u * (uint32_t)d->vmax, y, y1, first;
+    int i;
+    for (i = 0; i < d->nc; ++i) {
+        appm__jpeg_comp *c = &d->comp[i];
+        uint32_t by, bx;
+        for (by = k * (uint32_t)c->v; by < (k + 1) * (uint32_t)c->v; ++by) {
+            unsigned char *dst = appm__jpeg_row(c, by * 8);
+            for (bx = 0; bx < c->bw; ++bx)
+                appm__jpeg_idct(appm__jpeg_block(d, c, by, bx), c->q, dst + 8 * (size_t)bx, c->stride);
+        }
+    }
+    first = k > 0 ? k - 1 : 0;
+    y1 = k + 1 == d->mcuy ? d->h : k * rowh;
+    for (y = first * rowh; y < y1 && y < d->h; ++y) appm__jpeg_emit_row(d, y);
+}
+
+/* Finds the marker that ends the current entropy-coded segment and leaves
+ * d->pos on its first 0xFF.  Whole bytes left before it are skipped, as
+ * libjpeg does; consumed made-up bits mean the data ran out. */
+static appm_status appm__jpeg_segment_end(appm__jpeg *d)
+{
+    if (d->nbits < d->pad)
+        return APPM__JPEG_BAD(d, d->marker_pos >= d->len ? "JPEG: truncated scan data"
+                                                          : "JPEG: corrupt scan data (ends early at a marker)");
+    if (!d->hit) {
+        size_t q = d->pos;
+        for (;;) {
+            if (q >= d->len) break;
+            if (d->p[q] == 0xFF) {
+                size_t r = q + 1;
+                while (r < d->len && d->p[r] == 0xFF) r++;
+                if (r < d->len && d->p[r] == 0) {
+                    q = r + 1;
+                    continue;
+                }
+                break;
+            }
+            q++;
+        }
+        d->marker_pos = q;
+    }
+    d->pos = d->marker_pos;
+    appm__jpeg_reset_bits(d);
+    return APPM_OK;
+}
+
+/* A restart marker RSTm (F.1.2.3) ends each interval: the bit stream
+ * restarts byte-aligned with the DC predictions and EOBRUN reset. */
+static appm_status appm__jpeg_restart(appm__jpeg *d, int *next)
+{
+    appm_status st = appm__jpeg_segment_end(d);
+    size_t q = d->pos;
+    int i;
+    if (st != APPM_OK) return st;
+    while (q < d->len && d->p[q] == 0xFF) q++;
+    if (q >= d->len) return APPM__JPEG_BAD(d, "JPEG: truncated scan data (restart marker missing)");
+    if (d->p[q] != 0xD0 + *next)
+        return APPM__JPEG_BAD(d, "JPEG: expected restart marker RST%d, found 0xFF%02X", *next, d->p[q]);
+    d->pos = q + 1;
+    *next = (*next + 1) & 7;
+    for (i = 0; i < d->nc; ++i) d->comp[i].dc = 0;
+    d->eobrun = 0;
+    return APPM_OK;
+}
+
+static appm_status appm__jpeg_decode_block(appm__jpeg *d, appm__jpeg_comp *c, uint32_t brow, uint32_t bcol)
+{
+    int16_t *blk = appm__jpeg_block(d, c, brow, bcol);
+    switch (d->kind) {
+    case APPM__JPEG_SEQ: return appm__jpeg_block_seq(d, c, blk);
+    case APPM__JPEG_AC_FIRST: return appm__jpeg_block_ac_first(d, c, blk);
+    case APPM__JPEG_AC_REFINE: return appm__jpeg_block_ac_refine(d, c, blk);
+    default: return appm__jpeg_block_dc(d, c, blk);
+    }
+}
+
+/* Decodes the entropy-coded data of one scan.  An interleaved scan (several
+ * components) walks the MCUs of the frame, each holding h x v blocks of every
+ * component in turn (A.2.3); a single-component scan walks that component's
+ * own blocks, ceil(cw / 8) x ceil(ch / 8), without the MCU padding (A.2.2). */
+static appm_status appm__jpeg_scan(appm__jpeg *d)
+{
+    uint32_t nx, ny, mx, my;
+    unsigned todo = d->restart_interval;
+    int next_rst = 0, i;
+    appm_status st;
+    appm__jpeg_reset_bits(d);
+    d->eobrun = 0;
+    for (i = 0; i < d->nc; ++i) d->comp[i].dc = 0;
+    if (d->ns == 1) {
+        nx = (d->sc[0]->cw + 7) / 8;
+        ny = (d->sc[0]->ch + 7) / 8;
+    } else {
+        nx = d->mcux;
+        ny = d->mcuy;
+    }
+    /* Bounds the work of many scans over a big image (an attack on progressive
+     * decoders): ordinary files visit each block well under 16 times. */
+    if (d->ns == 1) d->visits += (uint64_t)nx * ny;
+    else
+        for (i = 0; i < d->ns; ++i) d->visits += (uint64_t)d->sc[i]->bw * d->sc[i]->bh;
+    if (d->visits > 64 * d->blocks + 4096) return APPM__JPEG_BAD(d, "JPEG: too many scans for the image size");
+    for (my = 0; my < ny; ++my) {
+        if (d->streaming)
+            for (i = 0; i < d->nc; ++i)
+                memset(d->comp[i].coef, 0, (size_t)d->comp[i].bw * (unsigned)d->comp[i].v * 64 * sizeof(int16_t));
+        for (mx = 0; mx < nx; ++mx) {
+            if (d->restart_interval) {
+                if (todo == 0) {
+                    if ((st = appm__jpeg_restart(d, &next_rst)) != APPM_OK) return st;
+                    todo = d->restart_interval;
+                }
+                todo--;
+            }
+            if (d->ns == 1) {
+                if ((st = appm__jpeg_decode_block(d, d->sc[0], my, mx)) != APPM_OK) return st;
+            } else {
+                for (i = 0; i < d->ns; ++i) {
+                    appm__jpeg_comp *c = d->sc[i];
+                    int bx, by;
+                    for (by = 0; by < c->v; ++by)
+                        for (bx = 0; bx < c->h; ++bx) {
+                            st = appm__jpeg_decode_block(d, c, my * (uint32_t)c->v + (uint32_t)by,
+                                                         mx * (uint32_t)c->h + (uint32_t)bx);
+                            if (st != APPM_OK) return st;
+                        }
+                }
+            }
+            if (d->nbits < d->pad) return appm__jpeg_segment_end(d); /* reports the truncation */
+        }
+        if (d->streaming) appm__jpeg_mcu_row_done(d, my);
+    }
+    return appm__jpeg_segment_end(d);
+}
+
+/* Allocates the output and the per-component buffers at the first scan. */
+static appm_status appm__jpeg_setup(appm__jpeg *d)
+{
+    uint64_t need = (uint64_t)d->w * d->h * (unsigned)d->nc;
+    int i;
+    if (need > SIZE_MAX) return appm__jpeg_nomem(d);
+    d->out = (unsigned char *)appm__alloc(d->m, (size_t)need, 1);
+    if (!d->out) return appm__jpeg_nomem(d);
+    for (i = 0; i < d->nc; ++i) {
+        appm__jpeg_comp *c = &d->comp[i];
+        uint64_t nblk = (uint64_t)c->bw * (d->full ? c->bh : (uint32_t)c->v);
+        if (nblk > SIZE_MAX / 128) return appm__jpeg_nomem(d);
+        c->coef = (int16_t *)appm__alloc(d->m, (size_t)nblk * 64, sizeof(int16_t));
+        c->stride = (size_t)c->bw * 8;
+        c->nrows = 3u * 8u * (uint32_t)c->v;
+        c->rows = (unsigned char *)appm__alloc(d->m, c->stride, c->nrows);
+        if (!c->coef || !c->rows) return appm__jpeg_nomem(d);
+        if (c->up != APPM__JPEG_UP_FULL) {
+            c->upbuf = (unsigned char *)appm__alloc(d->m, (size_t)d->mcux * 8 * (unsigned)d->hmax + 8, 1);
+            if (!c->upbuf) return appm__jpeg_nomem(d);
+        }
+    }
+    return APPM_OK;
+}
+
+/* Which colour space three components are in, decided as libjpeg does
+ * (jdapimin.c): a JFIF marker means YCbCr; else an Adobe APP14 marker's
+ * transform flag (0: no transform, RGB); else component ids 'R' 'G' 'B'
+ * mean RGB; anything else is taken to be YCbCr. */
+static int appm__jpeg_is_rgb(const appm__jpeg *d)
+{
+    if (d->nc != 3 || d->jfif) return 0;
+    if (d->adobe) return d->adobe_transform == 0;
+    return d->comp[0].id == 'R' && d->comp[1].id == 'G' && d->comp[2].id == 'B';
+}
+
+static appm_status appm__jpeg_sos(appm__jpeg *d, const unsigned char *s, size_t n)
+{
+    int i, j, blocks = 0;
+    appm_status st;
+    if (!d->frame) return APPM__JPEG_BAD(d, "JPEG: scan (SOS) before the frame header (SOF)");
+    if (d->complete) return APPM__JPEG_BAD(d, "JPEG: extra scan after the image was complete");
+    if (n < 1 || s[0] < 1 || s[0] > 4 || n != 4 + 2 * (size_t)s[0])
+        return APPM__JPEG_BAD(d, "JPEG: malformed scan header (SOS)");
+    d->ns = s[0];
+    for (i = 0; i < d->ns; ++i) {
+        int id = s[1 + 2 * i];
+        appm__jpeg_comp *c = NULL;
+        for (j = 0; j < d->nc; ++j)
+            if (d->comp[j].id == id) c = &d->comp[j];
+        if (!c) return APPM__JPEG_BAD(d, "JPEG: scan uses component %d, which the frame does not have", id);
+        for (j = 0; j < i; ++j)
+            if (d->sc[j] == c) return APPM__JPEG_BAD(d, "JPEG: component %d appears twice in a scan", id);
+        c->td = s[2 + 2 * i] >> 4;
+        c->ta = s[2 + 2 * i] & 15;
+        if (c->td > 3 || c->ta > 3) return APPM__JPEG_BAD(d, "JPEG: scan selects Huffman table 0x%02X", s[2 + 2 * i]);
+        d->sc[i] = c;
+        blocks += c->h * c->v;
+    }
+    d->ss = s[1 + 2 * d->ns];
+    d->se = s[2 + 2 * d->ns];
+    d->ah = s[3 + 2 * d->ns] >> 4;
+    d->al = s[3 + 2 * d->ns] & 15;
+    if (d->ns > 1 && blocks > 10) return APPM__JPEG_BAD(d, "JPEG: %d blocks per MCU (at most 10)", blocks);
+    if (d->frame == 1) {
+        /* Ss, Se, Ah, Al mean nothing in a sequential scan; libjpeg ignores them too. */
+        d->kind = APPM__JPEG_SEQ;
+        for (i = 0; i < d->ns; ++i) {
+            if (d->sc[i]->scanned)
+                return APPM__JPEG_BAD(d, "JPEG: component %d in two sequential scans", d->sc[i]->id);
+            d->sc[i]->scanned = 1;
+        }
+    } else {
+        /* The progression rules of G.1.1.1.1. */
+        if (d->ss == 0 ? d->se != 0 : (d->ss > d->se || d->se > 63 || d->ns != 1) ||
+            (d->ah != 0 && d->al != d->ah - 1) || d->al > 13)
+            return APPM__JPEG_BAD(d, "JPEG: invalid progressive scan (Ss %d, Se %d, Ah %d, Al %d, %d components)",
+                                  d->ss, d->se, d->ah, d->al, d->ns);
+        d->kind = d->ss == 0 ? (d->ah ? APPM__JPEG_DC_REFINE : APPM__JPEG_DC_FIRST)
+                             : (d->ah ? APPM__JPEG_AC_REFINE : APPM__JPEG_AC_FIRST);
+    }
+    for (i = 0; i < d->ns; ++i) {
+        appm__jpeg_comp *c = d->sc[i];
+        if ((d->kind == APPM__JPEG_SEQ || d->kind == APPM__JPEG_DC_FIRST) && !d->dc[c->td].defined)
+            return APPM__JPEG_BAD(d, "JPEG: DC Huffman table %d not defined", c->td);
+        if ((d->kind == APPM__JPEG_SEQ || d->kind >= APPM__JPEG_AC_FIRST) && !d->ac[c->ta].defined)
+            return APPM__JPEG_BAD(d, "JPEG: AC Huffman table %d not defined", c->ta);
+        /* libjpeg takes a component's table when its first scan starts; a
+         * DQT after that does not change it. */
+        if (!c->latched) {
+            if (!d->qt_defined[c->tq]) return APPM__JPEG_BAD(d, "JPEG: quantisation table %d not defined", c->tq);
+            memcpy(c->q, d->qt[c->tq], sizeof c->q);
+            c->latched = 1;
+        }
+    }
+    if (d->scans++ == 0) {
+        d->streaming = d->frame == 1 && d->ns == d->nc;
+        d->full = !d->streaming;
+        d->rgb = appm__jpeg_is_rgb(d);
+        if ((st = appm__jpeg_setup(d)) != APPM_OK) return st;
+    }
+    if ((st = appm__jpeg_scan(d)) != APPM_OK) return st;
+    if (d->streaming) d->complete = 1;
+    return APPM_OK;
+}
+
+static appm_status appm__jpeg_eoi(appm__jpeg *d)
+{
+    uint32_t k;
+    int i;
+    if (!d->frame) return APPM__JPEG_BAD(d, "JPEG: no image (EOI before any frame header)");
+    if (!d->scans) return APPM__JPEG_BAD(d, "JPEG: no scan data");
+    if (d->frame == 1)
+        for (i = 0; i < d->nc; ++i)
+            if (!d->comp[i].scanned) return APPM__JPEG_BAD(d, "JPEG: component %d has no scan", d->comp[i].id);
+    if (d->full)
+        for (k = 0; k < d->mcuy; ++k) appm__jpeg_mcu_row_done(d, k);
+    return APPM_OK;
+}
+
+static appm_status appm__jpeg_markers(appm__jpeg *d)
+{
+    if (d->len < 2 || d->p[0] != 0xFF || d->p[1] != 0xD8)
+        return APPM__JPEG_BAD(d, "JPEG: not a JPEG file (no SOI marker)");
+    d->pos = 2;
+    for (;;) {
+        int mk;
+        size_t n = 0;
+        const unsigned char *s = NULL;
+        appm_status st = APPM_OK;
+        if (d->pos >= d->len) return APPM__JPEG_BAD(d, "JPEG: truncated file (no EOI marker)");
+        if (d->p[d->pos] != 0xFF)
+            return APPM__JPEG_BAD(d, "JPEG: expected a marker at byte %.0f, found 0x%02X", (double)d->pos,
+                                  d->p[d->pos]);
+        while (d->pos < d->len && d->p[d->pos] == 0xFF) d->pos++; /* fill bytes */
+        if (d->pos >= d->len) return APPM__JPEG_BAD(d, "JPEG: truncated file (no EOI marker)");
+        mk = d->p[d->pos++];
+        if (mk == 0xD9) return appm__jpeg_eoi(d);
+        if ((mk >= 0xD0 && mk <= 0xD7) || mk == 0x01) continue; /* RSTn, TEM: no segment */
+        if (mk == 0x00 || mk == 0xD8) return APPM__JPEG_BAD(d, "JPEG: unexpected marker 0xFF%02X", mk);
+        if (d->len - d->pos < 2) return APPM__JPEG_BAD(d, "JPEG: truncated marker 0xFF%02X", mk);
+        n = appm__jpeg_u16(d->p + d->pos);
+        if (n < 2) return APPM__JPEG_BAD(d, "JPEG: marker 0xFF%02X has length %u", mk, (unsigned)n);
+        if (n > d->len - d->pos) return APPM__JPEG_BAD(d, "JPEG: truncated marker 0xFF%02X segment", mk);
+        s = d->p + d->pos + 2;
+        n -= 2;
+        d->pos += n + 2;
+        switch (mk) {
+        case 0xC0: case 0xC1: case 0xC2: st = appm__jpeg_sof(d, mk, s, n); break;
+        case 0xC4: st = appm__jpeg_dht(d, s, n); break;
+        case 0xDB: st = appm__jpeg_dqt(d, s, n); break;
+        case 0xDA: st = appm__jpeg_sos(d, s, n); break;
+        case 0xDD:
+            if (n != 2) return APPM__JPEG_BAD(d, "JPEG: restart interval (DRI) segment has the wrong length");
+            d->restart_interval = appm__jpeg_u16(s);
+            break;
+        case 0xE0:
+            if (n >= 14 && memcmp(s, "JFIF", 5) == 0) d->jfif = 1;
+            break;
+        case 0xEE:
+            if (n >= 12 && memcmp(s, "Adobe", 5) == 0) {
+                d->adobe = 1;
+                d->adobe_transform = s[11];
+            }
+            break;
+        case 0xC3: return APPM__JPEG_BAD(d, "JPEG: lossless JPEG (SOF3) not supported");
+        case 0xC5: case 0xC6: case 0xC7: case 0xDE: case 0xDF:
+            return APPM__JPEG_BAD(d, "JPEG: hierarchical JPEG (marker 0xFF%02X) not supported", mk);
+        case 0xC9: case 0xCA: case 0xCB: case 0xCD: case 0xCE: case 0xCF: case 0xCC:
+            return APPM__JPEG_BAD(d, "JPEG: arithmetic coding (marker 0xFF%02X) not supported", mk);
+        case 0xDC: return APPM__JPEG_BAD(d, "JPEG: DNL marker (height given after the scan) not supported");
+        default:
+            if ((mk >= 0xE1 && mk <= 0xEF) || mk == 0xFE) break; /* APPn (EXIF, ICC, ...), COM: skipped */
+            return APPM__JPEG_BAD(d, "JPEG: unsupported marker 0xFF%02X", mk);
+        }
+        if (st != APPM_OK) return st;
+    }
+}
+
+static void appm__jpeg_release(appm__jpeg *d)
+{
+    int i;
+    for (i = 0; i < 3; ++i) {
+        appm__free(d->m, d->comp[i].coef);
+        appm__free(d->m, d->comp[i].rows);
+        appm__free(d->m, d->comp[i].upbuf);
+    }
+    appm__free(d->m, d->out);
+    appm__free(d->m, d);
+}
+
+/* Decodes the JPEG file p[0..len) into 8-bit grey (1 channel) or RGB (3),
+ * row 0 at the top.  EXIF orientation is not applied: the pixels are as
+ * stored. */
+static appm_status appm__jpeg_decode(appm__mem *m, const unsigned char *p, size_t len, const char *name,
+                                     appm__pixels *out, appm_diag *diag)
+{
+    appm__jpeg *d;
+    appm_status st;
+    memset(out, 0, sizeof *out);
+    d = (appm__jpeg *)appm__alloc(m, 1, sizeof *d);
+    if (!d) return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "JPEG: out of memory");
+    d->m = m;
+    d->name = name;
+    d->diag = diag;
+    d->p = p;
+    d->len = p ? len : 0;
+    st = appm__jpeg_markers(d);
+    if (st == APPM_OK) {
+        out->w = d->w;
+        out->h = d->h;
+        out->channels = (unsigned)d->nc;
+        out->depth = 8;
+        out->data = d->out;
+        d->out = NULL;
+    }
+    appm__jpeg_release(d);
+    return st;
+}
+/* ---- 3.10 Any image: the decoder by the first bytes ----------------------- */
+
+static appm_status appm__pfm_decode(appm__mem *m, const unsigned char *p, size_t len, const char *name,
+                                    appm__pixels *out, appm_diag *diag)
+{
+    appm_image img;
+    appm_status st = appm__pfm_parse(m, p, len, name, &img, diag);
+    if (st != APPM_OK) return st;
+    out->w = img.width;
+    out->h = img.height;
+    out->channels = 3;
+    out->depth = 32;
+    out->data = img.rgb;
+    return APPM_OK;
+}
+
+typedef appm_status (*appm__decode_fn)(appm__mem *m, const unsigned char *p, size_t len, const char *name,
+                                       appm__pixels *out, appm_diag *diag);
+
+/* The decoder for a file that starts with p[0..len) and is called `name`, or
+ * NULL when it is no format appm reads. */
+static appm__decode_fn appm__image_format(const unsigned char *p, size_t len, const char *name,
+                                          const char **format)
+{
+    static const unsigned char png[8] = {0x89, 'P', 'N', 'G', 13, 10, 26, 10};
+    static const unsigned char exr[4] = {0x76, 0x2f, 0x31, 0x01};
+    *format = "PFM";
+    if (len >= 2 && p[0] == 'P' && (p[1] == 'F' || p[1] == 'f')) return appm__pfm_decode;
+    *format = "PNG";
+    if (len >= 8 && memcmp(p, png, 8) == 0) return appm__png_decode;
+    *format = "OpenEXR";
+    if (len >= 4 && memcmp(p, exr, 4) == 0) return appm__exr_decode;
+    *format = "JPEG";
+    if (len >= 3 && p[0] == 0xFF && p[1] == 0xD8 && p[2] == 0xFF) return appm__jpeg_decode;
+    *format = "PNM";
+    if (len >= 2 && p[0] == 'P' && (p[1] == '2' || p[1] == '3' || p[1] == '5' || p[1] == '6'))
+        return appm__pnm_decode;
+    *format = "Radiance HDR";
+    if (len >= 2 && p[0] == '#' && p[1] == '?') return appm__hdr_decode;
+    *format = "TGA";
+    if (appm__ends_with(name, ".tga") || appm__ends_with(name, ".TGA")) return appm__tga_decode;
+    *format = NULL;
+    return NULL;
+}
+
+static appm_status appm__image_decode(appm__mem *m, const unsigned char *p, size_t len, const char *name,
+                                      appm__pixels *out, appm_diag *diag)
+{
+    const char *format;
+    appm__decode_fn fn = appm__image_format(p, len, name, &format);
+    appm_status st;
+    memset(out, 0, sizeof *out);
+    if (!fn)
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                          "not an image appm reads (PNG, JPEG, TGA, PPM/PGM, PFM, OpenEXR, Radiance HDR)");
+    st = fn(m, p, len, name, out, diag);
+    if (st == APPM_OK && (!out->data || out->w == 0 || out->h == 0 || out->w > APPM__IMAGE_MAX ||
+                          out->h > APPM__IMAGE_MAX || out->channels < 1 || out->channels > 4 ||
+                          (out->depth != 8 && out->depth != 16 && out->depth != 32))) {
+        appm__free(m, out->data);
+        memset(out, 0, sizeof *out);
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "%s decoder gave no image", format);
+    }
+    if (st != APPM_OK) memset(out, 0, sizeof *out);
+    return st;
+}
+
+/* The sRGB transfer curve decoded: the linear value of 8-bit code c. */
+static float appm__srgb_linear(double c)
+{
+    return (float)(c <= 0.04045 ? c / 12.92 : pow((c + 0.055) / 1.055, 2.4));
+}
+
+/* Sample k of pixel i of img as a linear number (colour channels of 8- and
+ * 16-bit images sRGB-decoded, alpha linear). */
+static float appm__pixels_linear(const appm__pixels *img, size_t i, unsigned k)
+{
+    size_t j = i * img->channels + k;
+    int alpha = (img->channels == 2 && k == 1) || (img->channels == 4 && k == 3);
+    double c;
+    if (img->depth == 32) return ((const float *)img->data)[j];
+    c = img->depth == 8 ? ((const unsigned char *)img->data)[j] / 255.0 : ((const uint16_t *)img->data)[j] / 65535.0;
+    return alpha ? (float)c : appm__srgb_linear(c);
+}
+
+APPM_API appm_status appm_image_read(const char *path, const appm_config *cfg, appm_image *out,
+                                     appm_diag *diag)
+{
+    appm__mem m;
+    char *buf;
+    size_t len, i, n;
+    appm__pixels px;
+    appm_status s;
+    appm__diag_clear(diag);
+    if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0, "no output image");
+    out->width = out->height = 0;
+    out->rgb = NULL;
+    if (!path) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no path");
+    appm__mem_init(&m, cfg);
+    m.diag = diag;
+    s = appm__read_file(&m, path, &buf, &len, diag);
+    if (s != APPM_OK) return s;
+    s = appm__image_decode(&m, (const unsigned char *)buf, len, path, &px, diag);
+    appm__free(&m, buf);
+    if (s != APPM_OK) return s;
+    if (px.depth == 32 && px.channels == 3) { /* already what appm_image holds */
+        out->rgb = (float *)px.data;
+    } else {
+        n = (size_t)px.w * px.h;
+        out->rgb = (float *)appm__alloc(&m, n, 3 * sizeof(float));
+        if (!out->rgb) {
+            appm__free(&m, px.data);
+            return appm__fail(diag, APPM_ERR_NOMEM, path, 0, "out of memory");
+        }
+        for (i = 0; i < n; ++i) { /* grey to all three; alpha dropped */
+            unsigned k, colour = px.channels >= 3 ? 3 : 1;
+            for (k = 0; k < 3; ++k) out->rgb[3 * i + k] = appm__pixels_linear(&px, i, colour == 3 ? k : 0);
+        }
+        appm__free(&m, px.data);
+    }
+    out->width = px.w;
+    out->height = px.h;
+    return APPM_OK;
+}
+
 APPM_API void appm_image_free(const appm_config *cfg, appm_image *img)
 {
     appm__mem m;
@@ -2383,19 +5469,33 @@ typedef struct appm__material {
     float ns;       /* glossy: Phong exponent, (0, 1e5] */
     float ior;
     uint32_t name;  /* offset of the name in the loader's string pool */
+    /* map_Kd, map_Ks, map_d: 1 + the texture's index in appm_scene.tex, 0 for
+     * none.  map_Kd multiplies color (Kd), map_Ks ks (a mirror's color), map_d
+     * cuts the surface away where its alpha is below 1/2 (appm__cut_away). */
+    uint32_t map_kd, map_ks, map_d;
 } appm__material;
+
+/* A decoded texture map: 8-bit samples (colour sRGB-encoded, alpha linear)
+ * or linear floats (16-bit files are converted to float when they load). */
+typedef struct appm__texture {
+    appm__pixels px;
+    uint64_t hash;  /* of its samples, for checkpoints (section 13) */
+    uint32_t name;  /* loader: offset of its path in the string pool */
+    int missing;    /* loader: it could not be read (--missing-textures warn) */
+} appm__texture;
 
 typedef struct appm__tri { /* 36 bytes: just what the intersection test reads */
     appm__v3 p0, p1, p2;
 } appm__tri;
 
-typedef struct appm__tri_info { /* 32 bytes: what shading reads after a hit */
+typedef struct appm__tri_info { /* 36 bytes: what shading reads after a hit */
     appm__v3 ng;                /* unit geometric normal, counter-clockwise side */
     float area;
     uint32_t mat;
     int32_t light;   /* index of its area light, or -1 */
     int32_t n0;      /* first of three shading normals in scene->normals, or -1 */
     uint32_t nhash;  /* its corners' vn as written, hashed (for checkpoints, section 13); 0 if flat */
+    int32_t uv0;     /* first of its three corners' (u, v) pairs in appm_scene.uv, or -1 */
 } appm__tri_info;
 
 enum { APPM__LIGHT_AREA = 0, APPM__LIGHT_POINT, APPM__LIGHT_SPOT, APPM__LIGHT_ENV };
@@ -2413,6 +5513,22 @@ typedef struct appm__light {
     double pick;     /* probability of choosing this light for a photon or a shadow ray */
     unsigned line;   /* line of the `.scene` statement (0 for area lights) */
 } appm__light;
+
+/* An environment map (`environment map FILE`): the radiance arriving from
+ * each direction, an equirectangular image (docs/scene-format.md 4): row 0 the
+ * zenith (+y), column 0 towards -z, columns advancing towards +x; `rotate`
+ * turns it about +y by that angle (column 0 then looks along +x at 90).  The
+ * loader keeps the decoded file in px; the scene (6.2) keeps linear RGB times
+ * `scale` in rgb and the distribution appm__env_sample draws from. */
+typedef struct appm__envmap {
+    appm__pixels px;   /* loader: the decoded file */
+    float *rgb;        /* w * h * 3 radiances */
+    uint32_t w, h;
+    double *cdf;       /* rows' CDF (h + 1 entries), then each row's CDF over its columns (w + 1 each) */
+    double scale, rotate; /* as written; rotate in degrees */
+    float rot;         /* rotate in radians */
+    uint64_t hash;     /* of the file's samples, scale and rotate (checkpoints) */
+} appm__envmap;
 
 typedef struct appm__camera {
     appm__v3 eye, forward, right, up;
@@ -2435,19 +5551,25 @@ typedef struct appm__loader {
     appm__array pos;        /* appm__v3: the current OBJ's `v` */
     appm__array vn;         /* appm__v3: the current OBJ's `vn`, as written (not normalised) */
     appm__array nrm;        /* appm__v3: shading normals, three per smooth triangle */
-    size_t nvt;             /* `vt` count of the current OBJ (read, unused) */
+    appm__array vt;         /* float pairs: the current OBJ's `vt` (u, v) */
+    appm__array uv;         /* float pairs: three per textured triangle (tri_info.uv0) */
+    appm__array tex;        /* appm__texture: every map the MTL files name, once per path */
+    int missing_warn;       /* appm_config.missing_textures: a map that cannot be read is a warning */
     appm__array tri;        /* appm__tri */
     appm__array info;       /* appm__tri_info */
     appm__array mat;        /* appm__material */
     size_t mat_base;        /* first material of the current OBJ's libraries */
     appm__array names;      /* char: NUL-terminated material names */
-    appm__array face;       /* int64_t pairs (position, normal) of the face being read */
+    appm__array face;       /* int64_t triples (position, normal, texture) of the face being read */
     appm__array lights;     /* appm__light: point, spot, environment */
+    appm__envmap envmap;    /* `environment map`: the decoded file (px.data NULL: none) */
     uint64_t dropped;
     appm__camera cam;
     int have_camera;
     uint32_t width, height;
-    int bare_obj;           /* an OBJ read as a whole scene: no light gets a white environment */
+    int bare_obj;           /* an OBJ read as a whole scene: without light it gets a studio */
+    int stand_in;           /* it got one (appm__stand_in): ground plate, sky, camera */
+    int white;              /* appm_config.stand_in: a bare OBJ without light gets a white environment instead */
     const char *mem_mtl;    /* in-memory MTL text (appm_scene_load_obj_memory) */
     size_t mem_mtl_len;
     const appm_memory_file *files; /* appm_scene_load_memory: the texts meshes and mtllibs name */
@@ -2872,6 +5994,121 @@ static appm_status appm__mtl_illum(appm__loader *L, const char **s, const char *
     return APPM_OK;
 }
 
+/* A texture's samples as appm__tex_lookup reads them: 8-bit as they are,
+ * 16-bit converted to linear float (colour sRGB-decoded), floats as they are;
+ * and the hash of the result (checkpoints).  Frees what it replaces. */
+static appm_status appm__texture_prepare(appm__mem *m, appm__texture *t)
+{
+    size_t n = (size_t)t->px.w * t->px.h * t->px.channels, i;
+    uint64_t h = appm__mix64(((uint64_t)t->px.w << 32 | t->px.h) ^ ((uint64_t)t->px.channels << 8 | t->px.depth));
+    if (t->px.depth == 16) {
+        float *f = (float *)appm__alloc(m, n, sizeof(float));
+        if (!f) return APPM_ERR_NOMEM;
+        for (i = 0; i < n; ++i) f[i] = appm__pixels_linear(&t->px, i / t->px.channels, (unsigned)(i % t->px.channels));
+        appm__free(m, t->px.data);
+        t->px.data = f;
+        t->px.depth = 32;
+    }
+    { /* FNV-1a over the bytes, folded into h */
+        const unsigned char *b = (const unsigned char *)t->px.data;
+        size_t bytes = n * (t->px.depth == 8 ? 1 : 4);
+        uint64_t f = 0xcbf29ce484222325ull;
+        for (i = 0; i < bytes; ++i) f = (f ^ b[i]) * 0x100000001b3ull;
+        t->hash = appm__mix64(h ^ f);
+    }
+    return APPM_OK;
+}
+
+/* The texture at `path`, loaded once however many materials name it: into
+ * *index (1 + its place in L->tex; 0 when it is missing and missing maps
+ * are warnings). */
+static appm_status appm__texture_load(appm__loader *L, const char *path, unsigned line, uint32_t *index)
+{
+    appm__texture *t;
+    const char *buf;
+    char *owned;
+    size_t len, k, off = L->names.count, plen = strlen(path);
+    appm_status st;
+    appm_diag why;
+    *index = 0;
+    for (k = 0; k < L->tex.count; ++k) {
+        t = (appm__texture *)L->tex.data + k;
+        if (strcmp((const char *)L->names.data + t->name, path) == 0) {
+            *index = t->missing ? 0 : (uint32_t)k + 1;
+            return APPM_OK;
+        }
+    }
+    if (!appm__array_reserve(L->mem, &L->names, off + plen + 1)) return APPM_ERR_NOMEM;
+    memcpy((char *)L->names.data + off, path, plen + 1);
+    L->names.count += plen + 1;
+    if (!(t = (appm__texture *)appm__array_push(L->mem, &L->tex))) return APPM_ERR_NOMEM;
+    t->name = (uint32_t)off;
+    appm__diag_clear(&why);
+    L->mem->diag = &why;
+    st = appm__loader_read(L, path, &buf, &len, &owned, &why);
+    if (st == APPM_OK) {
+        st = appm__image_decode(L->mem, (const unsigned char *)buf, len, path, &t->px, &why);
+        appm__free(L->mem, owned);
+    }
+    if (st == APPM_OK) st = appm__texture_prepare(L->mem, t);
+    L->mem->diag = L->diag;
+    if (st == APPM_ERR_NOMEM) return appm__fail(L->diag, st, path, 0, "out of memory loading the texture");
+    if (st != APPM_OK) {
+        appm__free(L->mem, t->px.data);
+        t->px.data = NULL;
+        t->missing = 1;
+        if (!L->missing_warn)
+            return appm__fail(L->diag, st, L->file, line, "texture '%s': %s", path, why.message);
+        if (L->log) {
+            char msg[512];
+            snprintf(msg, sizeof msg, "texture '%.200s': %.250s; rendered without it", path, why.message);
+            L->log(L->log_user, L->file ? L->file : "", line, msg);
+        }
+        return APPM_OK;
+    }
+    *index = (uint32_t)L->tex.count;
+    return APPM_OK;
+}
+
+/* map_Kd, map_Ks or map_d (`which` 'd', 's' or 'a'): [options] FILE.  The
+ * options (-o, -s, -bm, -clamp, ...) are skipped with a warning; the file
+ * name is the rest of the line, relative to the MTL file. */
+static appm_status appm__mtl_map(appm__loader *L, appm__mtl_block *b, char which, const char *s, const char *e,
+                                 unsigned line)
+{
+    const char *ns, *ne, *ts, *te;
+    char path[4096];
+    uint32_t *slot = which == 'd' ? &b->cur->map_kd : which == 's' ? &b->cur->map_ks : &b->cur->map_d;
+    for (;;) { /* an option is '-' then a letter; its arguments are the numbers and words like on/off after it */
+        const char *save = s;
+        if (!appm__token(&save, e, &ts, &te) || te - ts < 2 || ts[0] != '-' ||
+            !((ts[1] >= 'a' && ts[1] <= 'z') || (ts[1] >= 'A' && ts[1] <= 'Z')))
+            break;
+        appm__warn(L, (uint64_t)1 << 8, line, "texture options ('%.*s') are not modelled, ignored",
+                   (int)(te - ts > 20 ? 20 : te - ts), ts);
+        s = save;
+        for (;;) {
+            double v;
+            save = s;
+            if (!appm__token(&save, e, &ts, &te)) break;
+            if (!appm__parse_number(ts, te, &v) && !appm__token_is(ts, te, "on") && !appm__token_is(ts, te, "off") &&
+                !(te - ts == 1 && (*ts == 'r' || *ts == 'g' || *ts == 'b' || *ts == 'm' || *ts == 'l' || *ts == 'z')))
+                break;
+            s = save;
+        }
+    }
+    if (!appm__rest(s, e, &ns, &ne))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "texture map without a file name");
+    if (L->mem_mtl) { /* an in-memory MTL: names are as written */
+        if ((size_t)(ne - ns) >= sizeof path)
+            return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "texture path too long");
+        memcpy(path, ns, (size_t)(ne - ns));
+        path[ne - ns] = 0;
+    } else if (!appm__join_path(path, sizeof path, L->file, ns, (size_t)(ne - ns)))
+        return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "texture path too long");
+    return appm__texture_load(L, path, line, slot);
+}
+
 /* Statement ts..te, not one this renderer models: a texture map, another known
  * MTL statement, or an unknown one.  Warns (each kind once per file). */
 static void appm__mtl_ignored(appm__loader *L, const char *ts, const char *te, unsigned line)
@@ -2881,7 +6118,8 @@ static void appm__mtl_ignored(appm__loader *L, const char *ts, const char *te, u
                                           "disp", "decal", "refl"};
     size_t k, n = sizeof ignored / sizeof ignored[0];
     if (te - ts > 4 && memcmp(ts, "map_", 4) == 0) {
-        appm__warn(L, (uint64_t)1 << 9, line, "texture maps are not modelled: '%.*s' ignored",
+        appm__warn(L, (uint64_t)1 << 9, line,
+                   "texture map '%.*s' is not modelled (map_Kd, map_Ks and map_d are), ignored",
                    (int)(te - ts > 30 ? 30 : te - ts), ts);
         return;
     }
@@ -2921,6 +6159,10 @@ static appm_status appm__mtl_parse(appm__loader *L, const char *buf, size_t len)
             if ((st = appm__mtl_ns(L, &s, e, it.line, b.cur)) == APPM_OK) b.have_ns = 1;
         } else if (appm__token_is(ts, te, "illum"))
             st = appm__mtl_illum(L, &s, e, it.line, &b.illum);
+        else if (appm__token_is(ts, te, "map_Kd") || appm__token_is(ts, te, "map_Ks"))
+            st = appm__mtl_map(L, &b, ts[5], s, e, it.line);
+        else if (appm__token_is(ts, te, "map_d"))
+            st = appm__mtl_map(L, &b, 'a', s, e, it.line);
         else
             appm__mtl_ignored(L, ts, te, it.line);
         if (st != APPM_OK) return st;
@@ -3010,14 +6252,15 @@ static uint64_t appm__vn_hash(uint64_t h, appm__v3 n)
 }
 
 /* One vertex reference "v", "v/vt", "v//vn" or "v/vt/vn" of a face, ts..te:
- * *vi the position's index into L->pos and *ni the normal's into L->vn (-1:
- * none).  The texture index is checked and dropped. */
-static appm_status appm__obj_corner(appm__loader *L, const char *ts, const char *te, unsigned line, int64_t *vi,
-                                    int64_t *ni)
+ * c[0] the position's index into L->pos, c[1] the normal's into L->vn and c[2]
+ * the texture coordinate's into L->vt (-1: none). */
+static appm_status appm__obj_corner(appm__loader *L, const char *ts, const char *te, unsigned line, int64_t *c)
 {
     const char *slash1 = ts, *slash2;
+    int64_t *vi = &c[0], *ni = &c[1];
     int ok;
     *ni = -1;
+    c[2] = -1;
     while (slash1 < te && *slash1 != '/') slash1++;
     *vi = appm__obj_index(ts, slash1, L->pos.count, &ok);
     if (*vi < 0)
@@ -3028,7 +6271,7 @@ static appm_status appm__obj_corner(appm__loader *L, const char *ts, const char 
     if (slash1 < te) {
         slash2 = slash1 + 1;
         while (slash2 < te && *slash2 != '/') slash2++;
-        if (slash2 > slash1 + 1 && appm__obj_index(slash1 + 1, slash2, L->nvt, &ok) < 0)
+        if (slash2 > slash1 + 1 && (c[2] = appm__obj_index(slash1 + 1, slash2, L->vt.count, &ok)) < 0)
             return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line,
                               ok ? "texture index out of range" : "malformed texture index");
         if (slash2 < te) {
@@ -3061,9 +6304,10 @@ static appm_status appm__obj_tri_normals(appm__loader *L, appm__tri_info *in, co
     return APPM_OK;
 }
 
-/* One triangle of a face, its corners c0, c1, c2 (pairs: index into L->pos, into
- * L->vn or -1), of material `mat`: appended to L->tri and L->info, with shading
- * normals when all three corners have one.  A triangle whose area is zero as a
+/* One triangle of a face, its corners c0, c1, c2 (triples: index into L->pos,
+ * into L->vn or -1, into L->vt or -1), of material `mat`: appended to L->tri and
+ * L->info, with shading normals when all three corners have one and texture
+ * coordinates when all three have them and the material has a map.  A triangle whose area is zero as a
  * float is dropped instead (L->dropped, a warning). */
 static appm_status appm__obj_tri(appm__loader *L, const int64_t *c0, const int64_t *c1, const int64_t *c2,
                                  uint32_t mat, unsigned line)
@@ -3106,6 +6350,22 @@ static appm_status appm__obj_tri(appm__loader *L, const int64_t *c0, const int64
     in->mat = mat;
     in->light = -1;
     in->n0 = -1;
+    in->uv0 = -1;
+    if (c0[2] >= 0 && c1[2] >= 0 && c2[2] >= 0) {
+        const appm__material *mm = (const appm__material *)L->mat.data + mat;
+        if (mm->map_kd || mm->map_ks || mm->map_d) {
+            const float *vt = (const float *)L->vt.data;
+            float *uv;
+            if (L->uv.count > 0x7FFFFFF0u) return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "too many triangles");
+            if (!appm__array_reserve(L->mem, &L->uv, L->uv.count + 3)) return APPM_ERR_NOMEM;
+            uv = (float *)L->uv.data + 2 * L->uv.count;
+            memcpy(uv, vt + 2 * c0[2], 2 * sizeof(float));
+            memcpy(uv + 2, vt + 2 * c1[2], 2 * sizeof(float));
+            memcpy(uv + 4, vt + 2 * c2[2], 2 * sizeof(float));
+            in->uv0 = (int32_t)L->uv.count;
+            L->uv.count += 3;
+        }
+    }
     if (c0[1] >= 0 && c1[1] >= 0 && c2[1] >= 0) {
         /* shading normals are stored per triangle corner, three in a row */
         const int64_t idx[3] = {c0[1], c1[1], c2[1]};
@@ -3114,8 +6374,8 @@ static appm_status appm__obj_tri(appm__loader *L, const int64_t *c0, const int64
     return APPM_OK;
 }
 
-/* f: the face's vertex references into L->face (pairs: position, normal or
- * -1), then its triangles as a fan (0, k, k+1).  A face of fewer than three
+/* f: the face's vertex references into L->face (triples: position, normal or
+ * -1, texture coordinate or -1), then its triangles as a fan (0, k, k+1).  A face of fewer than three
  * vertices is skipped with a warning. */
 static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e, unsigned line,
                                   uint32_t mat)
@@ -3126,12 +6386,10 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
     appm_status st;
     L->face.count = 0;
     while (appm__token(s, e, &ts, &te)) {
-        int64_t vi, ni, *pair;
-        if ((st = appm__obj_corner(L, ts, te, line, &vi, &ni)) != APPM_OK) return st;
+        int64_t c[3];
+        if ((st = appm__obj_corner(L, ts, te, line, c)) != APPM_OK) return st;
         if (!appm__array_reserve(L->mem, &L->face, L->face.count + 1)) return APPM_ERR_NOMEM;
-        pair = (int64_t *)L->face.data + 2 * L->face.count++;
-        pair[0] = vi;
-        pair[1] = ni;
+        memcpy((int64_t *)L->face.data + 3 * L->face.count++, c, sizeof c);
     }
     n = L->face.count;
     if (n < 3) {
@@ -3140,7 +6398,7 @@ static appm_status appm__obj_face(appm__loader *L, const char **s, const char *e
     }
     f = (int64_t *)L->face.data;
     for (k = 1; k + 1 < n; ++k) /* fan: (0, k, k+1) */
-        if ((st = appm__obj_tri(L, f, f + 2 * k, f + 2 * k + 2, mat, line)) != APPM_OK) return st;
+        if ((st = appm__obj_tri(L, f, f + 3 * k, f + 3 * k + 3, mat, line)) != APPM_OK) return st;
     return APPM_OK;
 }
 
@@ -3175,6 +6433,27 @@ static appm_status appm__obj_vn(appm__loader *L, const char **s, const char *e, 
     n = appm__normalize(*p);
     if (!(appm__dot(n, n) > 0.5f))
         return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "zero-length normal");
+    return APPM_OK;
+}
+
+/* vt: a texture coordinate u [v [w]] into L->vt (v defaults to 0, w is
+ * ignored).  Any value appm__numbers takes: maps repeat (appm__tex_lookup wraps). */
+static appm_status appm__obj_vt(appm__loader *L, const char **s, const char *e, unsigned line)
+{
+    const char *ts, *te;
+    double v[2] = {0.0, 0.0};
+    float *p;
+    int k;
+    appm_status st;
+    for (k = 0; k < 2; ++k) {
+        const char *save = *s;
+        if (k == 1 && !appm__token(&save, e, &ts, &te)) break; /* "vt u": v = 0 */
+        if ((st = appm__numbers(L, s, e, line, "vt", v + k, 1)) != APPM_OK) return st;
+    }
+    if (!appm__array_reserve(L->mem, &L->vt, L->vt.count + 1)) return APPM_ERR_NOMEM;
+    p = (float *)L->vt.data + 2 * L->vt.count++;
+    p[0] = (float)v[0];
+    p[1] = (float)v[1];
     return APPM_OK;
 }
 
@@ -3233,7 +6512,7 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
     appm_status st = APPM_OK;
     size_t i;
     L->pos.count = 0;
-    L->nvt = 0;
+    L->vt.count = 0;
     L->vn.count = 0;
     L->mat_base = L->mat.count;
     for (i = 0; i < len; ++i)
@@ -3251,7 +6530,7 @@ static appm_status appm__obj_parse(appm__loader *L, const char *buf, size_t len,
         else if (appm__token_is(ts, te, "vn"))
             st = appm__obj_vn(L, &s, e, it.line);
         else if (appm__token_is(ts, te, "vt"))
-            L->nvt++;
+            st = appm__obj_vt(L, &s, e, it.line);
         else if (appm__token_is(ts, te, "f"))
             st = appm__obj_face(L, &s, e, it.line, mat);
         else if (appm__token_is(ts, te, "usemtl"))
@@ -3424,11 +6703,54 @@ static appm_status appm__scene_image(appm__loader *L, const char **s, const char
 }
 
 /* environment r g b (radiance >= 0): light l becomes the environment. */
+/* environment map FILE [scale S] [rotate DEG]: the file decoded into
+ * L->envmap (section 6.2 makes it a light); FILE relative to the scene file. */
+static appm_status appm__scene_envmap(appm__loader *L, appm__light *l, const char **s, const char *e,
+                                      unsigned line, const char *path)
+{
+    appm__kv kv[2] = {{"scale", 1, {1, 0, 0}, 0}, {"rotate", 1, {0, 0, 0}, 0}};
+    const char *ts, *te, *buf;
+    char mpath[4096], *owned;
+    size_t len;
+    appm_status st;
+    appm_diag why;
+    if (L->envmap.px.data) return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "more than one environment");
+    if (!appm__token(s, e, &ts, &te))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "environment map: missing file name");
+    if (!appm__join_path(mpath, sizeof mpath, path, ts, (size_t)(te - ts)))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "environment map: path too long");
+    if ((st = appm__keyvals(L, s, e, line, "environment map", kv, 2)) != APPM_OK) return st;
+    if (!(kv[0].v[0] >= 0.0) || !(kv[0].v[0] <= 1e30))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "environment map: scale must be in [0, 1e30]");
+    appm__diag_clear(&why);
+    L->mem->diag = &why;
+    st = appm__loader_read(L, mpath, &buf, &len, &owned, &why);
+    if (st == APPM_OK) {
+        st = appm__image_decode(L->mem, (const unsigned char *)buf, len, mpath, &L->envmap.px, &why);
+        appm__free(L->mem, owned);
+    }
+    L->mem->diag = L->diag;
+    if (st != APPM_OK)
+        return appm__fail(L->diag, st, path, line, "environment map '%s': %s", mpath, why.message);
+    L->envmap.scale = kv[0].v[0];
+    L->envmap.rotate = kv[1].v[0];
+    l->kind = APPM__LIGHT_ENV;
+    l->value = appm__v((float)kv[0].v[0], (float)kv[0].v[0], (float)kv[0].v[0]);
+    return APPM_OK;
+}
+
 static appm_status appm__scene_env(appm__loader *L, appm__light *l, const char **s, const char *e, unsigned line,
                                    const char *path)
 {
     double v[3];
     appm_status st;
+    {
+        const char *save = *s, *ts, *te;
+        if (appm__token(&save, e, &ts, &te) && appm__token_is(ts, te, "map")) {
+            *s = save;
+            return appm__scene_envmap(L, l, s, e, line, path);
+        }
+    }
     if ((st = appm__numbers(L, s, e, line, "environment", v, 3)) != APPM_OK ||
         (st = appm__line_end(L, s, e, line, "environment")) != APPM_OK)
         return st;
@@ -3550,6 +6872,116 @@ static appm_status appm__scene_parse(appm__loader *L, const char *buf, size_t le
     return APPM_OK;
 }
 
+/* ---- 4.5 Texture lookups -----------------------------------------------------
+ *
+ * (u, v) from `vt`: u runs left to right, v bottom to top (OBJ's convention),
+ * both repeat.  Bilinear between the four texel centres around the point, in
+ * linear values: an 8-bit colour sample is sRGB-decoded by the table below
+ * before it is blended (blending the codes would darken every edge). */
+static const float appm__srgb8[256] = {
+     0.0f, 0.000303526991f, 0.000607053982f, 0.000910580973f, 0.00121410796f, 0.00151763496f,
+     0.00182116195f, 0.00212468882f, 0.00242821593f, 0.0027317428f, 0.00303526991f, 0.00334653584f,
+     0.00367650739f, 0.00402471703f, 0.00439144205f, 0.00477695325f, 0.00518151652f, 0.00560539169f,
+     0.00604883302f, 0.00651209056f, 0.00699541019f, 0.00749903219f, 0.00802319311f, 0.00856812578f,
+     0.00913405884f, 0.00972121768f, 0.010329823f, 0.0109600937f, 0.0116122449f, 0.012286488f,
+     0.0129830325f, 0.0137020834f, 0.0144438436f, 0.0152085144f, 0.0159962941f, 0.0168073755f,
+     0.0176419541f, 0.01850022f, 0.0193823613f, 0.0202885624f, 0.0212190095f, 0.0221738853f,
+     0.0231533665f, 0.0241576321f, 0.0251868591f, 0.0262412224f, 0.0273208916f, 0.02842604f,
+     0.0295568351f, 0.0307134446f, 0.0318960324f, 0.0331047662f, 0.0343398079f, 0.0356013142f,
+     0.0368894488f, 0.0382043719f, 0.0395462364f, 0.0409151986f, 0.0423114114f, 0.043735031f,
+     0.045186203f, 0.0466650873f, 0.0481718257f, 0.0497065671f, 0.0512694567f, 0.0528606474f,
+     0.054480277f, 0.0561284907f, 0.0578054301f, 0.0595112368f, 0.0612460524f, 0.0630100146f,
+     0.064803265f, 0.0666259378f, 0.0684781671f, 0.0703600943f, 0.0722718537f, 0.0742135718f,
+     0.0761853829f, 0.078187421f, 0.0802198201f, 0.0822827071f, 0.0843762085f, 0.0865004584f,
+     0.0886555836f, 0.0908417106f, 0.0930589661f, 0.0953074694f, 0.097587347f, 0.0998987257f,
+     0.102241732f, 0.104616486f, 0.107023105f, 0.10946171f, 0.111932427f, 0.114435375f, 0.116970666f,
+     0.119538426f, 0.122138776f, 0.124771819f, 0.127437681f, 0.130136475f, 0.13286832f, 0.135633335f,
+     0.138431609f, 0.141263291f, 0.144128472f, 0.147027269f, 0.149959788f, 0.152926147f,
+     0.155926466f, 0.158960834f, 0.162029371f, 0.165132195f, 0.168269396f, 0.171441108f,
+     0.174647406f, 0.177888423f, 0.18116425f, 0.18447499f, 0.187820777f, 0.191201687f, 0.194617838f,
+     0.198069319f, 0.20155625f, 0.205078736f, 0.208636865f, 0.212230757f, 0.215860501f, 0.219526201f,
+     0.223227963f, 0.226965874f, 0.230740055f, 0.23455058f, 0.238397568f, 0.242281124f, 0.246201321f,
+     0.25015828f, 0.254152089f, 0.258182853f, 0.262250662f, 0.266355604f, 0.270497799f, 0.274677306f,
+     0.278894275f, 0.283148736f, 0.287440836f, 0.291770637f, 0.296138257f, 0.300543785f,
+     0.304987311f, 0.309468925f, 0.313988715f, 0.318546772f, 0.323143214f, 0.327778101f,
+     0.332451522f, 0.337163627f, 0.341914415f, 0.346704066f, 0.351532608f, 0.356400132f,
+     0.361306787f, 0.366252601f, 0.371237695f, 0.376262128f, 0.38132602f, 0.386429429f, 0.391572475f,
+     0.396755219f, 0.401977777f, 0.407240212f, 0.412542611f, 0.417885065f, 0.423267663f,
+     0.428690493f, 0.434153646f, 0.439657182f, 0.445201188f, 0.450785786f, 0.456411034f,
+     0.462076992f, 0.467783809f, 0.473531485f, 0.479320168f, 0.48514995f, 0.491020858f, 0.496932983f,
+     0.502886474f, 0.50888133f, 0.514917672f, 0.520995557f, 0.527115107f, 0.533276379f, 0.539479494f,
+     0.545724452f, 0.55201143f, 0.558340371f, 0.564711511f, 0.571124852f, 0.577580452f, 0.584078431f,
+     0.590618849f, 0.597201765f, 0.603827357f, 0.610495567f, 0.617206573f, 0.623960376f,
+     0.630757153f, 0.637596846f, 0.644479692f, 0.651405632f, 0.658374846f, 0.665387273f,
+     0.672443151f, 0.679542482f, 0.686685324f, 0.693871737f, 0.701101899f, 0.708375752f,
+     0.715693474f, 0.723055124f, 0.730460763f, 0.73791039f, 0.745404184f, 0.752942204f, 0.760524511f,
+     0.768151164f, 0.775822222f, 0.783537805f, 0.791297913f, 0.799102724f, 0.806952238f,
+     0.814846575f, 0.822785735f, 0.830769897f, 0.838799f, 0.846873224f, 0.854992628f, 0.863157213f,
+     0.871367097f, 0.8796224f, 0.887923121f, 0.896269381f, 0.904661179f, 0.913098633f, 0.921581864f,
+     0.930110872f, 0.938685715f, 0.947306514f, 0.955973327f, 0.964686275f, 0.973445296f,
+     0.982250571f, 0.991102099f, 1.0f,
+};
+
+/* Texel (x, y) of t, channel k, as a linear number; colour of an 8-bit map
+ * through appm__srgb8 unless raw (alpha, and the grey of a cut-out map). */
+static float appm__texel(const appm__texture *t, uint32_t x, uint32_t y, unsigned k, int raw)
+{
+    size_t i = ((size_t)y * t->px.w + x) * t->px.channels + k;
+    if (t->px.depth == 32) return ((const float *)t->px.data)[i];
+    return raw ? ((const unsigned char *)t->px.data)[i] * (1.0f / 255.0f)
+               : appm__srgb8[((const unsigned char *)t->px.data)[i]];
+}
+
+/* Where (u, v) falls on t: the four texels around it and the weights. */
+typedef struct appm__tex_at {
+    uint32_t x0, x1, y0, y1;
+    float ax, ay;
+} appm__tex_at;
+
+static void appm__tex_locate(const appm__texture *t, float u, float v, appm__tex_at *a)
+{
+    const uint32_t w = t->px.w, h = t->px.h;
+    double fx = ((double)u - floor((double)u)) * w - 0.5, fy = (1.0 - ((double)v - floor((double)v))) * h - 0.5;
+    double x0f = floor(fx), y0f = floor(fy);
+    a->ax = (float)(fx - x0f);
+    a->ay = (float)(fy - y0f);
+    /* x0f in [-1, w - 1]: wrapped by adding w before the modulo, never on a negative */
+    a->x0 = (uint32_t)((int64_t)x0f + w) % w;
+    a->y0 = (uint32_t)((int64_t)y0f + h) % h;
+    a->x1 = a->x0 + 1 == w ? 0 : a->x0 + 1;
+    a->y1 = a->y0 + 1 == h ? 0 : a->y0 + 1;
+}
+
+static float appm__tex_sample(const appm__texture *t, const appm__tex_at *a, unsigned c, int raw)
+{
+    return (1.0f - a->ay) * ((1.0f - a->ax) * appm__texel(t, a->x0, a->y0, c, raw) + a->ax * appm__texel(t, a->x1, a->y0, c, raw)) +
+           a->ay * ((1.0f - a->ax) * appm__texel(t, a->x0, a->y1, c, raw) + a->ax * appm__texel(t, a->x1, a->y1, c, raw));
+}
+
+/* Linear RGB of t at (u, v) (a grey map's value in all three), bilinear,
+ * repeating. */
+static appm__v3 appm__tex_rgb(const appm__texture *t, float u, float v)
+{
+    appm__tex_at a;
+    appm__tex_locate(t, u, v, &a);
+    if (t->px.channels < 3) {
+        float g = appm__tex_sample(t, &a, 0, 0);
+        return appm__v(g, g, g);
+    }
+    return appm__v(appm__tex_sample(t, &a, 0, 0), appm__tex_sample(t, &a, 1, 0), appm__tex_sample(t, &a, 2, 0));
+}
+
+/* The cut-out value of map t at (u, v): its alpha, or for a map without
+ * alpha the raw value of its first channel (a grey mask), bilinear; the
+ * surface is there where this is at least 1/2. */
+static float appm__tex_coverage(const appm__texture *t, float u, float v)
+{
+    appm__tex_at a;
+    unsigned nc = t->px.channels;
+    appm__tex_locate(t, u, v, &a);
+    return appm__tex_sample(t, &a, nc == 2 ? 1 : nc == 4 ? 3 : 0, 1);
+}
+
 /* ==== 5. BVH ==============================================================
  *
  * A binary BVH over triangles in one flat array of 32-byte nodes.  Build:
@@ -3637,11 +7069,17 @@ struct appm_scene {
     uint32_t nnormals;
     appm__material *mat;
     uint32_t nmat;
+    appm__texture *tex;    /* the maps materials name (appm__material.map_kd, ...) */
+    uint32_t ntex;
+    float *uv;             /* (u, v) pairs, three per textured triangle (tri_info.uv0) */
+    uint64_t tex_bytes;    /* the maps' samples */
+    int cutouts;           /* a material has map_d: appm__intersect looks through its holes */
     appm__light *light;
     uint32_t nlight;
     double *light_cdf;     /* nlight + 1 entries, light_cdf[nlight] == 1 */
     int env;               /* index of the environment light, or -1 */
-    int env_auto;          /* that environment is the stand-in of a bare OBJ without light */
+    int env_auto;          /* that environment is the stand-in of a bare OBJ without light: 1 white, 2 the studio's sky */
+    appm__envmap envmap;   /* the environment's map (rgb NULL: a constant environment) */
     appm__node *node;      /* binary SAH tree: freed after the collapse unless APPM_BVH_BINARY */
     uint32_t nnode, depth; /* of the binary tree */
     appm__node root;       /* its root box (the box-test slack is measured on it) */
@@ -4475,21 +7913,62 @@ static int appm__occluded_wide(const appm_scene *s, const appm__ray *r, uint32_t
     }
 }
 
-/* Closest hit in (tmin, tmax), ignoring triangle `skip` (the one a secondary ray
- * leaves: a flat triangle cannot be hit again by a ray leaving it). */
-static int appm__intersect(const appm_scene *s, const appm__ray *r, uint32_t skip, appm__hit *h)
+static int appm__intersect_tree(const appm_scene *s, const appm__ray *r, uint32_t skip, appm__hit *h)
 {
-    if (!r->valid || s->nwnode == 0) return 0;
 #if APPM_BVH_BINARY
     if (s->bvh_path == APPM__BVH_BINARY) return appm__intersect_bin(s, r, skip, h);
 #endif
     return appm__intersect_wide(s, r, skip, h, s->bvh_path == APPM__BVH_SCALAR);
 }
 
+/* Whether hit h fell in a hole of a cut-out (map_d) surface: its coverage
+ * below 1/2 (section 4.5).  A triangle without texture coordinates is solid. */
+static int appm__cut_away(const appm_scene *s, const appm__hit *h)
+{
+    const appm__tri_info *in = &s->info[h->tri];
+    const appm__material *m = &s->mat[in->mat];
+    const float *uv;
+    float b0;
+    if (!m->map_d || in->uv0 < 0) return 0;
+    uv = s->uv + 2 * (size_t)in->uv0;
+    b0 = 1.0f - h->b1 - h->b2;
+    return appm__tex_coverage(&s->tex[m->map_d - 1], b0 * uv[0] + h->b1 * uv[2] + h->b2 * uv[4],
+                              b0 * uv[1] + h->b1 * uv[3] + h->b2 * uv[5]) < 0.5f;
+}
+
+/* Cut-outs: the closest hit is searched again beyond each hit that fell in a
+ * hole (tmin moved to it, strictly past it: (tmin, tmax) is open, so the
+ * search moves on every time and ends).  Scenes without map_d never get
+ * here, so their rays cost what they cost before. */
+static int appm__intersect_holes(const appm_scene *s, const appm__ray *r, uint32_t skip, uint32_t skip1,
+                                 appm__hit *h)
+{
+    appm__ray q = *r;
+    for (;;) {
+        if (!appm__intersect_tree(s, &q, skip, h)) return 0;
+        if (h->tri != skip1 && !appm__cut_away(s, h)) return 1;
+        q.tmin = h->t;
+        skip = h->tri;
+    }
+}
+
+/* Closest hit in (tmin, tmax), ignoring triangle `skip` (the one a secondary ray
+ * leaves: a flat triangle cannot be hit again by a ray leaving it). */
+static int appm__intersect(const appm_scene *s, const appm__ray *r, uint32_t skip, appm__hit *h)
+{
+    if (!r->valid || s->nwnode == 0) return 0;
+    if (s->cutouts) return appm__intersect_holes(s, r, skip, skip, h);
+    return appm__intersect_tree(s, r, skip, h);
+}
+
 /* Any hit in (tmin, tmax), ignoring triangles skip0 and skip1: shadow rays. */
 static int appm__occluded(const appm_scene *s, const appm__ray *r, uint32_t skip0, uint32_t skip1)
 {
     if (!r->valid || s->nwnode == 0) return 0;
+    if (s->cutouts) {
+        appm__hit h;
+        return appm__intersect_holes(s, r, skip0, skip1, &h);
+    }
 #if APPM_BVH_BINARY
     if (s->bvh_path == APPM__BVH_BINARY) return appm__occluded_bin(s, r, skip0, skip1);
 #endif
@@ -5011,6 +8490,7 @@ typedef struct appm__surf {
     appm__v3 ns;   /* unit shading normal, on the side of ng */
     uint32_t tri, mat;
     float t;
+    float u, v;    /* texture coordinates (0 without) */
 } appm__surf;
 
 static void appm__surface(const appm_scene *s, const appm__hit *h, appm__surf *out)
@@ -5037,6 +8517,36 @@ static void appm__surface(const appm_scene *s, const appm__hit *h, appm__surf *o
     out->tri = h->tri;
     out->mat = in->mat;
     out->t = h->t;
+    out->u = out->v = 0.0f;
+    if (in->uv0 >= 0) {
+        const float *uv = s->uv + 2 * (size_t)in->uv0;
+        out->u = b0 * uv[0] + b1 * uv[2] + b2 * uv[4];
+        out->v = b0 * uv[1] + b1 * uv[3] + b2 * uv[5];
+    }
+}
+
+static appm__v3 appm__clamp01(appm__v3 v)
+{
+    return appm__v(v.x > 0.0f ? (v.x < 1.0f ? v.x : 1.0f) : 0.0f, v.y > 0.0f ? (v.y < 1.0f ? v.y : 1.0f) : 0.0f,
+                   v.z > 0.0f ? (v.z < 1.0f ? v.z : 1.0f) : 0.0f);
+}
+
+/* The material at surface point sf: the scene's, or with texture maps its
+ * copy in *tmp with Kd (map_Kd) and Ks (map_Ks; a mirror's reflectance) times
+ * the texel, clamped to [0, 1] (a float map may hold more). */
+static const appm__material *appm__material_at(const appm_scene *s, const appm__surf *sf, appm__material *tmp)
+{
+    const appm__material *m = &s->mat[sf->mat];
+    if (!m->map_kd && !m->map_ks) return m;
+    *tmp = *m;
+    if (m->map_kd && m->kind != APPM__MAT_MIRROR && m->kind != APPM__MAT_DIELECTRIC)
+        tmp->color = appm__mul(tmp->color, appm__clamp01(appm__tex_rgb(&s->tex[m->map_kd - 1], sf->u, sf->v)));
+    if (m->map_ks) {
+        appm__v3 k = appm__clamp01(appm__tex_rgb(&s->tex[m->map_ks - 1], sf->u, sf->v));
+        if (m->kind == APPM__MAT_MIRROR) tmp->color = appm__mul(tmp->color, k);
+        else if (m->kind == APPM__MAT_GLOSSY) tmp->ks = appm__mul(tmp->ks, k);
+    }
+    return tmp;
 }
 
 /* The origin for a ray leaving `sf` towards w: outside the error box of the hit
@@ -5293,7 +8803,221 @@ static unsigned appm__bsdf_dims(const appm__material *m)
     return m->kind == APPM__MAT_DIFFUSE ? 3u : (m->kind == APPM__MAT_MIRROR ? 0u : 4u);
 }
 
-/* ---- 6.2 Lights -------------------------------------------------------------- */
+/* ---- 6.2 Environment maps -------------------------------------------------------
+ *
+ * The map is read as the radiance L(w) arriving from direction w: texel
+ * (column c, row r) at u = (c + 1/2) / w, v = (r + 1/2) / h, the direction
+ *      theta = pi v (from +y),  phi = 2 pi u + rot,
+ *      w = (sin theta sin phi, cos theta, -sin theta cos phi),
+ * and L between texel centres bilinear (repeating in u, clamped in v).
+ * Shadow rays and photons draw w from a piecewise-constant density over the
+ * texels (pbrt's InfiniteAreaLight, Pharr et al. 2016, 14.2.4): texel weight
+ * f = the largest mean of RGB over the texel and its 8 neighbours (the texels
+ * its bilinear value can borrow from, so the density is never 0 where L is
+ * not) times sin theta (a row near a pole covers little solid angle).  Rows
+ * are drawn by their sums, then a column within the row, each by inverting a
+ * CDF (appm__cdf_invert), so the low-discrepancy points stay stratified; the
+ * density in (u, v) is p(u, v) = w h f / sum f, in solid angle
+ *      p(w) = p(u, v) / (2 pi^2 sin theta).
+ * A small sun holding most of the power then gets most of the samples, which
+ * is what makes its shadows sharp and its caustics possible at all. */
+
+/* The radiance of texel (x, y). */
+static const float *appm__env_texel(const appm__envmap *e, uint32_t x, uint32_t y)
+{
+    return e->rgb + 3 * ((size_t)y * e->w + x);
+}
+
+/* (u, v) in [0,1) x [0,1] of direction d. */
+static void appm__env_uv(const appm__envmap *e, appm__v3 d, double *u, double *v)
+{
+    double y = d.y, len = sqrt((double)d.x * d.x + y * y + (double)d.z * d.z), phi;
+    y = len > 0.0 ? y / len : 1.0;
+    y = y > 1.0 ? 1.0 : (y < -1.0 ? -1.0 : y);
+    *v = acos(y) / APPM__PI;
+    phi = atan2((double)d.x, -(double)d.z) - e->rot;
+    *u = phi / (2.0 * APPM__PI);
+    *u -= floor(*u);
+    if (!(*u < 1.0)) *u = 0.0;
+}
+
+/* L(d): bilinear between the four texel centres around d. */
+static appm__v3 appm__env_lookup(const appm__envmap *e, appm__v3 d)
+{
+    double u, v, fx, fy, x0f, y0f;
+    float ax, ay, o[3];
+    uint32_t x0, x1, y0, y1;
+    int k;
+    appm__env_uv(e, d, &u, &v);
+    fx = u * e->w - 0.5;
+    fy = v * e->h - 0.5;
+    x0f = floor(fx);
+    y0f = floor(fy);
+    ax = (float)(fx - x0f);
+    ay = (float)(fy - y0f);
+    x0 = (uint32_t)((int64_t)x0f + e->w) % e->w;
+    x1 = x0 + 1 == e->w ? 0 : x0 + 1;
+    y0 = y0f < 0.0 ? 0 : (uint32_t)y0f; /* clamped at the poles */
+    y1 = y0f < 0.0 ? 0 : (y0 + 1 < e->h ? y0 + 1 : e->h - 1);
+    if (y0 >= e->h) y0 = e->h - 1;
+    for (k = 0; k < 3; ++k)
+        o[k] = (1.0f - ay) * ((1.0f - ax) * appm__env_texel(e, x0, y0)[k] + ax * appm__env_texel(e, x1, y0)[k]) +
+               ay * ((1.0f - ax) * appm__env_texel(e, x0, y1)[k] + ax * appm__env_texel(e, x1, y1)[k]);
+    return appm__v(o[0], o[1], o[2]);
+}
+
+static appm__v3 appm__env_dir(const appm__envmap *e, double u, double v)
+{
+    double theta = APPM__PI * v, phi = 2.0 * APPM__PI * u + e->rot, st = sin(theta);
+    return appm__v((float)(st * sin(phi)), (float)cos(theta), (float)(-st * cos(phi)));
+}
+
+/* The solid-angle density with which appm__env_sample draws d. */
+static float appm__env_pdf(const appm__envmap *e, appm__v3 d)
+{
+    double u, v, st, pr, pc;
+    const double *cr;
+    uint32_t x, y;
+    appm__env_uv(e, d, &u, &v);
+    st = sin(APPM__PI * v);
+    if (!(st > 0.0)) return 0.0f;
+    x = (uint32_t)(u * e->w);
+    y = (uint32_t)(v * e->h);
+    if (x >= e->w) x = e->w - 1;
+    if (y >= e->h) y = e->h - 1;
+    cr = e->cdf + (e->h + 1) + (size_t)y * (e->w + 1);
+    pr = e->cdf[y + 1] - e->cdf[y];
+    pc = cr[x + 1] - cr[x];
+    return (float)(pr * pc * e->w * e->h / (2.0 * APPM__PI * APPM__PI * st));
+}
+
+/* A direction *d from (u1, u2) with its solid-angle density (0: none). */
+static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v3 *d)
+{
+    int y, x;
+    float v = appm__cdf_invert(e->cdf, (int)e->h, u1, &y);
+    const double *cr = e->cdf + (e->h + 1) + (size_t)y * (e->w + 1);
+    float u = appm__cdf_invert(cr, (int)e->w, u2, &x);
+    double st = sin(APPM__PI * (double)v);
+    *d = appm__env_dir(e, u, v);
+    if (!(st > 0.0)) return 0.0f;
+    return (float)((e->cdf[y + 1] - e->cdf[y]) * (cr[x + 1] - cr[x]) * e->w * e->h /
+                   (2.0 * APPM__PI * APPM__PI * st));
+}
+
+/* The map's radiances (linear RGB times scale) and its sampling CDFs, from
+ * the decoded file in e->px.  A map that holds NaN or infinity, or that is
+ * black, is refused; negative samples (a lossy encoder's ringing) become 0. */
+static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *name, appm_diag *diag)
+{
+    uint32_t w = e->px.w, h = e->px.h, x, y;
+    size_t n = (size_t)w * h, i;
+    unsigned c3 = e->px.channels >= 3 ? 3 : 1, k;
+    double total = 0.0, *rows, *cols;
+    float *f;
+    e->w = w;
+    e->h = h;
+    e->rot = (float)(e->rotate * APPM__PI / 180.0);
+    e->rgb = (float *)appm__alloc(m, n, 3 * sizeof(float));
+    e->cdf = (double *)appm__alloc(m, (size_t)h + 1 + (size_t)h * ((size_t)w + 1), sizeof(double));
+    f = (float *)appm__alloc(m, n, sizeof(float));
+    if (!e->rgb || !e->cdf || !f) {
+        appm__free(m, f);
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "out of memory for the environment map");
+    }
+    for (i = 0; i < n; ++i)
+        for (k = 0; k < 3; ++k) {
+            double v = appm__pixels_linear(&e->px, i, c3 == 3 ? k : 0) * e->scale;
+            if (!(v == v) || !(fabs(v) <= FLT_MAX)) {
+                appm__free(m, f);
+                return appm__fail(diag, APPM_ERR_PARSE, name, 0,
+                                  "environment map: pixel (%u, %u) is not a finite number",
+                                  (unsigned)(i % w), (unsigned)(i / w));
+            }
+            e->rgb[3 * i + k] = v > 0.0 ? (float)v : 0.0f;
+        }
+    for (y = 0; y < h; ++y) /* f: the mean of RGB, the largest over the 3 x 3 neighbourhood */
+        for (x = 0; x < w; ++x) {
+            float best = 0.0f;
+            int dy, dx;
+            for (dy = -1; dy <= 1; ++dy)
+                for (dx = -1; dx <= 1; ++dx) {
+                    int64_t yy = (int64_t)y + dy;
+                    uint32_t xx = (uint32_t)(((int64_t)x + dx + w) % w);
+                    const float *t;
+                    if (yy < 0 || yy >= (int64_t)h) continue;
+                    t = appm__env_texel(e, xx, (uint32_t)yy);
+                    if ((t[0] + t[1] + t[2]) / 3.0f > best) best = (t[0] + t[1] + t[2]) / 3.0f;
+                }
+            f[(size_t)y * w + x] = best;
+        }
+    rows = e->cdf;
+    cols = e->cdf + h + 1;
+    rows[0] = 0.0;
+    for (y = 0; y < h; ++y) {
+        double st = sin(APPM__PI * (y + 0.5) / h), sum = 0.0;
+        double *cr = cols + (size_t)y * (w + 1);
+        cr[0] = 0.0;
+        for (x = 0; x < w; ++x) cr[x + 1] = cr[x] + (double)f[(size_t)y * w + x];
+        sum = cr[w];
+        if (sum > 0.0)
+            for (x = 1; x <= w; ++x) cr[x] /= sum;
+        else /* a black row: uniform, never drawn (its row weight is 0) */
+            for (x = 1; x <= w; ++x) cr[x] = (double)x / w;
+        cr[w] = 1.0;
+        rows[y + 1] = rows[y] + sum * st;
+    }
+    appm__free(m, f);
+    total = rows[h];
+    if (!(total > 0.0) || !(total < HUGE_VAL))
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "environment map: it is black (or its scale is 0)");
+    for (y = 1; y <= h; ++y) rows[y] /= total;
+    rows[h] = 1.0;
+    return APPM_OK;
+}
+
+/* Integral of L over the sphere (W / m^2 / sr times sr), RGB, texel by
+ * texel: texel (x, y) spans 2 pi / w in phi and cos theta_y - cos theta_y+1. */
+static void appm__env_integral(const appm__envmap *e, double *out)
+{
+    uint32_t x, y;
+    int k;
+    out[0] = out[1] = out[2] = 0.0;
+    for (y = 0; y < e->h; ++y) {
+        double dw = 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
+        for (x = 0; x < e->w; ++x)
+            for (k = 0; k < 3; ++k) out[k] += dw * appm__env_texel(e, x, y)[k];
+    }
+}
+
+/* bench/envmap.sh builds appm with APPM_ENV_UNIFORM=1 to measure what the
+ * map's density buys: shadow rays then take the cosine alone and photons
+ * uniform directions, as for a constant environment. */
+#ifndef APPM_ENV_UNIFORM
+#define APPM_ENV_UNIFORM 0
+#endif
+
+/* Shadow rays towards a map draw their direction from a mixture: half from
+ * the map's density pm (a sun gets its samples), half from the cosine about
+ * the shading normal (the rest of the sky is sampled as a constant one
+ * would be); the mixture's density is their mean, so neither strategy's
+ * failure case (a small sun for the cosine, a dim sky behind a bright
+ * horizon for the map) costs more than twice the variance of the other. */
+static double appm__env_mix_pdf(float pm, float cos_n)
+{
+    if (APPM_ENV_UNIFORM) return (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI;
+    return 0.5 * (double)pm + 0.5 * (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI;
+}
+
+/* L(d) of the scene's environment: its map's, its constant's, or 0. */
+static appm__v3 appm__env_radiance(const appm_scene *s, appm__v3 d)
+{
+    if (s->env < 0) return appm__v(0, 0, 0);
+    if (s->envmap.rgb) return appm__env_lookup(&s->envmap, d);
+    return s->light[s->env].value;
+}
+
+/* ---- 6.3 Lights -------------------------------------------------------------- */
 
 /* Index of the light whose CDF interval holds u (binary search; u < 1 always,
  * and lights of zero power have empty intervals so are never returned). */
@@ -5355,7 +9079,8 @@ typedef struct appm__photon_start {
  *   spot         Phi = 2 pi I [(1 - cos_inner) + (cos_inner - cos_cone) / 5]
  *                (the d^4 ramp integrates to a fifth of its width in cos theta)
  *   environment  Phi = 4 pi^2 R^2 L          (L through the disk of the bounding
- *                sphere, radius R, from every direction) */
+ *                sphere, radius R, from every direction); with a map
+ *                Phi = pi R^2 times the integral of L over the sphere */
 static void appm__light_power(const appm_scene *s, const appm__light *l, double *power)
 {
     double f;
@@ -5368,7 +9093,14 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
     }
     if (l->kind == APPM__LIGHT_POINT) f = 4.0 * APPM__PI;
     else if (l->kind == APPM__LIGHT_SPOT) f = 2.0 * APPM__PI * ((1.0 - l->cos_inner) + (l->cos_inner - l->cos_cone) / 5.0);
-    else f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
+    else if (s->envmap.rgb) { /* pi R^2 times the integral of L over the sphere */
+        appm__env_integral(&s->envmap, power);
+        f = APPM__PI * (double)s->radius * s->radius;
+        power[0] *= f;
+        power[1] *= f;
+        power[2] *= f;
+        return;
+    } else f = 4.0 * APPM__PI * APPM__PI * (double)s->radius * s->radius;
     power[0] = f * l->value.x;
     power[1] = f * l->value.y;
     power[2] = f * l->value.z;
@@ -5416,12 +9148,22 @@ static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, ap
         appm__v3 t, b;
         float r = s->radius, rr = sqrtf(u3), phi = 2.0f * APPM__PIF * u4;
         if (!(r > 0.0f)) return 0;
-        d = appm__uniform_sphere(u1, u2);
+        if (s->envmap.rgb) { /* the direction light arrives from by the map's density; the photon travels against it */
+            appm__v3 wl;
+            float pdf = APPM_ENV_UNIFORM ? (float)(0.25 * APPM__INV_PI) : appm__env_sample(&s->envmap, u1, u2, &wl);
+            if (APPM_ENV_UNIFORM) wl = appm__uniform_sphere(u1, u2);
+            if (!(pdf > 0.0f)) return 0;
+            d = appm__neg(wl);
+            /* gamma = L(wl) / (pick * p(wl) * (1/(pi R^2))) */
+            ps->gamma = appm__scale(appm__env_lookup(&s->envmap, wl), (float)(APPM__PI * (double)r * r / (l->pick * pdf)));
+        } else {
+            d = appm__uniform_sphere(u1, u2);
+            /* gamma = L / (pick * (1/4pi) * (1/(pi R^2))) */
+            ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI * APPM__PI * (double)r * r / l->pick));
+        }
         appm__basis(d, &t, &b);
         o = appm__add(appm__sub(s->center, appm__scale(d, 1.001f * r)),
                       appm__add(appm__scale(t, r * rr * cosf(phi)), appm__scale(b, r * rr * sinf(phi))));
-        /* gamma = L / (pick * (1/4pi) * (1/(pi R^2))) */
-        ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI * APPM__PI * (double)r * r / l->pick));
     }
     appm__ray_init(&ps->ray, o, d, FLT_MAX);
     return appm__finite3(ps->gamma);
@@ -5455,11 +9197,29 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
     if (!(l->pick > 0.0)) return 0;
     if (l->kind == APPM__LIGHT_ENV) {
         float c;
-        ls->wi = appm__cosine_dir(n, u1, u2);
-        c = appm__dot(ls->wi, n);
-        if (!(c > 0.0f)) return 0;
-        ls->pdf = (float)(l->pick * c * APPM__INV_PI);
-        ls->li = appm__scale(l->value, 1.0f / ls->pdf);
+        if (s->envmap.rgb) { /* the map's density and the cosine's, half and half */
+            float pm;
+            if (APPM_ENV_UNIFORM) {
+                ls->wi = appm__cosine_dir(n, u1, u2);
+                pm = 0.0f;
+            } else if (u1 < 0.5f) {
+                ls->wi = appm__cosine_dir(n, 2.0f * u1, u2);
+                pm = appm__env_pdf(&s->envmap, ls->wi);
+            } else {
+                pm = appm__env_sample(&s->envmap, 2.0f * u1 - 1.0f, u2, &ls->wi);
+            }
+            c = appm__dot(ls->wi, n);
+            if (!(c > 0.0f)) return 0;
+            ls->pdf = (float)(l->pick * appm__env_mix_pdf(pm, c));
+            if (!(ls->pdf > 0.0f)) return 0;
+            ls->li = appm__scale(appm__env_lookup(&s->envmap, ls->wi), 1.0f / ls->pdf);
+        } else { /* a constant: by the cosine, the product's best */
+            ls->wi = appm__cosine_dir(n, u1, u2);
+            c = appm__dot(ls->wi, n);
+            if (!(c > 0.0f)) return 0;
+            ls->pdf = (float)(l->pick * c * APPM__INV_PI);
+            ls->li = appm__scale(l->value, 1.0f / ls->pdf);
+        }
         o = appm__offset(sf, ls->wi);
         appm__ray_init(&ls->shadow, o, ls->wi, FLT_MAX);
         return 1;
@@ -5523,11 +9283,11 @@ static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi
     return (float)(s->light[in->light].pick / in->area * ((double)t * t) / cos_l);
 }
 
-/* ---- 6.3 The light table and scene assembly -------------------------------
+/* ---- 6.4 The light table and scene assembly -------------------------------
  *
  * Loader arrays (section 4) -> an immutable scene: exact-size copies, bounds,
  * the BVH (section 5), one light per emissive triangle plus the scene's
- * lights with the table that picks them by power (6.2), and the camera.  Here,
+ * lights with the table that picks them by power (6.3), and the camera.  Here,
  * not in section 4, because it needs the BVH and the lights.
  */
 static void appm__loader_free(appm__loader *L)
@@ -5541,6 +9301,15 @@ static void appm__loader_free(appm__loader *L)
     appm__array_free(L->mem, &L->names);
     appm__array_free(L->mem, &L->face);
     appm__array_free(L->mem, &L->lights);
+    appm__array_free(L->mem, &L->vt);
+    appm__array_free(L->mem, &L->uv);
+    if (L->tex.data) { /* textures the scene did not take */
+        size_t k;
+        for (k = 0; k < L->tex.count; ++k) appm__free(L->mem, ((appm__texture *)L->tex.data)[k].px.data);
+    }
+    appm__array_free(L->mem, &L->tex);
+    appm__free(L->mem, L->envmap.px.data);
+    L->envmap.px.data = NULL;
 }
 
 /* Copies a loader array into an exact-size block owned by the scene. */
@@ -5557,8 +9326,48 @@ static void *appm__take(appm__mem *m, appm__array *a, int *ok)
     return p;
 }
 
+/* Takes the map the loader decoded (or that appm_scene_set_environment_map
+ * read) into *e: radiances, CDFs and hash; the file's samples are freed. */
+static appm_status appm__envmap_take(appm__mem *m, appm__envmap *e, appm__envmap *from, const char *name,
+                                     appm_diag *diag)
+{
+    appm_status st;
+    size_t i, n;
+    uint64_t h = 0xcbf29ce484222325ull;
+    memset(e, 0, sizeof *e);
+    e->px = from->px;
+    e->scale = from->scale;
+    e->rotate = from->rotate;
+    from->px.data = NULL;
+    st = appm__env_build(m, e, name, diag);
+    appm__free(m, e->px.data);
+    e->px.data = NULL;
+    if (st != APPM_OK) return st;
+    n = (size_t)e->w * e->h * 3;
+    for (i = 0; i < n; ++i) { /* FNV-1a of the radiances: the file, its scale; then the rotation */
+        uint32_t u;
+        memcpy(&u, &e->rgb[i], 4);
+        h = (h ^ u) * 0x100000001b3ull;
+    }
+    e->hash = appm__mix64(h ^ ((uint64_t)e->w << 32 | e->h)) ^ appm__mix64((uint64_t)(int64_t)(e->rotate * 1e6));
+    return APPM_OK;
+}
+
+static void appm__envmap_free(appm__mem *m, appm__envmap *e)
+{
+    appm__free(m, e->rgb);
+    appm__free(m, e->cdf);
+    appm__free(m, e->px.data);
+    memset(e, 0, sizeof *e);
+}
+
 static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
 {
+    uint32_t i;
+    appm__envmap_free(m, &s->envmap);
+    for (i = 0; i < s->ntex; ++i) appm__free(m, s->tex[i].px.data);
+    appm__free(m, s->tex);
+    appm__free(m, s->uv);
     appm__free(m, s->tri);
     appm__free(m, s->info);
     appm__free(m, s->normals);
@@ -5606,13 +9415,13 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
 {
     uint32_t i, n = 0, k = 0, extra = (uint32_t)L->lights.count;
     for (i = 0; i < s->ntri; ++i) n += s->mat[s->info[i].mat].emissive;
-    if (n + extra == 0 && L->bare_obj && s->ntri > 0) {
+    if (L->stand_in) { /* the studio's sky (appm__stand_in, L->envmap) or the white environment */
         appm__light *l = (appm__light *)appm__array_push(L->mem, &L->lights);
         if (!l) return APPM_ERR_NOMEM;
         l->kind = APPM__LIGHT_ENV;
         l->value = appm__v(1.0f, 1.0f, 1.0f);
         extra = 1;
-        s->env_auto = 1;
+        s->env_auto = L->white ? 1 : 2;
     }
     if (n + extra == 0)
         return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
@@ -5636,9 +9445,18 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
         appm__light *l = &s->light[k];
         *l = ((appm__light *)L->lights.data)[i];
         if (l->kind == APPM__LIGHT_ENV) {
+            appm_status st;
             if (s->env >= 0)
                 return appm__fail(L->diag, APPM_ERR_PARSE, name, l->line, "more than one environment");
             s->env = (int)k;
+            if (L->envmap.px.data) {
+                appm_diag why;
+                appm__diag_clear(&why);
+                s->mem.diag = &why;
+                st = appm__envmap_take(&s->mem, &s->envmap, &L->envmap, name, &why);
+                s->mem.diag = L->diag;
+                if (st != APPM_OK) return appm__fail(L->diag, st, name, l->line, "%s", why.message);
+            }
         }
         appm__light_power(s, l, l->power);
         k++;
@@ -5647,15 +9465,112 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
     return appm__light_table(s, L->diag, name);
 }
 
+/* A bare OBJ in which nothing emits and that names no light gets a studio,
+ * as a product shot would show it: a ground plate under its bounding box
+ * that catches its shadow (grey, albedo 0.5, 2 radii of the model's bounding
+ * sphere each way: wider puts more of the photons the sky emits on it, the
+ * model's share falling as the square of the scene's radius, a hair below the model so the two never overlap), a sky
+ * brighter above than below with a soft key light high on the left in front
+ * (an environment map, 6.2, so shadow rays and photons find the key light),
+ * and a camera 20 degrees above the model, framing it.  Without form the
+ * model is a silhouette: under the constant white sky of earlier versions
+ * the bunny's centre was within 17 % of the background.  Lights the user
+ * adds later (appm_scene_add_point_light, _set_environment...) replace the
+ * sky; the plate stays. */
+#define APPM__STAND_IN_W 128 /* the sky map: 128 x 64 texels, 2.8 degrees each */
+
+/* The sky's radiance from direction d: 0.3 at the horizon to 1 at the zenith
+ * (a slightly blue white), 0.2 below, and the key light, radiance 14 (a warm
+ * white) within 10 degrees of its axis, fading to the sky over 3 more: about
+ * as much irradiance as the whole sky, so the model has a lit side and a
+ * shadow on the plate. */
+static appm__v3 appm__stand_in_sky(appm__v3 d)
+{
+    const appm__v3 key = appm__normalize(appm__v(-0.55f, 0.72f, 0.42f));
+    float y = d.y, c = appm__dot(d, key), sky = y >= 0.0f ? 0.3f + 0.7f * y : 0.2f, k = 0.0f;
+    float c0 = (float)cos(13.0 * APPM__PI / 180.0), c1 = (float)cos(10.0 * APPM__PI / 180.0);
+    if (c > c0) k = c >= c1 ? 14.0f : 14.0f * (c - c0) / (c1 - c0);
+    return appm__v(sky * 0.92f + k, sky * 0.96f + k * 0.96f, sky + k * 0.9f);
+}
+
+static appm_status appm__stand_in(appm__loader *L, appm__v3 lo, appm__v3 hi)
+{
+    appm__v3 c = appm__scale(appm__add(lo, hi), 0.5f), corner[4];
+    float r = 0.5f * appm__length(appm__sub(hi, lo)), e = 2.0f * r, y = lo.y - 1e-3f * r;
+    const uint32_t w = APPM__STAND_IN_W, h = APPM__STAND_IN_W / 2;
+    appm__material *g = (appm__material *)appm__array_push(L->mem, &L->mat);
+    int64_t idx[4][3];
+    uint32_t x, k, mat;
+    float *sky;
+    appm_status st;
+    if (!g) return APPM_ERR_NOMEM;
+    g->kind = APPM__MAT_DIFFUSE;
+    g->color = appm__v(0.5f, 0.5f, 0.5f);
+    g->ior = 1.5f;
+    g->ns = 1.0f;
+    mat = (uint32_t)L->mat.count - 1;
+    corner[0] = appm__v(c.x - e, y, c.z - e);
+    corner[1] = appm__v(c.x - e, y, c.z + e);
+    corner[2] = appm__v(c.x + e, y, c.z + e);
+    corner[3] = appm__v(c.x + e, y, c.z - e);
+    L->pos.count = 0; /* the OBJ's vertices are no longer needed */
+    L->vt.count = 0;
+    for (k = 0; k < 4; ++k) {
+        appm__v3 *p = (appm__v3 *)appm__array_push(L->mem, &L->pos);
+        if (!p) return APPM_ERR_NOMEM;
+        *p = corner[k];
+        idx[k][0] = k;
+        idx[k][1] = idx[k][2] = -1;
+    }
+    /* counter-clockwise seen from above: the plate faces +y */
+    if ((st = appm__obj_tri(L, idx[0], idx[1], idx[2], mat, 0)) != APPM_OK ||
+        (st = appm__obj_tri(L, idx[0], idx[2], idx[3], mat, 0)) != APPM_OK)
+        return st;
+    sky = (float *)appm__alloc(L->mem, (size_t)w * h, 3 * sizeof(float));
+    if (!sky) return APPM_ERR_NOMEM;
+    L->envmap.px.w = w;
+    L->envmap.px.h = h;
+    L->envmap.px.channels = 3;
+    L->envmap.px.depth = 32;
+    L->envmap.px.data = sky;
+    L->envmap.scale = 1.0;
+    for (k = 0; k < h; ++k)
+        for (x = 0; x < w; ++x) { /* each texel: the sky at its centre's direction (6.2) */
+            double th = APPM__PI * (k + 0.5) / h, ph = 2.0 * APPM__PI * (x + 0.5) / w;
+            appm__v3 v = appm__stand_in_sky(
+                appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph))));
+            float *t = sky + 3 * ((size_t)k * w + x);
+            t[0] = v.x;
+            t[1] = v.y;
+            t[2] = v.z;
+        }
+    L->stand_in = 1;
+    return APPM_OK;
+}
+
 /* Loader arrays -> scene: exact-size copies, bounds, BVH, lights, camera. */
 static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char *name)
 {
     int ok = 1;
     uint32_t i;
-    appm__bbox bb;
+    appm__bbox bb, model;
     appm_status st;
     if (L->tri.count == 0 && L->lights.count == 0)
         return appm__fail(L->diag, APPM_ERR_PARSE, name, 0, "the scene has no triangles");
+    appm__bbox_empty(&model);
+    for (i = 0; i < L->tri.count; ++i) {
+        const appm__tri *t = (const appm__tri *)L->tri.data + i;
+        appm__bbox_grow(&model, t->p0);
+        appm__bbox_grow(&model, t->p1);
+        appm__bbox_grow(&model, t->p2);
+    }
+    if (L->bare_obj && L->lights.count == 0 && L->tri.count > 0) {
+        uint32_t emissive = 0;
+        for (i = 0; i < L->info.count; ++i)
+            emissive += ((const appm__material *)L->mat.data)[((const appm__tri_info *)L->info.data)[i].mat].emissive;
+        if (!emissive && L->white) L->stand_in = 1;
+        else if (!emissive && (st = appm__stand_in(L, model.lo, model.hi)) != APPM_OK) return st;
+    }
     s->ntri = (uint32_t)L->tri.count;
     s->nnormals = (uint32_t)L->nrm.count;
     s->nmat = (uint32_t)L->mat.count;
@@ -5663,7 +9578,17 @@ static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char
     s->info = (appm__tri_info *)appm__take(&s->mem, &L->info, &ok);
     s->normals = (appm__v3 *)appm__take(&s->mem, &L->nrm, &ok);
     s->mat = (appm__material *)appm__take(&s->mem, &L->mat, &ok);
+    s->uv = (float *)appm__take(&s->mem, &L->uv, &ok);
     if (!ok) return APPM_ERR_NOMEM;
+    if ((s->tex = (appm__texture *)appm__take(&s->mem, &L->tex, &ok)) != NULL) {
+        s->ntex = (uint32_t)L->tex.count;
+        L->tex.count = 0; /* the scene owns the samples now */
+    }
+    if (!ok) return APPM_ERR_NOMEM;
+    for (i = 0; i < s->ntex; ++i)
+        if (s->tex[i].px.data)
+            s->tex_bytes += (uint64_t)s->tex[i].px.w * s->tex[i].px.h * s->tex[i].px.channels * (s->tex[i].px.depth / 8);
+    for (i = 0; i < s->nmat; ++i) s->cutouts |= s->mat[i].map_d != 0;
     s->dropped = L->dropped;
     appm__bbox_empty(&bb);
     for (i = 0; i < s->ntri; ++i) {
@@ -5678,12 +9603,16 @@ static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char
     s->radius = 0.5f * appm__length(appm__sub(bb.hi, bb.lo));
     if ((st = appm__bvh_build(s, L->diag)) != APPM_OK) return st;
     if ((st = appm__scene_lights(s, L, name)) != APPM_OK) return st;
-    if (!L->have_camera) { /* frame the bounding sphere, looking along -z */
-        float rad = s->radius > 0.0f ? s->radius : 1.0f;
+    if (!L->have_camera) { /* frame the bounding sphere, looking along -z (the studio's: from 20 degrees above) */
+        int studio = L->stand_in && !L->white;
+        appm__v3 mc = studio ? appm__scale(appm__add(model.lo, model.hi), 0.5f) : s->center;
+        float mr = studio ? 0.5f * appm__length(appm__sub(model.hi, model.lo)) : s->radius;
+        float rad = mr > 0.0f ? mr : 1.0f;
         float dist = rad / (float)sin(0.5 * 40.0 * APPM__PI / 180.0) * 1.05f;
-        appm__v3 eye = appm__add(s->center, appm__v(0, 0, dist));
+        appm__v3 dir = studio ? appm__v(0.0f, 0.34202014f, 0.93969262f) : appm__v(0, 0, 1);
+        appm__v3 eye = appm__add(mc, appm__scale(dir, dist));
         L->file = name;
-        if ((st = appm__camera_set(L, 0, eye, s->center, appm__v(0, 1, 0), 40.0)) != APPM_OK) return st;
+        if ((st = appm__camera_set(L, 0, eye, mc, appm__v(0, 1, 0), 40.0)) != APPM_OK) return st;
         L->cam.framed = 1;
     }
     s->cam = L->cam;
@@ -5700,6 +9629,8 @@ static void appm__loader_init(appm__loader *L, appm__mem *m, const appm_config *
     if (cfg) {
         L->log = cfg->log;
         L->log_user = cfg->log_user;
+        L->missing_warn = cfg->missing_textures == APPM_MISSING_TEXTURES_WARN;
+        L->white = cfg->stand_in == APPM_STAND_IN_WHITE;
     }
     appm__array_init(&L->pos, sizeof(appm__v3));
     appm__array_init(&L->vn, sizeof(appm__v3));
@@ -5708,7 +9639,10 @@ static void appm__loader_init(appm__loader *L, appm__mem *m, const appm_config *
     appm__array_init(&L->info, sizeof(appm__tri_info));
     appm__array_init(&L->mat, sizeof(appm__material));
     appm__array_init(&L->names, 1);
-    appm__array_init(&L->face, 2 * sizeof(int64_t));
+    appm__array_init(&L->face, 3 * sizeof(int64_t));
+    appm__array_init(&L->vt, 2 * sizeof(float));
+    appm__array_init(&L->uv, 2 * sizeof(float));
+    appm__array_init(&L->tex, sizeof(appm__texture));
     appm__array_init(&L->lights, sizeof(appm__light));
 }
 
@@ -5886,6 +9820,12 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
     info->height = s->height;
     info->memory_bytes = s->mem.live;
     info->peak_bytes = s->mem.peak;
+    for (i = 0; i < s->ntex; ++i) info->textures += s->tex[i].px.data != NULL;
+    info->texture_bytes = s->tex_bytes;
+    info->materials_cutout = 0;
+    for (i = 0; i < s->nmat; ++i) info->materials_cutout += s->mat[i].map_d != 0;
+    info->environment_map_width = s->envmap.rgb ? s->envmap.w : 0;
+    info->environment_map_height = s->envmap.rgb ? s->envmap.h : 0;
 }
 
 /* Lights added to a loaded scene.  The light arrays are rebuilt one entry
@@ -5972,15 +9912,33 @@ APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double 
     l.value = appm__v((float)intensity[0], (float)intensity[1], (float)intensity[2]);
     drop = scene->env_auto ? scene->env : -1;
     st = appm__scene_relight(scene, drop, &l, diag);
+    if (st == APPM_OK && drop >= 0) appm__envmap_free(&scene->mem, &scene->envmap); /* the stand-in's sky */
     if (st == APPM_OK) scene->env_auto = 0;
     return st;
+}
+
+/* The environment becomes light l, with map *map (NULL: a constant one),
+ * replacing the one there, if any; on failure the scene is as it was. */
+static appm_status appm__scene_set_env(appm_scene *s, const appm__light *l, const appm__envmap *map, appm_diag *diag)
+{
+    appm__envmap old = s->envmap;
+    appm_status st;
+    if (map) s->envmap = *map; /* the new light's power (appm__light_power) reads it */
+    else memset(&s->envmap, 0, sizeof s->envmap);
+    st = appm__scene_relight(s, s->env, l, diag);
+    if (st != APPM_OK) {
+        s->envmap = old;
+        return st;
+    }
+    appm__envmap_free(&s->mem, &old);
+    s->env_auto = 0;
+    return APPM_OK;
 }
 
 APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
                                                 appm_diag *diag)
 {
     appm__light l;
-    appm_status st;
     appm__diag_clear(diag);
     if (!scene || !radiance) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or radiance");
     if (!appm__finite_nonneg3(radiance))
@@ -5989,8 +9947,51 @@ APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double 
     memset(&l, 0, sizeof l);
     l.kind = APPM__LIGHT_ENV;
     l.value = appm__v((float)radiance[0], (float)radiance[1], (float)radiance[2]);
-    st = appm__scene_relight(scene, scene->env, &l, diag); /* replaces the one there, if any */
-    if (st == APPM_OK) scene->env_auto = 0;
+    return appm__scene_set_env(scene, &l, NULL, diag);
+}
+
+APPM_API appm_status appm_scene_set_environment_map(appm_scene *scene, const char *path, double scale,
+                                                    double rotate_degrees, const appm_config *cfg,
+                                                    appm_diag *diag)
+{
+    appm__light l;
+    appm__envmap from, map;
+    appm__mem *m;
+    appm_file_reader saved;
+    char *buf;
+    size_t len;
+    appm_status st;
+    appm__diag_clear(diag);
+    if (!scene || !path) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no scene or path");
+    if (!(scale >= 0.0 && scale <= 1e30) || !(fabs(rotate_degrees) <= 1e6))
+        return appm__fail(diag, APPM_ERR_INVALID_ARG, path, 0,
+                          "environment map: scale must be in [0, 1e30] and rotate in [-1e6, 1e6] degrees");
+    m = &scene->mem;
+    m->diag = diag;
+    saved = m->reader;
+    m->reader.read = cfg && cfg->reader.read ? cfg->reader.read : NULL; /* this call's reader, not the load's */
+    m->reader.release = cfg && cfg->reader.read ? cfg->reader.release : NULL;
+    m->reader.user = cfg && cfg->reader.read ? cfg->reader.user : NULL;
+    memset(&from, 0, sizeof from);
+    from.scale = scale;
+    from.rotate = rotate_degrees;
+    st = appm__read_file(m, path, &buf, &len, diag);
+    if (st == APPM_OK) {
+        st = appm__image_decode(m, (const unsigned char *)buf, len, path, &from.px, diag);
+        appm__free(m, buf);
+    }
+    if (st == APPM_OK) st = appm__envmap_take(m, &map, &from, path, diag);
+    m->diag = NULL;
+    m->reader = saved;
+    if (st != APPM_OK) {
+        appm__envmap_free(m, &map);
+        return st;
+    }
+    memset(&l, 0, sizeof l);
+    l.kind = APPM__LIGHT_ENV;
+    l.value = appm__v((float)scale, (float)scale, (float)scale);
+    st = appm__scene_set_env(scene, &l, &map, diag);
+    if (st != APPM_OK) appm__envmap_free(m, &map);
     return st;
 }
 
@@ -6795,18 +10796,18 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         appm__hit h;
         appm__surf sf;
         const appm__material *m, *mg;
-        appm__material tmp;
+        appm__material tmp, tex;
         appm__v3 wo;
         appm__bsdf_sample bs;
         float u3[4];
         unsigned dims;
         if (++segs > r->max_depth) break;
         if (!appm__intersect(s, &ray, skip, &h)) {
-            if (s->env >= 0) ld = appm__add(ld, appm__mul(W, s->light[s->env].value));
+            if (s->env >= 0) ld = appm__add(ld, appm__mul(W, appm__env_radiance(s, ray.d)));
             break;
         }
         appm__surface(s, &h, &sf);
-        m = &s->mat[sf.mat];
+        m = appm__material_at(s, &sf, &tex);
         wo = appm__neg(ray.d);
         travelled += h.t;
         if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) ld = appm__add(ld, appm__mul(W, m->ke));
@@ -6931,25 +10932,6 @@ static uint32_t appm__guide_cell(float u1, float u2)
     i = i < 0 ? 0 : (i >= APPM__GUIDE_RES ? APPM__GUIDE_RES - 1 : i);
     k = k < 0 ? 0 : (k >= APPM__GUIDE_RES ? APPM__GUIDE_RES - 1 : k);
     return (uint32_t)(i * APPM__GUIDE_RES + k);
-}
-
-/* Inverts the piecewise-constant CDF c[0..n] (c[0] = 0, c[n] = 1, strictly
- * increasing) at u in [0,1): the cell *i with c[i] <= u < c[i+1], and the point
- * (i + t) / n, t the position of u within the cell. */
-static float appm__cdf_invert(const double *c, int n, float u, int *cell)
-{
-    int lo = 0, hi = n;
-    double t, x;
-    while (hi - lo > 1) {
-        int mid = lo + (hi - lo) / 2;
-        if (c[mid] <= (double)u) lo = mid;
-        else hi = mid;
-    }
-    t = ((double)u - c[lo]) / (c[lo + 1] - c[lo]);
-    t = t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
-    x = ((double)lo + t) / (double)n;
-    *cell = lo;
-    return (float)x < 1.0f ? (float)x : 0.99999994f;
 }
 
 /* The light of a photon path (by power, as appm__emit picks it, from u[0]) and
@@ -7238,6 +11220,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         appm__hit h;
         appm__surf sf;
         const appm__material *m;
+        appm__material tex;
         appm__v3 wi, g2;
         appm__bsdf_sample bs;
         float u3[4];
@@ -7245,7 +11228,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         float q;
         if (!appm__intersect(s, &ray, skip, &h)) break;
         appm__surface(s, &h, &sf);
-        m = &s->mat[sf.mat];
+        m = appm__material_at(s, &sf, &tex);
         wi = appm__neg(ray.d);
         if (appm__stores_photons(m) && segs >= first) {
             if (!appm__finite3(gamma)) {
@@ -8737,6 +12720,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         appm__hit h;
         appm__surf sf;
         const appm__material *m;
+        appm__material tex;
         appm__v3 wo;
         appm__bsdf_sample bs;
         float u3[4];
@@ -8747,14 +12731,16 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
                 float w = 1.0f;
                 if (!prev_specular) {
                     float c = appm__dot(ray.d, prev_ns);
-                    w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
+                    double p = s->envmap.rgb ? appm__env_mix_pdf(appm__env_pdf(&s->envmap, ray.d), c)
+                                             : (c > 0 ? c : 0) * APPM__INV_PI;
+                    w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * p));
                 }
-                L = appm__add(L, appm__scale(appm__mul(W, s->light[s->env].value), w));
+                L = appm__add(L, appm__scale(appm__mul(W, appm__env_radiance(s, ray.d)), w));
             }
             break;
         }
         appm__surface(s, &h, &sf);
-        m = &s->mat[sf.mat];
+        m = appm__material_at(s, &sf, &tex);
         wo = appm__neg(ray.d);
         if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) {
             float w = prev_specular ? 1.0f : appm__mis(prev_pdf, appm__area_light_pdf(s, sf.tri, ray.d, h.t));
@@ -8919,10 +12905,15 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
-    if (scene->env_auto && c.log) /* once per renderer: the stand-in light is worth a word */
+    if (scene->env_auto == 1 && c.log) /* once per renderer: the stand-in light is worth a word */
         c.log(c.log_user, scene->name, 0,
               "nothing in the model emits light: it is lit by a constant white environment of "
               "radiance 1 (add lights to choose others)");
+    if (scene->env_auto == 2 && c.log)
+        c.log(c.log_user, scene->name, 0,
+              "nothing in the model emits light: it is shown in a studio - a sky brighter above "
+              "than below with a soft key light high on the left, a grey ground plate under it "
+              "and a camera 20 degrees above (add lights or an environment to replace the sky)");
     *out = c;
     return APPM_OK;
 }
@@ -9725,7 +13716,19 @@ static void appm__hash_tri(const appm_scene *s, uint32_t i, uint64_t *sum)
     sum[APPM__SH_GEOMETRY] += appm__mix64(appm__hash_f(appm__hash_v3(v, t->ng), t->area));
     h = appm__hash_u(appm__hash_u(v, (uint32_t)m->kind), (uint32_t)m->emissive);
     h = appm__hash_v3(appm__hash_v3(appm__hash_v3(h, m->color), m->ke), m->ks);
-    sum[APPM__SH_MATERIALS] += appm__mix64(appm__hash_f(appm__hash_f(h, m->ns), m->ior));
+    h = appm__hash_f(appm__hash_f(h, m->ns), m->ior);
+    if (m->map_kd || m->map_ks || m->map_d) { /* maps and coordinates: only where there are maps, so
+                                               * the hashes of scenes without stay what they were */
+        h = appm__hash_u(h, m->map_kd ? s->tex[m->map_kd - 1].hash : 0);
+        h = appm__hash_u(h, m->map_ks ? s->tex[m->map_ks - 1].hash : 0);
+        h = appm__hash_u(h, m->map_d ? s->tex[m->map_d - 1].hash : 0);
+        if (t->uv0 >= 0) {
+            const float *uv = s->uv + 2 * (size_t)t->uv0;
+            int k;
+            for (k = 0; k < 6; ++k) h = appm__hash_f(h, uv[k]);
+        }
+    }
+    sum[APPM__SH_MATERIALS] += appm__mix64(h);
     sum[APPM__SH_NORMALS] += appm__mix64(appm__hash_u(v, t->nhash));
 }
 
@@ -9737,6 +13740,7 @@ static uint64_t appm__hash_lights(const appm_scene *s)
         const appm__light *l = &s->light[i];
         if (l->kind == APPM__LIGHT_AREA) continue;
         h = appm__hash_v3(appm__hash_u(h, (uint32_t)l->kind), l->value);
+        if (l->kind == APPM__LIGHT_ENV && s->envmap.rgb) h = appm__hash_u(h, s->envmap.hash);
         if (l->kind == APPM__LIGHT_ENV) continue;
         h = appm__hash_v3(h, l->pos);
         if (l->kind == APPM__LIGHT_SPOT)

@@ -279,6 +279,25 @@ typedef enum appm_emission {
     APPM_EMISSION_GUIDED
 } appm_emission;
 
+/* What a texture map (map_Kd, map_Ks, map_d) that cannot be read or decoded
+ * does to a scene's load. */
+typedef enum appm_missing_textures {
+    APPM_MISSING_TEXTURES_ERROR = 0, /* default: the load fails, naming the map and the MTL line */
+    APPM_MISSING_TEXTURES_WARN       /* one warning per map (cfg.log); the material renders without it */
+} appm_missing_textures;
+
+/* What lights a bare OBJ in which nothing emits and that names no light
+ * (appm_scene_load of a .obj, appm_scene_load_obj_memory). */
+typedef enum appm_stand_in {
+    APPM_STAND_IN_STUDIO = 0, /* default: a product shot - a sky brighter above than below
+                               * with a soft key light high on the left in front (an
+                               * environment map), a grey ground plate (albedo 0.5) under
+                               * the model's bounding box, 2 of its bounding radii each
+                               * way, and the camera 20 degrees above, framing the model  */
+    APPM_STAND_IN_WHITE       /* a constant white environment of radiance 1 and the camera
+                               * looking along -z: a furnace, as earlier versions lit it   */
+} appm_stand_in;
+
 /* Every field: 0 (or NULL) means "default".  `appm_config cfg = {0};` works. */
 typedef struct appm_config {
     appm_allocator allocator;
@@ -308,6 +327,8 @@ typedef struct appm_config {
     appm_file_reader reader;  /* every file a load reads (scenes, meshes, materials,
                                * PFM images, a renderer's checkpoints): NULL read
                                * hook: the file system                              */
+    appm_missing_textures missing_textures; /* APPM_MISSING_TEXTURES_ERROR            */
+    appm_stand_in stand_in;   /* APPM_STAND_IN_STUDIO                                */
 } appm_config;
 
 /* The defaults spelled out (every field set to the value 0 stands for, where that
@@ -373,6 +394,18 @@ APPM_API appm_status appm_scene_add_point_light(appm_scene *scene, const double 
                                                 const double intensity[3], appm_diag *diag);
 APPM_API appm_status appm_scene_set_environment(appm_scene *scene, const double radiance[3],
                                                 appm_diag *diag);
+/* The environment becomes the equirectangular map at `path` (any format
+ * appm_image_read reads; row 0 the zenith, +y; column 0 looking along -z,
+ * columns advancing towards +x), its radiance times `scale` (>= 0), turned
+ * by `rotate_degrees` about +y (90: column 0 looks along +x); replaces a
+ * constant or mapped environment, or a bare OBJ's stand-in sky.  Shadow rays
+ * and photons are drawn by the map's brightness times sin(theta).  The file
+ * is read through cfg->reader when one is set; its memory comes from the
+ * scene's allocator.  APPM_ERR_IO, _PARSE (an unreadable, non-finite or black
+ * map) or _INVALID_ARG leave the scene as it was. */
+APPM_API appm_status appm_scene_set_environment_map(appm_scene *scene, const char *path, double scale,
+                                                    double rotate_degrees, const appm_config *cfg,
+                                                    appm_diag *diag);
 
 typedef struct appm_scene_info {
     uint64_t triangles;       /* after fan triangulation, degenerate ones dropped */
@@ -390,6 +423,10 @@ typedef struct appm_scene_info {
     uint64_t memory_bytes;          /* bytes the scene holds                            */
     uint64_t peak_bytes;            /* the most that loading held at once               */
     uint32_t materials_glossy;      /* Lambert + Phong lobe (Ks > 0 on illum 2)          */
+    uint32_t textures;              /* texture maps loaded (each file once)              */
+    uint64_t texture_bytes;         /* their samples (part of memory_bytes)              */
+    uint32_t materials_cutout;      /* materials with a map_d cut-out                    */
+    uint32_t environment_map_width, environment_map_height; /* 0: no map                */
 } appm_scene_info;
 
 APPM_API void appm_scene_get_info(const appm_scene *scene, appm_scene_info *info);
@@ -429,6 +466,14 @@ APPM_API appm_status appm_image_write_ex(const char *path, const appm_image *img
  * cfg->allocator (cfg may be NULL); free them with appm_image_free(). */
 APPM_API appm_status appm_image_read_pfm(const char *path, const appm_config *cfg,
                                          appm_image *out, appm_diag *diag);
+/* Reads any image appm reads as a texture or an environment map (by its first
+ * bytes; TGA by the name's .tga): PNG (every colour type and depth, palette,
+ * Adam7), JPEG (baseline and progressive, 4:4:4 / 4:2:2 / 4:2:0), TGA, PPM/PGM,
+ * PFM, OpenEXR (scanline: none, RLE, ZIPS, ZIP; half, float, uint) and Radiance
+ * HDR, as linear RGB: 8- and 16-bit colour sRGB-decoded, grey copied to all
+ * three channels, alpha dropped.  Free with appm_image_free(). */
+APPM_API appm_status appm_image_read(const char *path, const appm_config *cfg, appm_image *out,
+                                     appm_diag *diag);
 APPM_API void appm_image_free(const appm_config *cfg, appm_image *img);
 
 /* Error metrics of `a` against the reference `b` (same size): the `compare` line

@@ -134,7 +134,8 @@ static const char *const HELP =
     "\n"
     "usage:\n"
     "  appm render SCENE [options]   progressive render of a .scene or .obj, writes an image\n"
-    "  appm compare A.pfm B.pfm      error of A against the reference B\n"
+    "  appm compare A B              error of image A against the reference B (linear:\n"
+    "                                .pfm .exr .hdr; 8-bit files are sRGB-decoded)\n"
     "  appm info SCENE               what the scene contains, memory it will need\n"
     "  appm --help | appm render --help | appm --version\n";
 
@@ -145,10 +146,6 @@ static const char *const RENDER_HELP =
     "                        (8-bit sRGB) [SCENENAME.png in the current folder]\n"
     "  --exr float|half      sample type of an .exr output [float]\n"
     "  --exr-compression zip|none   compression of an .exr output [zip]\n"
-    "  --environment R G B   add (or replace) a constant environment light of this radiance\n"
-    "  --light point X Y Z R G B    add a point light (intensity W/sr per channel); repeatable\n"
-    "                        (a bare .obj that emits nothing and gets neither is lit by a\n"
-    "                        white environment of radiance 1, with a warning)\n"
     "  --method M            appm (adaptive radius, default) | appm-paper (the adaptive radius\n"
     "                        as Kaplanyan-Dachsbacher derive it: one photon component) | ppm\n"
     "                        (global radius schedule, Knaus-Zwicker) | sppm (per-pixel\n"
@@ -174,7 +171,7 @@ static const char *const RENDER_HELP =
     "  --chains K            qmc: K independently scrambled chains of passes, so that\n"
     "                        est_relerr is honest (K >= 2) at a price in accuracy [1]\n"
     "  --exposure X          multiply before the sRGB conversion of .png/.ppm [1]\n"
-    "  --reference REF.pfm   compare with this image after every pass\n"
+    "  --reference REF       compare with this image after every pass (.pfm .exr .hdr ...)\n"
     "  --log FILE.csv        one row per pass: pass,seconds,photons,rmse,relmse,est_relerr\n"
     "  --aux PREFIX          also write PREFIX-{radius,variance,laplacian,error}.pfm and .png\n"
     "                        (appm also PREFIX-radius-{caustic,diffuse}: each component's radius;\n"
@@ -184,7 +181,28 @@ static const char *const RENDER_HELP =
     "  --checkpoint-every N  with --checkpoint: every N passes instead of every 10 s\n"
     "  --resume FILE         continue from a checkpoint of the same scene and options (any\n"
     "                        --threads); --passes counts the whole render, --time this run\n"
-    "  -q, --quiet           no progress output and no warnings\n";
+    "  -q, --quiet           no progress output and no warnings\n"
+    "\n"
+    "lights and maps:\n";
+
+/* The second half of `appm render --help` (C99 compilers need only take
+ * string literals of up to 4095 characters). */
+static const char *const RENDER_HELP_LIGHTS =
+    "  --environment R G B   add (or replace) a constant environment light of this radiance\n"
+    "  --environment-map FILE   light the scene by this equirectangular map (.exr .hdr .pfm\n"
+    "                        .png .jpg ...; row 0 the zenith, +y; column 0 looking along -z),\n"
+    "                        replacing its environment\n"
+    "  --environment-scale S    multiply the map's radiance by S [1]\n"
+    "  --environment-rotate DEG turn the map about the up axis (90: column 0 looks along +x) [0]\n"
+    "  --missing-textures error|warn   a texture map that cannot be read fails the load\n"
+    "                        (error) or renders without it, with a warning [error]\n"
+    "  --light point X Y Z R G B    add a point light (intensity W/sr per channel); repeatable\n"
+    "                        (a bare .obj that emits nothing and gets neither is shown in\n"
+    "                        a studio, with a warning: see --stand-in)\n"
+    "  --stand-in studio|white   what lights a bare .obj without light: a sky with a key\n"
+    "                        light, a ground plate and a camera from above (studio), or a\n"
+    "                        constant white environment of radiance 1 (white) [studio]\n";
+
 
 /* "appm, ppm, sppm, pt or appm-paper": the library's method names, for messages. */
 static const char *method_list(char *buf, size_t size)
@@ -344,6 +362,9 @@ typedef struct render_opts {
     double lights[MAX_CLI_LIGHTS][6]; /* --light point: position, intensity */
     int nlights, have_env;
     double env[3];                    /* --environment */
+    const char *env_map;              /* --environment-map */
+    double env_scale, env_rotate;     /* --environment-scale, --environment-rotate */
+    int have_env_scale, have_env_rotate;
     double time_limit, until_error, exposure;
     unsigned long long passes, checkpoint_every; /* 0: every CHECKPOINT_SECONDS */
     int quiet, have_time, have_passes, have_until;
@@ -395,6 +416,24 @@ static int parse_output_option(const char *a, const char *v, render_opts *o, int
         if (strcmp(v, "zip") == 0) o->write.exr_uncompressed = 0;
         else if (strcmp(v, "none") == 0) o->write.exr_uncompressed = 1;
         else *rc = usage_error("--exr-compression must be zip or none, not '%s'", v);
+    } else if (strcmp(a, "--environment-map") == 0) {
+        o->env_map = v;
+    } else if (strcmp(a, "--environment-scale") == 0) {
+        if (!parse_double(v, &d) || !(d >= 0 && d <= 1e30))
+            *rc = usage_error("--environment-scale needs a number in [0, 1e30], not '%s'", v);
+        else o->env_scale = d, o->have_env_scale = 1;
+    } else if (strcmp(a, "--environment-rotate") == 0) {
+        if (!parse_double(v, &d) || !(fabs(d) <= 1e6))
+            *rc = usage_error("--environment-rotate needs degrees in [-1e6, 1e6], not '%s'", v);
+        else o->env_rotate = d, o->have_env_rotate = 1;
+    } else if (strcmp(a, "--stand-in") == 0) {
+        if (strcmp(v, "studio") == 0) o->cfg.stand_in = APPM_STAND_IN_STUDIO;
+        else if (strcmp(v, "white") == 0) o->cfg.stand_in = APPM_STAND_IN_WHITE;
+        else *rc = usage_error("--stand-in must be studio or white, not '%s'", v);
+    } else if (strcmp(a, "--missing-textures") == 0) {
+        if (strcmp(v, "error") == 0) o->cfg.missing_textures = APPM_MISSING_TEXTURES_ERROR;
+        else if (strcmp(v, "warn") == 0) o->cfg.missing_textures = APPM_MISSING_TEXTURES_WARN;
+        else *rc = usage_error("--missing-textures must be error or warn, not '%s'", v);
     } else if (strcmp(a, "--exposure") == 0) {
         if (!parse_double(v, &d) || !(d > 0)) *rc = usage_error("--exposure needs a number > 0, not '%s'", v);
         else o->exposure = d;
@@ -497,6 +536,7 @@ static int parse_render(int argc, char **argv, render_opts *o)
         int rc;
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(RENDER_HELP, stdout);
+            fputs(RENDER_HELP_LIGHTS, stdout);
             exit(EXIT_OK);
         }
         if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
@@ -520,6 +560,9 @@ static int parse_render(int argc, char **argv, render_opts *o)
     }
     if (!o->scene) return usage_error("render needs a scene file");
     if (o->checkpoint_every && !o->checkpoint) return usage_error("--checkpoint-every needs --checkpoint FILE");
+    if ((o->have_env_scale || o->have_env_rotate) && !o->env_map)
+        return usage_error("--environment-scale and --environment-rotate need --environment-map FILE");
+    if (o->env_map && o->have_env) return usage_error("--environment and --environment-map: give one of them");
     return -1;
 }
 
@@ -567,7 +610,8 @@ static int save_checkpoint(appm_renderer *r, const render_opts *o, double now, d
     return 0;
 }
 
-/* --environment, then the --light point lights, in command-line order. */
+/* --environment or --environment-map, then the --light point lights, in
+ * command-line order. */
 static int add_cli_lights(const render_opts *o, appm_scene *scene)
 {
     appm_diag d;
@@ -575,6 +619,9 @@ static int add_cli_lights(const render_opts *o, appm_scene *scene)
     int k;
     if (o->have_env && (s = appm_scene_set_environment(scene, o->env, &d)) != APPM_OK)
         return lib_error(s, &d, "--environment");
+    if (o->env_map && (s = appm_scene_set_environment_map(scene, o->env_map, o->have_env_scale ? o->env_scale : 1.0,
+                                                          o->env_rotate, &o->cfg, &d)) != APPM_OK)
+        return lib_error(s, &d, o->env_map);
     for (k = 0; k < o->nlights; ++k)
         if ((s = appm_scene_add_point_light(scene, o->lights[k], o->lights[k] + 3, &d)) != APPM_OK)
             return lib_error(s, &d, "--light");
@@ -653,7 +700,7 @@ static int render_setup(render_run *R)
     if ((rc = cli_agree(rc)) != EXIT_OK) return rc; /* before the --resume read every rank takes part in */
     if (o->resume && (rc = resume_render(R->r, o, &R->resumed)) != EXIT_OK) return rc;
     /* what rank 0 alone reads comes after the reads every rank of a job takes part in */
-    if (o->reference && cli_root() && (s = appm_image_read_pfm(o->reference, NULL, &R->ref, &d)) != APPM_OK)
+    if (o->reference && cli_root() && (s = appm_image_read(o->reference, NULL, &R->ref, &d)) != APPM_OK)
         return lib_error(s, &d, o->reference);
     if (R->ref.rgb) {
         appm_renderer_image(R->r, &R->img);
@@ -889,11 +936,11 @@ static int cmd_compare(int argc, char **argv)
     appm_compare_result c;
     appm_status s;
     if (argc != 4) return usage_error("compare needs two PFM files");
-    if ((s = appm_image_read_pfm(argv[2], NULL, &a, &d)) != APPM_OK) {
+    if ((s = appm_image_read(argv[2], NULL, &a, &d)) != APPM_OK) {
         lib_error(s, &d, argv[2]);
         return EXIT_INPUT;
     }
-    if ((s = appm_image_read_pfm(argv[3], NULL, &b, &d)) != APPM_OK) {
+    if ((s = appm_image_read(argv[3], NULL, &b, &d)) != APPM_OK) {
         lib_error(s, &d, argv[3]);
         appm_image_free(NULL, &a);
         return EXIT_INPUT;
@@ -954,6 +1001,11 @@ static int cmd_info(int argc, char **argv)
            in.bbox_min[2], in.bbox_max[0], in.bbox_max[1], in.bbox_max[2]);
     printf("bvh         %llu nodes, depth %u\n", (unsigned long long)in.bvh_nodes, in.bvh_depth);
     printf("image       %ux%u\n", in.width, in.height);
+    if (in.textures)
+        printf("textures    %u maps, %.1f KiB (%u materials with cut-outs)\n", in.textures,
+               (double)in.texture_bytes / 1024.0, in.materials_cutout);
+    if (in.environment_map_width)
+        printf("environment map %ux%u\n", in.environment_map_width, in.environment_map_height);
     printf("memory      scene %.1f KiB (peak while loading %.1f KiB)\n", (double)in.memory_bytes / 1024.0,
            (double)in.peak_bytes / 1024.0);
     cfg.threads = 1;

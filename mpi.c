@@ -228,7 +228,7 @@ int main(int argc, char **argv)
         g_who = who;
     }
     if (argc >= 2 && strcmp(argv[1], "render") == 0 && wants_help(argc, argv)) {
-        if (m.rank == 0) fputs(RENDER_HELP, stdout); /* parse_render would exit before MPI_Finalize */
+        if (m.rank == 0) fputs(RENDER_HELP, stdout), fputs(RENDER_HELP_LIGHTS, stdout); /* parse_render would exit before MPI_Finalize */
         MPI_Finalize();
         return EXIT_OK;
     }

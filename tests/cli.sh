@@ -365,14 +365,18 @@ if need pngcheck; then
     check "pngcheck reads the PNG" [ "$rc" -eq 0 ]
 fi
 
-# ---- any OBJ renders: the white environment, --light, --environment ------------------
+# ---- any OBJ renders: the studio, the white environment, --light, --environment ---------
 
 BUNNY=scenes/stanford-bunny.obj
 run "$APPM" render "$BUNNY" --size 32x32 --passes 2 -o "$T/bunny.png"
 check "a bare OBJ without light renders (exit $rc)" [ "$rc" -eq 0 ]
-check "... with one warning about the white environment" \
-    [ "$(grep -c 'white environment of radiance 1' "$T/err")" -eq 1 ]
+check "... with one warning about the studio" [ "$(grep -c 'shown in a studio' "$T/err")" -eq 1 ]
 check "... and writes the image" [ -s "$T/bunny.png" ]
+run "$APPM" render "$BUNNY" --size 32x32 --passes 2 --stand-in white -o "$T/bunny-w.png"
+check "--stand-in white: one warning about the white environment" \
+    [ "$(grep -c 'white environment of radiance 1' "$T/err")" -eq 1 ]
+run "$APPM" render "$BUNNY" --size 8x8 --passes 1 --stand-in grey -o "$T/never.png"
+check "--stand-in grey is a usage error (exit $rc)" [ "$rc" -eq 1 ]
 run "$APPM" render "$BUNNY" --size 32x32 --passes 2 -o "$T/bunny-l.pfm" --light point 0 0.3 0.3 0.05 0.05 0.05 \
     --light point 0.2 0.3 0 0.02 0.02 0.02
 check "--light point (twice) exits 0" [ "$rc" -eq 0 ]

@@ -13,7 +13,8 @@
 #   wasm32-wasi     clang -Werror, no threads: the web build (appm.c + web/shim.c), and
 #                   the tests that run in seconds (t_portable, t_alloc, t_image, t_loader,
 #                   t_bvh, t_sampling, t_fuzz_regress, t_pmap, t_estimator, t_lights,
-#                   t_extremes, t_sampler), 32-bit size_t, under Node's WASI
+#                   t_extremes, t_sampler, t_checkpoint, t_decode), 32-bit size_t, under
+#                   Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
 #   QEMU=1          t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
@@ -305,7 +306,7 @@ if have clang "wasm32-wasi"; then
             # overflow silently overwrites malloc's state; the tests' big local arrays
             # (t_bvh's most of all) get 32 MiB, below the data, so an overflow traps.
             for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress t_pmap \
-                t_estimator t_lights t_extremes t_sampler t_checkpoint; do
+                t_estimator t_lights t_extremes t_sampler t_checkpoint t_decode; do
                 if $WASM "tests/$n.c" -o "$OUT/$n.wasm" -Wl,-z,stack-size=33554432 \
                     -Wl,--stack-first >"$log" 2>&1; then
                     run_test "wasm32-wasi: tests/$n.c under node" env APPM_TEST_QUICK=1 \
@@ -382,6 +383,12 @@ if [ "${QEMU:-0}" = 1 ]; then
                 run_test "qemu-$arch: t_portable" qemu-$arch -L /usr/$triple "$OUT/t_portable-$arch"
             else
                 bad "$triple-gcc: tests/t_portable.c"
+            fi
+            # t_decode: every image decoder on a big-endian host (s390x) too
+            if $triple-gcc $C99 -O2 tests/t_decode.c -o "$OUT/t_decode-$arch" -lm -pthread >"$log" 2>&1; then
+                run_test "qemu-$arch: t_decode" env APPM_TEST_QUICK=1 qemu-$arch -L /usr/$triple "$OUT/t_decode-$arch"
+            else
+                bad "$triple-gcc: tests/t_decode.c"
             fi
             # t_bvh: NEON on aarch64, and its -DAPPM_SIMD=0 twin; s390x has no SIMD
             # path, so its default build is the scalar one already

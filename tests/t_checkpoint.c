@@ -703,13 +703,17 @@ typedef struct known_config {
     unsigned chains;     /* compared */
     appm_emission emission; /* compared (as the count of guided lights) */
     appm_file_reader reader; /* free: where a load's bytes come from */
+    appm_missing_textures missing_textures; /* free: what it changes is in the scene's hash */
+    appm_stand_in stand_in; /* free: the plate and the sky are in the scene's hash */
 } known_config;
 
 static void test_config_tripwire(void)
 {
     CHECK_MSG(sizeof(appm_config) == sizeof(known_config) &&
                   offsetof(appm_config, chains) == offsetof(known_config, chains) &&
-                  offsetof(appm_config, reader) == offsetof(known_config, reader),
+                  offsetof(appm_config, reader) == offsetof(known_config, reader) &&
+                  offsetof(appm_config, missing_textures) == offsetof(known_config, missing_textures) &&
+                  offsetof(appm_config, stand_in) == offsetof(known_config, stand_in),
               "appm_config has fields the checkpoint does not know: see the comment above test_config_tripwire");
 }
 

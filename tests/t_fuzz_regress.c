@@ -2,7 +2,8 @@
  * without libFuzzer, so that `make test` runs them under ASan+UBSan too.
  *
  * Every file of tests/fuzz/corpus/<target>/ and of tests/fuzz/regressions/ goes
- * through all four entry points of tests/fuzz/targets.h (obj, mtl, scene, pfm),
+ * through all the entry points of tests/fuzz/targets.h (obj, mtl, scene, pfm,
+ * checkpoint, image),
  * which check their own invariants (valid status, diag, no leak through the
  * allocator hooks, reader-specific promises) and run an out-of-memory variant.
  * A file in corpus/<target>/ named ok-* must load with APPM_OK through its own

@@ -1,5 +1,6 @@
 /* tests/t_lights.c - lights for any scene: the white environment a bare OBJ
- * without light gets, and the lights added to a loaded scene
+ * without light gets with appm_config.stand_in = APPM_STAND_IN_WHITE (the
+ * studio, the default, is tested at the end), and the lights added to a loaded scene
  * (appm_scene_add_point_light, appm_scene_set_environment).
  *
  * The scene is one two-sided Lambertian square, albedo rho = 0.5, side 2, in
@@ -34,12 +35,19 @@ static void on_log(void *user, const char *file, unsigned line, const char *msg)
     snprintf(w->last, sizeof w->last, "%s", msg);
 }
 
+/* The quad under the white stand-in (appm_config.stand_in), cfg's other
+ * fields as given (cfg may be NULL). */
 static appm_scene *load_quad(const appm_config *cfg)
 {
     appm_scene *s = NULL;
     appm_diag d;
-    appm_status st = appm_scene_load_obj_memory(QUAD_OBJ, strlen(QUAD_OBJ), QUAD_MTL, strlen(QUAD_MTL),
-                                                "quad.obj", cfg, &s, &d);
+    appm_config white;
+    appm_status st;
+    if (cfg) white = *cfg;
+    else appm_config_init(&white);
+    white.stand_in = APPM_STAND_IN_WHITE;
+    st = appm_scene_load_obj_memory(QUAD_OBJ, strlen(QUAD_OBJ), QUAD_MTL, strlen(QUAD_MTL), "quad.obj", &white, &s,
+                                    &d);
     CHECK_MSG(st == APPM_OK, "%s:%u: %s", d.file, d.line, d.message);
     return s;
 }
@@ -210,8 +218,71 @@ static void test_allocation_failure(void)
     CHECK(bad == 0);
 }
 
+/* The studio (appm_config.stand_in's default): a ground plate under the
+ * model, facing up; a sky map brighter above than below with a key light;
+ * the camera 20 degrees above.  A sphere rendered in it differs from the
+ * image's corners by more than 30 % in luminance (the issue's measure of
+ * "form"), and a light the user adds replaces the sky, not the plate. */
+static void test_studio(void)
+{
+    char obj[64 * 1024];
+    size_t at = 0;
+    int i, j, n = 12;
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_scene_info in;
+    appm_image img;
+    warnings w = {0, ""};
+    uint32_t t, plate = 0;
+    /* no material: the default, Kd 0.8, as the bunny's */
+    for (i = 0; i <= n; ++i)
+        for (j = 0; j < 2 * n; ++j) {
+            double th = APPM__PI * i / n, ph = APPM__PI * j / n;
+            at += (size_t)snprintf(obj + at, sizeof obj - at, "v %.6f %.6f %.6f\n", sin(th) * cos(ph), cos(th),
+                                   sin(th) * sin(ph));
+        }
+    for (i = 0; i < n; ++i)
+        for (j = 0; j < 2 * n; ++j) {
+            int a = i * 2 * n + j + 1, b = i * 2 * n + (j + 1) % (2 * n) + 1;
+            at += (size_t)snprintf(obj + at, sizeof obj - at, "f %d %d %d %d\n", a, a + 2 * n, b + 2 * n, b);
+        }
+    CHECK(appm_scene_load_obj_memory(obj, at, NULL, 0, "sphere.obj", NULL, &s, &d) == APPM_OK);
+    if (!s) return;
+    appm_scene_get_info(s, &in);
+    CHECK(in.lights_environment == 1 && in.environment_map_width == 128 && in.environment_map_height == 64);
+    for (t = 0; t < s->ntri; ++t)
+        if (s->info[t].ng.y > 0.999f && s->tri[t].p0.y < -1.0f && s->tri[t].p0.y > -1.01f) {
+            plate++;
+            CHECK(s->mat[s->info[t].mat].color.x == 0.5f && s->info[t].area > 3.9f);
+        }
+    CHECK(plate == 2);
+    CHECK(s->cam.forward.y < -0.33f && s->cam.forward.y > -0.35f); /* 20 degrees down */
+    {
+        appm__v3 up = appm__env_radiance(s, appm__v(0, 1, 0)), down = appm__env_radiance(s, appm__v(0, -1, 0));
+        appm__v3 key = appm__env_radiance(s, appm__normalize(appm__v(-0.55f, 0.72f, 0.42f)));
+        CHECK(up.y > 3.0f * down.y && key.y > 10.0f * up.y);
+    }
+    if (render(s, check_quick() ? 8 : 32, &w, &img)) {
+        double centre = box_mean(&img, 12, 20, 12, 20);
+        double corners = (box_mean(&img, 0, 3, 0, 3) + box_mean(&img, 29, 32, 0, 3) + box_mean(&img, 0, 3, 29, 32) +
+                          box_mean(&img, 29, 32, 29, 32)) / 4.0;
+        CHECK_MSG(fabs(centre - corners) > 0.3 * corners, "centre %g, corners %g", centre, corners);
+        free(img.rgb);
+    }
+    CHECK_MSG(w.n == 1 && strstr(w.last, "studio") != NULL, "%d warnings, last '%s'", w.n, w.last);
+    {
+        const double pos[3] = {0, 3, 2}, I[3] = {1, 1, 1};
+        CHECK(appm_scene_add_point_light(s, pos, I, &d) == APPM_OK);
+        appm_scene_get_info(s, &in);
+        CHECK(in.lights_environment == 0 && in.environment_map_width == 0 && s->envmap.rgb == NULL);
+        CHECK(in.triangles == s->ntri && plate == 2);
+    }
+    appm_scene_destroy(s);
+}
+
 int main(void)
 {
+    test_studio();
     test_white_environment();
     test_point_light();
     test_set_environment();

@@ -1030,10 +1030,10 @@ static void test_mtl_values(void)
     CHECK(log_count(&lb, "nope") == 1);
     if (log_find(&lb, "nope") >= 0) CHECK(lb.line[log_find(&lb, "nope")] == 7);
     appm_scene_destroy(s);
-    /* Ignored statements: one warning per kind, e.g. many Ka, Ns and map_Kd */
+    /* Ignored statements: one warning per kind, e.g. many Ka, Ns and map_Ka */
     CHECK(load_mem(TRI_LIGHT,
-                   "newmtl light\nKa 1 1 1\nNs 10\nmap_Kd a.png\nKe 1 1 1\n"
-                   "newmtl b\nKa 0 0 0\nNs 20\nmap_Kd -o 0 -7 0 -s 1 10 1 -clamp on tex.png\nmap_Bump x\n",
+                   "newmtl light\nKa 1 1 1\nNs 10\nmap_Ka a.png\nKe 1 1 1\n"
+                   "newmtl b\nKa 0 0 0\nNs 20\nmap_Ka -o 0 -7 0 -s 1 10 1 -clamp on tex.png\nmap_Bump x\n",
                    &s, &d, &lb) == APPM_OK);
     CHECK(log_count(&lb, "'Ka'") == 1);
     CHECK(log_count(&lb, "'Ns'") == 1);

@@ -2,7 +2,7 @@
 # tests/fuzz/run.sh - builds the libFuzzer targets of appm's readers and runs each
 # for a bounded time on a copy of its seed corpus (make fuzz).
 #
-#   sh tests/fuzz/run.sh [obj mtl scene pfm checkpoint]     (default: all five)
+#   sh tests/fuzz/run.sh [obj mtl scene pfm checkpoint image]     (default: all six)
 #
 # Environment:
 #   FUZZ_SECONDS=30    seconds per target
@@ -26,7 +26,7 @@ CC=${FUZZ_CC:-clang}
 SECONDS_EACH=${FUZZ_SECONDS:-30}
 OUT=build/fuzz
 FLAGS="-g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
-targets=${*:-obj mtl scene pfm checkpoint}
+targets=${*:-obj mtl scene pfm checkpoint image}
 
 unavailable() {
     echo "fuzz: $1"

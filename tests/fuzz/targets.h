@@ -1,4 +1,4 @@
-/* tests/fuzz/targets.h - the five fuzz entry points of appm's readers, shared by
+/* tests/fuzz/targets.h - the six fuzz entry points of appm's readers, shared by
  * the libFuzzer programs (tests/fuzz/fuzz_*.c) and the regression replayer
  * (tests/t_fuzz_regress.c).  Include it after appm.c.
  *
@@ -15,6 +15,9 @@
  *                   scene, as given and with its checksum made right; a
  *                   refused checkpoint leaves the renderer fresh, an accepted
  *                   one saves back to the same bytes and renders a pass
+ *   fuzz_image_one  appm__image_decode (every image format appm reads); the
+ *                   first byte picks the name (x.tga or x.img) and whether a
+ *                   PNG's chunk CRCs are made right; pixels and memory checked
  *
  * Each returns the status of its main call (>= 0) when everything the library
  * promises held, or FUZZ_BAD (-1) after printing what did not:
@@ -671,6 +674,102 @@ static int fuzz_pfm_one(const unsigned char *data, size_t size)
     return fuzz__twice_one("pfm", fuzz__pfm_run, NULL, data, size);
 }
 
+/* ---- Images (PNG, JPEG, OpenEXR, TGA, PGM/PPM, Radiance HDR, PFM) ---------------- */
+
+/* The first byte of the input picks the file's name: bit 0 set "x.tga" (TGA
+ * has no magic; appm__image_decode knows it by its name), clear "x.img"; with
+ * bit 1 clear, a PNG gets every chunk CRC made right first, so that mutations
+ * reach the decoder behind the CRC check.  The rest is the file. */
+typedef struct fuzz__img {
+    const unsigned char *p;
+    size_t n;
+    const char *name;
+} fuzz__img;
+
+static void fuzz__png_fix_crcs(unsigned char *p, size_t n)
+{
+    size_t at = 8;
+    while (n >= 12 && at <= n - 12) {
+        uint32_t len = appm__png_be32(p + at), c;
+        if (len > n - at - 12) break;
+        c = appm__crc32_update(0xFFFFFFFFu, p + at + 4, 4 + (size_t)len) ^ 0xFFFFFFFFu;
+        p[at + 8 + len] = (unsigned char)(c >> 24);
+        p[at + 9 + len] = (unsigned char)(c >> 16);
+        p[at + 10 + len] = (unsigned char)(c >> 8);
+        p[at + 11 + len] = (unsigned char)c;
+        at += 12 + (size_t)len;
+    }
+}
+
+/* appm__image_decode: a refusal leaves no pixels and names the file; out of
+ * memory only when an allocation was refused (every decoder bounds what a
+ * file of n bytes can make it allocate); a decoded image has a valid size,
+ * depth and channel count, only its pixel block stays allocated, every byte
+ * of it is readable, 8- and 16-bit samples give linear values in [0,1], and a
+ * Radiance HDR's are finite and >= 0. */
+static int fuzz__image_run(const void *ctx, fuzz_env *e)
+{
+    const fuzz__img *in = (const fuzz__img *)ctx;
+    appm__mem m;
+    appm__pixels px;
+    appm_status st;
+    int bad = 0;
+    appm__mem_init(&m, &e->cfg);
+    m.diag = &e->diag;
+    appm__diag_clear(&e->diag);
+    memset(&px, 0x5A, sizeof px);
+    st = appm__image_decode(&m, in->p, in->n, in->name, &px, &e->diag);
+    if (fuzz__check_diag("image", &e->diag, st)) bad = 1;
+    if (st != APPM_OK) {
+        if (px.data) bad = fuzz__bad("image", "pixels left after a failure");
+        if (st != APPM_ERR_PARSE && st != APPM_ERR_NOMEM) bad = fuzz__bad("image", "status neither PARSE nor NOMEM");
+        if (st == APPM_ERR_NOMEM && !e->a.failed)
+            bad = fuzz__bad("image", "out of memory though no allocation was refused (a missing size check)");
+        if (st == APPM_ERR_PARSE && strcmp(e->diag.file, in->name) != 0)
+            bad = fuzz__bad("image", "the refusal names another file");
+    } else if (!px.data || px.w < 1 || px.h < 1 || px.w > APPM__IMAGE_MAX || px.h > APPM__IMAGE_MAX ||
+               px.channels < 1 || px.channels > 4 || (px.depth != 8 && px.depth != 16 && px.depth != 32)) {
+        bad = fuzz__bad("image", "bad image after success");
+    } else {
+        size_t bytes = (size_t)px.w * px.h * px.channels * (px.depth / 8), i, n = (size_t)px.w * px.h;
+        int hdr = in->n >= 2 && in->p[0] == '#' && in->p[1] == '?';
+        volatile unsigned char sink = 0;
+        unsigned k;
+        if (m.live != bytes + APPM__ALLOC_HEADER) bad = fuzz__bad("image", "more than the pixels left allocated");
+        for (i = 0; i < bytes; i += 61) sink ^= ((const unsigned char *)px.data)[i];
+        sink ^= ((const unsigned char *)px.data)[bytes - 1]; /* ASan checks the block's size */
+        (void)sink;
+        for (i = 0; i < n && i < 4096 && !bad; ++i)
+            for (k = 0; k < px.channels; ++k) {
+                float v = appm__pixels_linear(&px, i, k);
+                if (px.depth != 32 && !(v >= 0.0f && v <= 1.0f))
+                    bad = fuzz__bad("image", "an 8- or 16-bit sample outside [0,1]");
+                if (hdr && !(v >= 0.0f && v <= FLT_MAX)) bad = fuzz__bad("image", "a Radiance HDR value not finite and >= 0");
+            }
+    }
+    if (st == APPM_OK) appm__free(&m, px.data);
+    if (m.live != 0) bad = fuzz__bad("image", "memory counter not back at 0");
+    if (fuzz__check_env("image", e)) bad = 1;
+    return bad ? FUZZ_BAD : (int)st;
+}
+
+static int fuzz_image_one(const unsigned char *data, size_t size)
+{
+    static const unsigned char png_sig[8] = {0x89, 'P', 'N', 'G', 13, 10, 26, 10};
+    unsigned sel = size ? data[0] : 0u;
+    size_t n = size ? size - 1 : 0;
+    unsigned char *buf = (unsigned char *)fuzz__dup(size ? data + 1 : data, n); /* exact size */
+    fuzz__img in;
+    int st;
+    if (!(sel & 2u) && n >= 8 && memcmp(buf, png_sig, 8) == 0) fuzz__png_fix_crcs(buf, n);
+    in.p = buf;
+    in.n = n;
+    in.name = (sel & 1u) ? FUZZ_DIR "x.tga" : FUZZ_DIR "x.img";
+    st = fuzz__twice("image", fuzz__image_run, &in, fuzz__hash(data, size));
+    free(buf);
+    return st;
+}
+
 /* ---- Checkpoints --------------------------------------------------------------- */
 
 /* The renderer checkpoints are loaded into: a lamp over a floor, 4x3 pixels, 64
@@ -782,7 +881,7 @@ static const struct fuzz_target {
     fuzz_fn one;
 } fuzz_targets[] = {
     {"obj", fuzz_obj_one}, {"mtl", fuzz_mtl_one}, {"scene", fuzz_scene_one}, {"pfm", fuzz_pfm_one},
-    {"checkpoint", fuzz_checkpoint_one}};
+    {"checkpoint", fuzz_checkpoint_one}, {"image", fuzz_image_one}};
 
 #define FUZZ_TARGET_COUNT (sizeof fuzz_targets / sizeof fuzz_targets[0])
 

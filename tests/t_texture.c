@@ -1,0 +1,532 @@
+/* tests/t_texture.c - texture maps (vt, map_Kd, map_Ks, map_d) and environment
+ * maps (section 4.5, 6.2): lookups against hand-computed bilinear values, a
+ * textured plane whose rendered value is its texel times the light, cut-outs
+ * that let light and rays through, the environment sampler against its own
+ * density (chi-square) and against a quadrature of the sphere, a white-map
+ * furnace, rotation, missing maps, and the checkpoint hash. */
+#include "../appm.c"
+#include "check.h"
+
+/* The base-2 radical inverse of i (van der Corput). */
+static double vdc(uint32_t i)
+{
+    double r = 0.0, f = 0.5;
+    for (; i; i >>= 1, f *= 0.5)
+        if (i & 1u) r += f;
+    return r;
+}
+
+/* tests/out/texture-NAME into buf (check_path's buffer lasts two calls). */
+static void tpath(char *buf, const char *name)
+{
+    snprintf(buf, 256, "%s", check_path("texture", name));
+}
+
+/* A w x h PFM of linear RGB from rgb[] (row 0 at the top) at path. */
+static int write_pfm(const char *path, uint32_t w, uint32_t h, const float *rgb)
+{
+    appm_image img;
+    img.width = w;
+    img.height = h;
+    img.rgb = (float *)rgb;
+    return appm_image_write(path, &img, 1.0, NULL) == APPM_OK;
+}
+
+/* A unit square in the z = 0 plane facing +z, (u, v) = (x, y) over [0,1]^2,
+ * in material m of MTL file mtl. */
+static void write_plane(const char *obj, const char *mtl_name)
+{
+    char text[512];
+    snprintf(text, sizeof text,
+             "mtllib %s\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+             "usemtl m\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
+             mtl_name);
+    CHECK(check_write_file(obj, text));
+}
+
+/* A camera looking at the unit square from +z, the square filling the image. */
+static const char *const PLANE_CAMERA = "camera eye 0.5 0.5 2 target 0.5 0.5 0 fov 28.0724869\nimage 32 32\n";
+
+static void render(const appm_scene *s, appm_method method, unsigned passes, appm_image *out)
+{
+    appm_config cfg;
+    appm_renderer *r = NULL;
+    appm_diag d;
+    unsigned k;
+    appm_config_init(&cfg);
+    cfg.method = method;
+    cfg.threads = 2;
+    out->rgb = NULL;
+    CHECK(appm_renderer_create(s, &cfg, &r, &d) == APPM_OK);
+    if (!r) return;
+    for (k = 0; k < passes; ++k) CHECK(appm_renderer_pass(r) == APPM_OK);
+    appm_renderer_image(r, out);
+    {
+        size_t n = (size_t)out->width * out->height * 3;
+        float *copy = (float *)malloc(n * sizeof(float));
+        if (copy) memcpy(copy, out->rgb, n * sizeof(float));
+        out->rgb = copy;
+    }
+    appm_renderer_destroy(r);
+}
+
+static const float *px(const appm_image *img, uint32_t x, uint32_t y)
+{
+    return img->rgb + 3 * ((size_t)y * img->width + x);
+}
+
+/* Bilinear lookups, wrap-around and sRGB decoding against values worked out
+ * by hand. */
+static void test_lookup(void)
+{
+    static const unsigned char g8[4] = {0, 255, 128, 64}; /* 2 x 2 grey */
+    float f[2 * 2 * 3] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
+    appm__texture t;
+    appm__v3 c;
+    memset(&t, 0, sizeof t);
+    t.px.w = 2;
+    t.px.h = 2;
+    t.px.channels = 3;
+    t.px.depth = 32;
+    t.px.data = f;
+    /* texel centres: (u, v) = ((x + 1/2) / 2, 1 - (y + 1/2) / 2) */
+    c = appm__tex_rgb(&t, 0.25f, 0.75f);
+    CHECK(c.x == 1 && c.y == 0 && c.z == 0);
+    c = appm__tex_rgb(&t, 0.75f, 0.25f);
+    CHECK(c.x == 1 && c.y == 1 && c.z == 1);
+    c = appm__tex_rgb(&t, 0.5f, 0.75f); /* halfway between the top two */
+    CHECK_NEAR(c.x, 0.5, 1e-6);
+    CHECK_NEAR(c.y, 0.5, 1e-6);
+    CHECK_NEAR(c.z, 0.0, 1e-6);
+    c = appm__tex_rgb(&t, 0.0f, 0.75f); /* the left edge wraps: halfway between right and left */
+    CHECK_NEAR(c.x, 0.5, 1e-6);
+    CHECK_NEAR(c.y, 0.5, 1e-6);
+    c = appm__tex_rgb(&t, 3.25f, -1.25f); /* repeat: the same as (0.25, 0.75) */
+    CHECK(c.x == 1 && c.y == 0 && c.z == 0);
+    c = appm__tex_rgb(&t, 0.5f, 0.5f); /* the centre: the mean of all four */
+    CHECK_NEAR(c.x, 0.5, 1e-6);
+    CHECK_NEAR(c.y, 0.5, 1e-6);
+    CHECK_NEAR(c.z, 0.5, 1e-6);
+    /* 8-bit grey: sRGB-decoded before blending; as a mask: raw */
+    t.px.channels = 1;
+    t.px.depth = 8;
+    t.px.data = (void *)g8;
+    c = appm__tex_rgb(&t, 0.75f, 0.75f);
+    CHECK_NEAR(c.x, 1.0, 1e-6);
+    c = appm__tex_rgb(&t, 0.25f, 0.25f); /* code 128 */
+    CHECK_NEAR(c.x, pow((128 / 255.0 + 0.055) / 1.055, 2.4), 1e-6);
+    c = appm__tex_rgb(&t, 0.5f, 0.75f); /* between codes 0 and 255: linear mean 0.5, not code 128 */
+    CHECK_NEAR(c.x, 0.5, 1e-6);
+    CHECK_NEAR(appm__tex_coverage(&t, 0.5f, 0.25f), (128 + 64) / 510.0, 1e-6);
+    {   /* the table agrees with the formula at every code */
+        int k, bad = 0;
+        for (k = 0; k < 256; ++k)
+            if (fabs(appm__srgb8[k] - appm__srgb_linear(k / 255.0)) > 1e-7) bad++;
+        CHECK(bad == 0);
+    }
+}
+
+/* A plane under a constant white environment reflects albedo x 1: each pixel
+ * of the rendered square is Kd times the texel under it.  The path tracer's
+ * cosine-sampled shadow rays make each sample exactly the albedo. */
+static void test_textured_plane(void)
+{
+    char tex[256];
+    tpath(tex, "kd.pfm");
+    char mtl[256];
+    tpath(mtl, "plane.mtl");
+    char obj[256];
+    tpath(obj, "plane.obj");
+    char scn[256];
+    tpath(scn, "plane.scene");
+    /* 4 x 4 texels of distinct colours */
+    float rgb[4 * 4 * 3];
+    char text[512];
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_image img;
+    int k, worst_k = -1;
+    double worst = 0.0;
+    for (k = 0; k < 16; ++k) {
+        rgb[3 * k] = 0.1f + 0.05f * (float)k;
+        rgb[3 * k + 1] = 0.9f - 0.05f * (float)k;
+        rgb[3 * k + 2] = (k & 1) ? 0.7f : 0.2f;
+    }
+    CHECK(write_pfm(tex, 4, 4, rgb));
+    CHECK(check_write_file(mtl, "newmtl m\nKd 0.5 1 1\nmap_Kd texture-kd.pfm\n"));
+    write_plane(obj, "texture-plane.mtl");
+    snprintf(text, sizeof text, "%smesh texture-plane.obj\nenvironment 1 1 1\n", PLANE_CAMERA);
+    CHECK(check_write_file(scn, text));
+    CHECK(appm_scene_load(scn, NULL, &s, &d) == APPM_OK);
+    if (!s) {
+        fprintf(stderr, "%s\n", d.message);
+        return;
+    }
+    CHECK(s->ntex == 1 && s->uv != NULL);
+    render(s, APPM_METHOD_PT, 16, &img);
+    if (img.rgb) {
+        for (k = 0; k < 16; ++k) { /* a pixel near the centre of texel k: 8 x 8 pixels a texel */
+            uint32_t x = (uint32_t)(k % 4) * 8 + 4, y = (uint32_t)(k / 4) * 8 + 4, c;
+            double want[3] = {0, 0, 0};
+            int i, j;
+            for (j = 0; j < 8; ++j) /* the pixel's mean of the bilinear texture: its samples' expectation */
+                for (i = 0; i < 8; ++i) {
+                    appm__v3 t = appm__tex_rgb(&s->tex[0], ((float)x + (i + 0.5f) / 8.0f) / 32.0f,
+                                               1.0f - ((float)y + (j + 0.5f) / 8.0f) / 32.0f);
+                    want[0] += 0.5 * t.x / 64.0;
+                    want[1] += t.y / 64.0;
+                    want[2] += t.z / 64.0;
+                }
+            for (c = 0; c < 3; ++c) {
+                double e = fabs(px(&img, x, y)[c] - want[c]);
+                if (e > worst) worst = e, worst_k = k;
+            }
+        }
+        CHECK_MSG(worst < 2e-3, "textured plane: worst |pixel - Kd texel| %g at texel %d", worst, worst_k);
+        free(img.rgb);
+    }
+    appm_scene_destroy(s);
+}
+
+/* map_d: where the mask is 0 the plane is not there.  A camera ray through the
+ * hole sees the environment (1), one on the solid half sees albedo 0.5; and
+ * a second plane behind the first, lit through the hole only, receives light
+ * only through the hole. */
+static void test_cutout(void)
+{
+    char mask[256];
+    tpath(mask, "mask.pfm");
+    char mtl[256];
+    tpath(mtl, "cut.mtl");
+    char obj[256];
+    tpath(obj, "cut.obj");
+    char scn[256];
+    tpath(scn, "cut.scene");
+    float rgb[2 * 1 * 3] = {0, 0, 0, 1, 1, 1}; /* left half a hole, right half solid */
+    char text[512];
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_image img;
+    CHECK(write_pfm(mask, 2, 1, rgb));
+    CHECK(check_write_file(mtl, "newmtl m\nKd 0.5 0.5 0.5\nmap_d texture-mask.pfm\n"));
+    write_plane(obj, "texture-cut.mtl");
+    snprintf(text, sizeof text, "%smesh texture-cut.obj\nenvironment 1 1 1\n", PLANE_CAMERA);
+    CHECK(check_write_file(scn, text));
+    CHECK(appm_scene_load(scn, NULL, &s, &d) == APPM_OK);
+    if (!s) return;
+    CHECK(s->cutouts);
+    render(s, APPM_METHOD_PT, 2, &img);
+    if (img.rgb) {
+        /* the mask is bilinear between texel centres u = 1/4 (0) and 3/4 (1): the edge at u = 1/2 */
+        CHECK_NEAR(px(&img, 4, 16)[0], 1.0, 1e-6);  /* u = 0.14: hole, the environment behind */
+        CHECK_NEAR(px(&img, 27, 16)[1], 0.5, 2e-3); /* u = 0.86: solid */
+        CHECK_NEAR(px(&img, 14, 16)[0], 1.0, 1e-6); /* u = 0.45: hole */
+        CHECK_NEAR(px(&img, 17, 16)[0], 0.5, 2e-3); /* u = 0.55: solid */
+        free(img.rgb);
+    }
+    {   /* rays: through the hole nothing is hit; the solid half occludes */
+        appm__ray r;
+        appm__hit h;
+        appm__ray_init(&r, appm__v(0.2f, 0.5f, 1.0f), appm__v(0, 0, -1), FLT_MAX);
+        CHECK(!appm__intersect(s, &r, UINT32_MAX, &h));
+        CHECK(!appm__occluded(s, &r, UINT32_MAX, UINT32_MAX));
+        appm__ray_init(&r, appm__v(0.8f, 0.5f, 1.0f), appm__v(0, 0, -1), FLT_MAX);
+        CHECK(appm__intersect(s, &r, UINT32_MAX, &h) && fabsf(h.t - 1.0f) < 1e-5f);
+        CHECK(appm__occluded(s, &r, UINT32_MAX, UINT32_MAX));
+    }
+    appm_scene_destroy(s);
+}
+
+/* An environment map of w x h texels with a bright texel at (sx, sy) on a
+ * dim background, decoded straight into a scene-less appm__envmap. */
+static int make_env(appm__mem *m, appm__envmap *e, uint32_t w, uint32_t h, uint32_t sx, uint32_t sy,
+                    double rotate)
+{
+    appm__envmap from;
+    float *f = (float *)appm__alloc(m, (size_t)w * h, 3 * sizeof(float));
+    uint32_t x, y;
+    appm_diag d;
+    if (!f) return 0;
+    for (y = 0; y < h; ++y)
+        for (x = 0; x < w; ++x) {
+            float v = (x == sx && y == sy) ? 500.0f : 0.2f + 0.6f * (float)y / (float)h + 0.1f * (float)(x % 3);
+            f[3 * ((size_t)y * w + x)] = v;
+            f[3 * ((size_t)y * w + x) + 1] = 0.5f * v;
+            f[3 * ((size_t)y * w + x) + 2] = 0.25f * v;
+        }
+    memset(&from, 0, sizeof from);
+    from.px.w = w;
+    from.px.h = h;
+    from.px.channels = 3;
+    from.px.depth = 32;
+    from.px.data = f;
+    from.scale = 1.0;
+    from.rotate = rotate;
+    appm__diag_clear(&d);
+    return appm__envmap_take(m, e, &from, "env", &d) == APPM_OK;
+}
+
+/* The sampler draws directions with the density appm__env_pdf says (chi-square
+ * over the texels), the density it returns is that density, and the density
+ * integrates to 1 over the sphere. */
+static void test_env_sampler(void)
+{
+    appm__mem m;
+    appm__envmap e;
+    const uint32_t W = 16, H = 8, N = check_quick() ? 200000 : 1000000;
+    double *count, chi2 = 0.0, integral = 0.0, expect_sum = 0.0;
+    uint32_t i, x, y, mismatch = 0;
+    int dof = 0;
+    appm__mem_init(&m, NULL);
+    CHECK(make_env(&m, &e, W, H, 11, 2, 0.0));
+    count = (double *)calloc((size_t)W * H, sizeof(double));
+    if (!count) return;
+    for (i = 0; i < N; ++i) {
+        appm__v3 d;
+        float u1 = (float)((i + 0.5) / N), u2 = (float)vdc(i), p;
+        double u, v;
+        p = appm__env_sample(&e, u1, u2, &d);
+        if (!(p > 0.0f)) continue;
+        if (fabsf(appm__env_pdf(&e, d) - p) > 1e-3f * p) mismatch++;
+        appm__env_uv(&e, d, &u, &v);
+        x = (uint32_t)(u * W);
+        y = (uint32_t)(v * H);
+        if (x >= W) x = W - 1;
+        if (y >= H) y = H - 1;
+        count[(size_t)y * W + x] += 1.0;
+    }
+    CHECK_MSG(mismatch == 0, "%u samples whose returned density is not appm__env_pdf's", mismatch);
+    for (y = 0; y < H; ++y)
+        for (x = 0; x < W; ++x) { /* expected count: the texel's probability, N (cdf steps) */
+            const double *cr = e.cdf + (H + 1) + (size_t)y * (W + 1);
+            double pr = (e.cdf[y + 1] - e.cdf[y]) * (cr[x + 1] - cr[x]) * N, o = count[(size_t)y * W + x];
+            expect_sum += pr;
+            if (pr < 5.0) continue;
+            chi2 += (o - pr) * (o - pr) / pr;
+            dof++;
+        }
+    /* a stratified u1 makes the counts closer than random ones: chi2 well below dof is fine */
+    CHECK_MSG(chi2 < dof + 4.0 * sqrt(2.0 * dof), "chi2 %g with %d degrees of freedom", chi2, dof);
+    CHECK_NEAR(expect_sum, N, 1e-6 * N);
+    /* quadrature: the density integrates to 1 over the sphere */
+    for (y = 0; y < 400; ++y)
+        for (x = 0; x < 800; ++x) {
+            double th = CHECK_PI * (y + 0.5) / 400, ph = 2 * CHECK_PI * (x + 0.5) / 800;
+            appm__v3 d = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
+            integral += appm__env_pdf(&e, d) * sin(th) * (CHECK_PI / 400) * (2 * CHECK_PI / 800);
+        }
+    CHECK_NEAR(integral, 1.0, 2e-3);
+    free(count);
+    appm__envmap_free(&m, &e);
+    CHECK(m.live == 0);
+}
+
+/* The contract's orientation: row 0 is +y, column 0 looks along -z, columns
+ * advance towards +x; rotate 90 turns column 0 to +x. */
+static void test_env_orientation(void)
+{
+    appm__mem m;
+    appm__envmap e;
+    appm__v3 L;
+    appm__mem_init(&m, NULL);
+    /* bright texel in the middle row (the horizon), column 0 */
+    CHECK(make_env(&m, &e, 16, 9, 0, 4, 0.0));
+    L = appm__env_lookup(&e, appm__env_dir(&e, 0.5 / 16, 4.5 / 9));
+    CHECK_NEAR(L.x, 500.0, 1e-3);
+    {
+        appm__v3 d = appm__env_dir(&e, 0.5 / 16, 4.5 / 9);
+        CHECK(d.z < -0.95f && fabsf(d.y) < 1e-6f);
+    }
+    CHECK(appm__env_dir(&e, 0.25, 0.5).x > 0.999f); /* a quarter of the way: +x */
+    CHECK(appm__env_dir(&e, 0.3, 0.0).y > 0.999f);  /* row 0: the zenith */
+    appm__envmap_free(&m, &e);
+    CHECK(make_env(&m, &e, 16, 9, 0, 4, 90.0));
+    L = appm__env_lookup(&e, appm__normalize(appm__v(1.0f, 0.0f, 0.19891237f))); /* 1/32 turn past +x */
+    CHECK_NEAR(L.x, 500.0, 1e-2);
+    L = appm__env_lookup(&e, appm__v(0, 0, -1));
+    CHECK(L.x < 1.0f);
+    appm__envmap_free(&m, &e);
+}
+
+/* A white sphere (Kd 1) under a white map (radiance 1 everywhere) is 1 in
+ * every pixel, on average within 0.5 %: the map's density, the mixture with
+ * the cosine and the photon weights all cancel. */
+static void test_env_furnace(void)
+{
+    char map[256];
+    tpath(map, "white.pfm");
+    char mtl[256];
+    tpath(mtl, "white.mtl");
+    char obj[256];
+    tpath(obj, "sphere.obj");
+    char scn[256];
+    tpath(scn, "furnace.scene");
+    float *white = (float *)malloc(32 * 16 * 3 * sizeof(float));
+    FILE *f;
+    int i, j, n = 16, mi;
+    appm_scene *s = NULL;
+    appm_diag d;
+    static const appm_method methods[3] = {APPM_METHOD_PT, APPM_METHOD_APPM, APPM_METHOD_PPM};
+    if (!white) return;
+    for (i = 0; i < 32 * 16 * 3; ++i) white[i] = 1.0f;
+    CHECK(write_pfm(map, 32, 16, white));
+    free(white);
+    CHECK(check_write_file(mtl, "newmtl w\nKd 1 1 1\n"));
+    f = fopen(obj, "w");
+    if (!f) return;
+    fprintf(f, "mtllib texture-white.mtl\nusemtl w\n");
+    for (i = 0; i <= n; ++i)
+        for (j = 0; j < 2 * n; ++j) {
+            double th = CHECK_PI * i / n, ph = CHECK_PI * j / n;
+            fprintf(f, "v %.9f %.9f %.9f\n", sin(th) * cos(ph), cos(th), sin(th) * sin(ph));
+        }
+    for (i = 0; i < n; ++i)
+        for (j = 0; j < 2 * n; ++j) {
+            int a = i * 2 * n + j + 1, b = i * 2 * n + (j + 1) % (2 * n) + 1;
+            if (i > 0) fprintf(f, "f %d %d %d\n", a, a + 2 * n, b);
+            if (i < n - 1) fprintf(f, "f %d %d %d\n", b, a + 2 * n, b + 2 * n);
+        }
+    fclose(f);
+    CHECK(check_write_file(scn, "camera eye 0 0 4 target 0 0 0 fov 40\nimage 48 48\nmesh texture-sphere.obj\n"
+                                "environment map texture-white.pfm\n"));
+    CHECK(appm_scene_load(scn, NULL, &s, &d) == APPM_OK);
+    if (!s) return;
+    CHECK(s->envmap.rgb != NULL && s->envmap.w == 32 && s->envmap.h == 16);
+    for (mi = 0; mi < 3; ++mi) {
+        appm_image img;
+        render(s, methods[mi], check_quick() ? 16 : 64, &img);
+        if (img.rgb) {
+            double sum = 0.0;
+            size_t k, cnt = (size_t)img.width * img.height * 3;
+            for (k = 0; k < cnt; ++k) sum += img.rgb[k];
+            CHECK_MSG(fabs(sum / (double)cnt - 1.0) < 5e-3, "furnace, method %s: mean %.5f", appm_method_name(methods[mi]),
+                      sum / (double)cnt);
+            free(img.rgb);
+        }
+    }
+    appm_scene_destroy(s);
+}
+
+/* Loading: vt forms, a texture named twice is loaded once, a missing map is
+ * an error naming it and the MTL line, or with warn one warning per file; a
+ * face without vt on a textured material is untextured. */
+typedef struct logbuf {
+    int n;
+    char last[512];
+    unsigned line;
+} logbuf;
+
+static void on_log(void *user, const char *file, unsigned line, const char *msg)
+{
+    logbuf *b = (logbuf *)user;
+    (void)file;
+    b->n++;
+    b->line = line;
+    snprintf(b->last, sizeof b->last, "%s", msg);
+}
+
+static void test_loading(void)
+{
+    char tex[256];
+    tpath(tex, "grey.pfm");
+    char mtl[256];
+    tpath(mtl, "two.mtl");
+    char obj[256];
+    tpath(obj, "two.obj");
+    float g[3] = {0.25f, 0.25f, 0.25f};
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_config cfg;
+    logbuf lb;
+    CHECK(write_pfm(tex, 1, 1, g));
+    CHECK(check_write_file(mtl, "newmtl a\nmap_Kd texture-grey.pfm\nnewmtl b\nmap_Kd texture-grey.pfm\n"
+                                "map_Ks texture-grey.pfm\nnewmtl c\nKd 1 1 1\nmap_Kd texture-none.png\n"
+                                "map_d texture-none.png\n"));
+    CHECK(check_write_file(obj, "mtllib texture-two.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.5\nvt 1 0 0\nvt 0 1\n"
+                                "usemtl a\nf 1/1 2/2 3/3\nusemtl b\nf 1/1 3/3 2/2\nusemtl a\nf 1 2 3\n"));
+    CHECK(appm_scene_load(obj, NULL, &s, &d) == APPM_ERR_IO);
+    CHECK_MSG(strstr(d.message, "texture-none.png") != NULL && d.line == 8 && strstr(d.file, "two.mtl") != NULL,
+              "%s:%u: %s", d.file, d.line, d.message);
+    appm_config_init(&cfg);
+    memset(&lb, 0, sizeof lb);
+    cfg.missing_textures = APPM_MISSING_TEXTURES_WARN;
+    cfg.log = on_log;
+    cfg.log_user = &lb;
+    CHECK(appm_scene_load(obj, &cfg, &s, &d) == APPM_OK);
+    CHECK_MSG(lb.n == 1 && strstr(lb.last, "texture-none.png") != NULL && lb.line == 8, "%d warnings, last '%s'",
+              lb.n, lb.last);
+    if (s) {
+        appm_scene_info in;
+        uint32_t i, textured = 0;
+        appm_scene_get_info(s, &in);
+        CHECK(in.textures == 1 && in.texture_bytes == 12);
+        CHECK(s->mat[1].map_kd == 1 && s->mat[2].map_kd == 1 && s->mat[2].map_ks == 1);
+        CHECK(s->mat[3].map_kd == 0 && s->mat[3].map_d == 0 && !s->cutouts);
+        for (i = 0; i < s->ntri; ++i)
+            if (s->info[i].uv0 >= 0) {
+                const float *uv = s->uv + 2 * (size_t)s->info[i].uv0;
+                textured++;
+                CHECK(uv[0] == 0.5f && uv[1] == 0.0f); /* "vt 0.5": v = 0 */
+            }
+        CHECK(textured == 2);
+    }
+    appm_scene_destroy(s);
+    /* malformed vt and texture index */
+    CHECK(appm_scene_load_obj_memory("v 0 0 0\nvt x\n", 13, NULL, 0, "m.obj", NULL, &s, &d) == APPM_ERR_PARSE &&
+          d.line == 2);
+    CHECK(appm_scene_load_obj_memory("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/2 2/1 3/1\n", 43, NULL, 0, "m.obj", NULL,
+                                     &s, &d) == APPM_ERR_PARSE &&
+          d.line == 5 && strstr(d.message, "texture index") != NULL);
+}
+
+/* set_environment_map: replaces a constant environment; a black or missing
+ * map leaves the scene as it was; the checkpoint hash sees the map and the
+ * texture's samples. */
+static void test_api(void)
+{
+    char map[256];
+    tpath(map, "sky.pfm");
+    char black[256];
+    tpath(black, "black.pfm");
+    float sky[8 * 4 * 3], zero[3] = {0, 0, 0};
+    appm_scene *s = NULL;
+    appm_diag d;
+    uint64_t h0[APPM__SH_PARTS], h1[APPM__SH_PARTS], h2[APPM__SH_PARTS];
+    int i;
+    for (i = 0; i < 8 * 4 * 3; ++i) sky[i] = 0.5f + 0.01f * (float)i;
+    CHECK(write_pfm(map, 8, 4, sky));
+    CHECK(write_pfm(black, 1, 1, zero));
+    CHECK(appm_scene_load("scenes/cornell-sphere.scene", NULL, &s, &d) == APPM_OK);
+    if (!s) return;
+    appm__scene_hash(s, h0);
+    CHECK(appm_scene_set_environment_map(s, black, 1.0, 0.0, NULL, &d) == APPM_ERR_PARSE);
+    CHECK(appm_scene_set_environment_map(s, "tests/out/none.pfm", 1.0, 0.0, NULL, &d) == APPM_ERR_IO);
+    CHECK(appm_scene_set_environment_map(s, map, -1.0, 0.0, NULL, &d) == APPM_ERR_INVALID_ARG);
+    CHECK(s->env < 0 && s->envmap.rgb == NULL);
+    CHECK(appm_scene_set_environment_map(s, map, 2.0, 30.0, NULL, &d) == APPM_OK);
+    CHECK(s->env >= 0 && s->envmap.rgb != NULL && s->envmap.rgb[0] == 1.0f);
+    appm__scene_hash(s, h1);
+    CHECK(h1[APPM__SH_LIGHTS] != h0[APPM__SH_LIGHTS] && h1[APPM__SH_GEOMETRY] == h0[APPM__SH_GEOMETRY]);
+    CHECK(appm_scene_set_environment_map(s, map, 2.0, 31.0, NULL, &d) == APPM_OK);
+    appm__scene_hash(s, h2);
+    CHECK(h2[APPM__SH_LIGHTS] != h1[APPM__SH_LIGHTS]);
+    {
+        double one[3] = {1, 1, 1};
+        CHECK(appm_scene_set_environment(s, one, &d) == APPM_OK);
+        CHECK(s->envmap.rgb == NULL && s->env >= 0);
+    }
+    appm_scene_destroy(s);
+}
+
+int main(void)
+{
+    test_lookup();
+    test_textured_plane();
+    test_cutout();
+    test_env_sampler();
+    test_env_orientation();
+    test_env_furnace();
+    test_loading();
+    test_api();
+    return check_finish();
+}
