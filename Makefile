@@ -28,7 +28,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h tests/fuzz/targets.h
 
-.PHONY: all mpi test-mpi bench-mpi test test-long portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-studio fuzz web \
+.PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-studio fuzz web \
         test-web clean
 
 all: appm
@@ -84,6 +84,11 @@ test-long: $(TESTS)
 
 portability:
 	sh tests/portability.sh
+
+# SIGKILL at random instants, SIGTERM/SIGINT and a full disk against checkpoints
+# (tests/crash.sh); CI runs it with CRASH_KILLS=20
+test-crash: appm
+	sh tests/crash.sh ./appm
 
 dynamic: appm
 	sh tests/dynamic.sh

@@ -128,6 +128,13 @@ typedef int appm__mutex;
 #endif
 #include <windows.h>
 #endif
+#if defined(_WIN32)
+#include <io.h> /* _commit, _fileno: appm__file_sync */
+#elif defined(__unix__) || defined(__APPLE__)
+#include <fcntl.h>  /* open: appm__dir_sync */
+#include <unistd.h> /* fsync */
+#define APPM__FSYNC 1
+#endif
 
 #define APPM__MAX_THREADS 256
 
@@ -220,6 +227,52 @@ static int appm__rename_replace(const char *from, const char *to)
     return MoveFileExA(from, to, MOVEFILE_REPLACE_EXISTING) ? 0 : -1;
 #else
     return rename(from, to);
+#endif
+}
+
+/* Makes the bytes written to f durable before the rename that publishes
+ * them: without it a power cut soon after the rename can leave the new name
+ * holding nothing (file systems allocate blocks late, and may write the
+ * rename first).  A killed process loses nothing either way - its writes are
+ * in the kernel already - but a crashed machine would.  0 on success. */
+static int appm__file_sync(FILE *f)
+{
+    if (fflush(f) != 0) return -1;
+#if defined(_WIN32)
+    return _commit(_fileno(f));
+#elif defined(APPM__FSYNC)
+    return fsync(fileno(f));
+#else
+    return 0;
+#endif
+}
+
+/* After a rename: makes the folder's new entry durable too (POSIX; Windows'
+ * MoveFileEx needs nothing more here).  Best effort: a folder that cannot
+ * be opened (no read permission) leaves it to the file system. */
+static void appm__dir_sync(const char *path)
+{
+#if defined(APPM__FSYNC)
+    char dir[4096];
+    size_t n = strlen(path), cut = 0, i;
+    int fd;
+    for (i = 0; i < n; ++i)
+        if (path[i] == '/') cut = i;
+    if (n >= sizeof dir) return;
+    if (path[cut] == '/') {
+        memcpy(dir, path, cut ? cut : 1);
+        dir[cut ? cut : 1] = 0;
+    } else {
+        dir[0] = '.';
+        dir[1] = 0;
+    }
+    fd = open(dir, O_RDONLY);
+    if (fd >= 0) {
+        (void)fsync(fd);
+        (void)close(fd);
+    }
+#else
+    (void)path;
 #endif
 }
 
@@ -566,8 +619,6 @@ static inline int appm__finite3(appm__v3 a)
 static inline float appm__lum(appm__v3 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
 static inline double appm__lumd(const double *c) { return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]; }
 
-/* Orthonormal basis (t, b) around unit n without a branch on a "pick an axis"
- * heuristic (Duff et al., "Building an Orthonormal Basis, Revisited", 2017). */
 /* Inverts the piecewise-constant CDF c[0..n] (c[0] = 0, c[n] = 1, strictly
  * increasing) at u in [0,1): the cell *i with c[i] <= u < c[i+1], and the point
  * (i + t) / n, t the position of u within the cell. */
@@ -587,6 +638,8 @@ static float appm__cdf_invert(const double *c, int n, float u, int *cell)
     return (float)x < 1.0f ? (float)x : 0.99999994f;
 }
 
+/* Orthonormal basis (t, b) around unit n without a branch on a "pick an axis"
+ * heuristic (Duff et al., "Building an Orthonormal Basis, Revisited", 2017). */
 static void appm__basis(appm__v3 n, appm__v3 *t, appm__v3 *b)
 {
     float sign = n.z >= 0.0f ? 1.0f : -1.0f;
@@ -2156,11 +2209,13 @@ APPM_API appm_status appm_image_write_ex(const char *path, const appm_image *img
         else if (kind == PPM) appm__write_ppm_body(&o, img, (float)exposure);
         else if (kind == PNG) st = appm__write_png_body(&o, &m, img, (float)exposure);
         else st = appm__write_exr_body(&o, &m, img, opt && opt->exr_half, !(opt && opt->exr_uncompressed));
+        if (!special && o.ok && st == APPM_OK && appm__file_sync(o.f) != 0) o.ok = 0; /* the data, then the name */
         if (fclose(o.f) != 0) o.ok = 0;
         if (st != APPM_OK) o.ok = 0;
         if (!special) {
             if (o.ok && appm__rename_replace(tmp, path) != 0) o.ok = 0;
             if (!o.ok) remove(tmp);
+            else appm__dir_sync(path);
         }
     }
     if (st != APPM_OK) return appm__fail(diag, st, path, 0, "out of memory writing the image");
@@ -5563,6 +5618,7 @@ typedef struct appm__loader {
     appm__array face;       /* int64_t triples (position, normal, texture) of the face being read */
     appm__array lights;     /* appm__light: point, spot, environment */
     appm__envmap envmap;    /* `environment map`: the decoded file (px.data NULL: none) */
+    char envmap_path[512];  /* and its path, for messages */
     uint64_t dropped;
     appm__camera cam;
     int have_camera;
@@ -6084,7 +6140,7 @@ static appm_status appm__mtl_map(appm__loader *L, appm__mtl_block *b, char which
         if (!appm__token(&save, e, &ts, &te) || te - ts < 2 || ts[0] != '-' ||
             !((ts[1] >= 'a' && ts[1] <= 'z') || (ts[1] >= 'A' && ts[1] <= 'Z')))
             break;
-        appm__warn(L, (uint64_t)1 << 8, line, "texture options ('%.*s') are not modelled, ignored",
+        appm__warn(L, (uint64_t)1 << 61, line, "texture options ('%.*s') are not modelled, ignored",
                    (int)(te - ts > 20 ? 20 : te - ts), ts);
         s = save;
         for (;;) {
@@ -6437,18 +6493,22 @@ static appm_status appm__obj_vn(appm__loader *L, const char **s, const char *e, 
 }
 
 /* vt: a texture coordinate u [v [w]] into L->vt (v defaults to 0, w is
- * ignored).  Any value appm__numbers takes: maps repeat (appm__tex_lookup wraps). */
+ * ignored); a malformed or non-finite one is 0 with a warning.  Maps repeat,
+ * so any value is a place on the map. */
 static appm_status appm__obj_vt(appm__loader *L, const char **s, const char *e, unsigned line)
 {
     const char *ts, *te;
     double v[2] = {0.0, 0.0};
     float *p;
     int k;
-    appm_status st;
     for (k = 0; k < 2; ++k) {
-        const char *save = *s;
-        if (k == 1 && !appm__token(&save, e, &ts, &te)) break; /* "vt u": v = 0 */
-        if ((st = appm__numbers(L, s, e, line, "vt", v + k, 1)) != APPM_OK) return st;
+        if (!appm__token(s, e, &ts, &te)) break; /* "vt u": v = 0 */
+        if (!appm__parse_number(ts, te, &v[k]) || !(fabs(v[k]) <= 1e18)) {
+            /* most files never read their vt: a bad one is worth a warning, not a failed load */
+            appm__warn(L, (uint64_t)1 << 60, line, "vt: '%.*s' is not a number below 1e18: taken as 0",
+                       (int)(te - ts > 30 ? 30 : te - ts), ts);
+            v[k] = 0.0;
+        }
     }
     if (!appm__array_reserve(L->mem, &L->vt, L->vt.count + 1)) return APPM_ERR_NOMEM;
     p = (float *)L->vt.data + 2 * L->vt.count++;
@@ -6722,6 +6782,8 @@ static appm_status appm__scene_envmap(appm__loader *L, appm__light *l, const cha
     if ((st = appm__keyvals(L, s, e, line, "environment map", kv, 2)) != APPM_OK) return st;
     if (!(kv[0].v[0] >= 0.0) || !(kv[0].v[0] <= 1e30))
         return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "environment map: scale must be in [0, 1e30]");
+    if (!(fabs(kv[1].v[0]) <= 1e6))
+        return appm__fail(L->diag, APPM_ERR_PARSE, path, line, "environment map: rotate must be in [-1e6, 1e6] degrees");
     appm__diag_clear(&why);
     L->mem->diag = &why;
     st = appm__loader_read(L, mpath, &buf, &len, &owned, &why);
@@ -6734,6 +6796,7 @@ static appm_status appm__scene_envmap(appm__loader *L, appm__light *l, const cha
         return appm__fail(L->diag, st, path, line, "environment map '%s': %s", mpath, why.message);
     L->envmap.scale = kv[0].v[0];
     L->envmap.rotate = kv[1].v[0];
+    appm__copy_str(L->envmap_path, sizeof L->envmap_path, mpath);
     l->kind = APPM__LIGHT_ENV;
     l->value = appm__v((float)kv[0].v[0], (float)kv[0].v[0], (float)kv[0].v[0]);
     return APPM_OK;
@@ -8537,7 +8600,7 @@ static appm__v3 appm__clamp01(appm__v3 v)
 static const appm__material *appm__material_at(const appm_scene *s, const appm__surf *sf, appm__material *tmp)
 {
     const appm__material *m = &s->mat[sf->mat];
-    if (!m->map_kd && !m->map_ks) return m;
+    if ((!m->map_kd && !m->map_ks) || s->info[sf->tri].uv0 < 0) return m; /* no maps, or no vt to read them at */
     *tmp = *m;
     if (m->map_kd && m->kind != APPM__MAT_MIRROR && m->kind != APPM__MAT_DIELECTRIC)
         tmp->color = appm__mul(tmp->color, appm__clamp01(appm__tex_rgb(&s->tex[m->map_kd - 1], sf->u, sf->v)));
@@ -8917,7 +8980,7 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
     float *f;
     e->w = w;
     e->h = h;
-    e->rot = (float)(e->rotate * APPM__PI / 180.0);
+    e->rot = (float)(fmod(e->rotate, 360.0) * APPM__PI / 180.0); /* |rotate| <= 1e6: no precision lost */
     e->rgb = (float *)appm__alloc(m, n, 3 * sizeof(float));
     e->cdf = (double *)appm__alloc(m, (size_t)h + 1 + (size_t)h * ((size_t)w + 1), sizeof(double));
     f = (float *)appm__alloc(m, n, sizeof(float));
@@ -8970,7 +9033,7 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
     appm__free(m, f);
     total = rows[h];
     if (!(total > 0.0) || !(total < HUGE_VAL))
-        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "environment map: it is black (or its scale is 0)");
+        return appm__fail(diag, APPM_ERR_PARSE, name, 0, "environment map: it is black, or its scale is 0, or its light sums to infinity");
     for (y = 1; y <= h; ++y) rows[y] /= total;
     rows[h] = 1.0;
     return APPM_OK;
@@ -9349,7 +9412,12 @@ static appm_status appm__envmap_take(appm__mem *m, appm__envmap *e, appm__envmap
         memcpy(&u, &e->rgb[i], 4);
         h = (h ^ u) * 0x100000001b3ull;
     }
-    e->hash = appm__mix64(h ^ ((uint64_t)e->w << 32 | e->h)) ^ appm__mix64((uint64_t)(int64_t)(e->rotate * 1e6));
+    {
+        double rot = e->rotate;
+        uint64_t r;
+        memcpy(&r, &rot, sizeof r);
+        e->hash = appm__mix64(h ^ ((uint64_t)e->w << 32 | e->h)) ^ appm__mix64(r);
+    }
     return APPM_OK;
 }
 
@@ -9455,7 +9523,8 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
                 s->mem.diag = &why;
                 st = appm__envmap_take(&s->mem, &s->envmap, &L->envmap, name, &why);
                 s->mem.diag = L->diag;
-                if (st != APPM_OK) return appm__fail(L->diag, st, name, l->line, "%s", why.message);
+                if (st != APPM_OK)
+                    return appm__fail(L->diag, st, name, l->line, "'%s': %s", L->envmap_path, why.message);
             }
         }
         appm__light_power(s, l, l->power);
@@ -9711,9 +9780,11 @@ static appm_status appm__scene_load(const char *path, int text_kind, const char 
             }
         }
         if (st == APPM_OK) {
-            s->mem = m; /* from here on the scene's own counter tracks its blocks */
+            s->mem = m; /* from here on the scene's own counter tracks its blocks, the loader's too */
+            L.mem = &s->mem;
             st = appm__scene_finish(s, &L, path);
             m = s->mem;
+            L.mem = &m;
         }
     }
     if (st == APPM_ERR_NOMEM) appm__fail(diag, APPM_ERR_NOMEM, path, 0, "out of memory loading the scene");
@@ -9973,6 +10044,7 @@ APPM_API appm_status appm_scene_set_environment_map(appm_scene *scene, const cha
     m->reader.release = cfg && cfg->reader.read ? cfg->reader.release : NULL;
     m->reader.user = cfg && cfg->reader.read ? cfg->reader.user : NULL;
     memset(&from, 0, sizeof from);
+    memset(&map, 0, sizeof map);
     from.scale = scale;
     from.rotate = rotate_degrees;
     st = appm__read_file(m, path, &buf, &len, diag);
@@ -12731,9 +12803,11 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
                 float w = 1.0f;
                 if (!prev_specular) {
                     float c = appm__dot(ray.d, prev_ns);
-                    double p = s->envmap.rgb ? appm__env_mix_pdf(appm__env_pdf(&s->envmap, ray.d), c)
-                                             : (c > 0 ? c : 0) * APPM__INV_PI;
-                    w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * p));
+                    if (s->envmap.rgb)
+                        w = appm__mis(prev_pdf, (float)(s->light[s->env].pick *
+                                                        appm__env_mix_pdf(appm__env_pdf(&s->envmap, ray.d), c)));
+                    else
+                        w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
                 }
                 L = appm__add(L, appm__scale(appm__mul(W, appm__env_radiance(s, ray.d)), w));
             }
@@ -14336,10 +14410,12 @@ static appm_status appm__ck_save_file(appm_renderer *r, const appm__ck_layout *L
     if (w.f) {
         appm__ck_write(&w, r, L);
         if (w.len && fwrite(w.buf, 1, w.len, w.f) != w.len) w.ok = 0;
+        if (!special && w.ok && appm__file_sync(w.f) != 0) w.ok = 0; /* the data first, then the name */
         if (fclose(w.f) != 0) w.ok = 0;
         if (!special) {
             if (w.ok && appm__rename_replace(tmp, path) != 0) w.ok = 0;
             if (!w.ok) remove(tmp);
+            else appm__dir_sync(path);
         }
     } else {
         w.ok = 0;

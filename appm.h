@@ -297,6 +297,10 @@ typedef enum appm_stand_in {
     APPM_STAND_IN_WHITE       /* a constant white environment of radiance 1 and the camera
                                * looking along -z: a furnace, as earlier versions lit it   */
 } appm_stand_in;
+/* Lights added to the loaded scene (appm_scene_add_point_light, ..._set_environment,
+ * ..._set_environment_map) replace the stand-in's sky or white environment; the
+ * studio's plate and camera stay.  The command line loads with WHITE when it is
+ * given lights, so that they replace all of it. */
 
 /* Every field: 0 (or NULL) means "default".  `appm_config cfg = {0};` works. */
 typedef struct appm_config {

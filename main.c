@@ -197,8 +197,8 @@ static const char *const RENDER_HELP_LIGHTS =
     "  --missing-textures error|warn   a texture map that cannot be read fails the load\n"
     "                        (error) or renders without it, with a warning [error]\n"
     "  --light point X Y Z R G B    add a point light (intensity W/sr per channel); repeatable\n"
-    "                        (a bare .obj that emits nothing and gets neither is shown in\n"
-    "                        a studio, with a warning: see --stand-in)\n"
+    "                        (a bare .obj that emits nothing and gets none of these is\n"
+    "                        shown in a studio, with a warning: see --stand-in)\n"
     "  --stand-in studio|white   what lights a bare .obj without light: a sky with a key\n"
     "                        light, a ground plate and a camera from above (studio), or a\n"
     "                        constant white environment of radiance 1 (white) [studio]\n";
@@ -365,6 +365,7 @@ typedef struct render_opts {
     const char *env_map;              /* --environment-map */
     double env_scale, env_rotate;     /* --environment-scale, --environment-rotate */
     int have_env_scale, have_env_rotate;
+    int have_stand_in;                /* --stand-in given */
     double time_limit, until_error, exposure;
     unsigned long long passes, checkpoint_every; /* 0: every CHECKPOINT_SECONDS */
     int quiet, have_time, have_passes, have_until;
@@ -430,6 +431,7 @@ static int parse_output_option(const char *a, const char *v, render_opts *o, int
         if (strcmp(v, "studio") == 0) o->cfg.stand_in = APPM_STAND_IN_STUDIO;
         else if (strcmp(v, "white") == 0) o->cfg.stand_in = APPM_STAND_IN_WHITE;
         else *rc = usage_error("--stand-in must be studio or white, not '%s'", v);
+        o->have_stand_in = 1;
     } else if (strcmp(a, "--missing-textures") == 0) {
         if (strcmp(v, "error") == 0) o->cfg.missing_textures = APPM_MISSING_TEXTURES_ERROR;
         else if (strcmp(v, "warn") == 0) o->cfg.missing_textures = APPM_MISSING_TEXTURES_WARN;
@@ -563,6 +565,9 @@ static int parse_render(int argc, char **argv, render_opts *o)
     if ((o->have_env_scale || o->have_env_rotate) && !o->env_map)
         return usage_error("--environment-scale and --environment-rotate need --environment-map FILE");
     if (o->env_map && o->have_env) return usage_error("--environment and --environment-map: give one of them");
+    /* the user's own lights replace all of the studio (its plate and camera too), as
+     * they replaced the white environment before: the bare OBJ loads without one */
+    if (!o->have_stand_in && (o->nlights || o->have_env || o->env_map)) o->cfg.stand_in = APPM_STAND_IN_WHITE;
     return -1;
 }
 
@@ -784,6 +789,7 @@ static int render_passes(render_run *R)
     int next;
     R->progress = !o->quiet && appm_isatty(2);
     signal(SIGINT, on_sigint);
+    signal(SIGTERM, on_sigint); /* a shutdown, a batch system's time limit: finish the pass, save, write */
     R->t0 = R->last_ck[0] = now_seconds();
     R->c0 = clock();
     appm_renderer_stats(R->r, &R->st);
@@ -935,7 +941,7 @@ static int cmd_compare(int argc, char **argv)
     appm_diag d;
     appm_compare_result c;
     appm_status s;
-    if (argc != 4) return usage_error("compare needs two PFM files");
+    if (argc != 4) return usage_error("compare needs two image files");
     if ((s = appm_image_read(argv[2], NULL, &a, &d)) != APPM_OK) {
         lib_error(s, &d, argv[2]);
         return EXIT_INPUT;

@@ -17,7 +17,9 @@
 #                   Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
-#   QEMU=1          t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
+#   QEMU=1          the test suite (quick) built for 32-bit i386 (i686-linux-gnu-gcc) and
+#                   armhf (arm-linux-gnueabihf-gcc), under qemu-user: 32-bit size_t;
+#                   t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
 #                   with -DAPPM_SIMD=0) and big-endian s390x (scalar) run under qemu-user,
 #                   and their appm resumes checkpoints that the native appm wrote
 # The BVH's box test: t_bvh built with SSE2, -DAPPM_SIMD=0, -mavx2 (where the CPU
@@ -350,6 +352,37 @@ if [ "${WINE:-0}" = 1 ]; then
 else
     lap
     echo "skip wine: set WINE=1 to run a mingw-w64 build under wine $took"
+fi
+
+# ---- optional: 32-bit Linux under qemu-user (i386, armhf) --------------------------------------
+# every size_t multiplication the library guards is 32 bits wide here: the tests' overflow
+# checks (t_alloc, t_extremes, t_decode's size limits) run where they can actually trip
+
+# PORTABILITY_32: the tests to run [t_portable t_alloc t_decode t_texture t_extremes
+# t_checkpoint: about 4 minutes for both]; "all": every tests/t_*.c (about half an hour).
+# i386 gets -msse2 -mfpmath=sse (x87 arithmetic would round otherwise than every other
+# build, and qemu emulates it slowly) and no threads: qemu-user 7.2 hangs i386 programs
+# whose threads wait on each other (threads are tested natively and under armhf).
+if [ "${QEMU:-0}" = 1 ]; then
+    T32=${PORTABILITY_32:-"t_portable t_alloc t_decode t_texture t_extremes t_checkpoint"}
+    [ "$T32" = all ] && T32=$(cd tests && ls t_*.c | sed 's/\.c$//')
+    for triple in i686-linux-gnu arm-linux-gnueabihf; do
+        case $triple in
+        i686*) q=i386 flags="-msse2 -mfpmath=sse -DAPPM_THREADS=0" ;;
+        *) q=arm flags="" ;;
+        esac
+        what="$triple: the test suite under qemu-$q"
+        if have $triple-gcc "$what" && have qemu-$q "$what"; then
+            step "$triple-gcc -Werror: appm.c main.c" $triple-gcc $C99 -O2 $flags appm.c main.c -o "$OUT/appm-$q" -lm -pthread
+            for n in $T32; do
+                if $triple-gcc $C99 -O2 $flags "tests/$n.c" -o "$OUT/$n-$q" -lm -pthread >"$log" 2>&1; then
+                    run_test "qemu-$q: $n" env APPM_TEST_QUICK=1 qemu-$q -L /usr/$triple "$OUT/$n-$q"
+                else
+                    bad "$triple-gcc: tests/$n.c"
+                fi
+            done
+        fi
+    done
 fi
 
 # ---- optional: qemu-user -----------------------------------------------------------------------

@@ -392,6 +392,14 @@ static void test_env_furnace(void)
     CHECK(appm_scene_load(scn, NULL, &s, &d) == APPM_OK);
     if (!s) return;
     CHECK(s->envmap.rgb != NULL && s->envmap.w == 32 && s->envmap.h == 16);
+    {   /* rotate beyond a million degrees is refused, naming the line */
+        char bad[256];
+        appm_scene *t = NULL;
+        tpath(bad, "rot.scene");
+        CHECK(check_write_file(bad, "mesh texture-sphere.obj\nenvironment map texture-white.pfm rotate 1e17\n"));
+        CHECK(appm_scene_load(bad, NULL, &t, &d) == APPM_ERR_PARSE && d.line == 2 && strstr(d.message, "rotate"));
+        appm_scene_destroy(t);
+    }
     for (mi = 0; mi < 3; ++mi) {
         appm_image img;
         render(s, methods[mi], check_quick() ? 16 : 64, &img);
@@ -462,6 +470,16 @@ static void test_loading(void)
         CHECK(in.textures == 1 && in.texture_bytes == 12);
         CHECK(s->mat[1].map_kd == 1 && s->mat[2].map_kd == 1 && s->mat[2].map_ks == 1);
         CHECK(s->mat[3].map_kd == 0 && s->mat[3].map_d == 0 && !s->cutouts);
+        for (i = 0; i < s->ntri; ++i) {
+            appm__surf sf;
+            appm__material tmp;
+            memset(&sf, 0, sizeof sf);
+            sf.tri = i;
+            sf.mat = s->info[i].mat;
+            /* a face without vt takes its material without the maps */
+            if (s->info[i].uv0 < 0) CHECK(appm__material_at(s, &sf, &tmp) == &s->mat[sf.mat]);
+            else CHECK(appm__material_at(s, &sf, &tmp) == &tmp && tmp.color.x == s->mat[sf.mat].color.x * 0.25f);
+        }
         for (i = 0; i < s->ntri; ++i)
             if (s->info[i].uv0 >= 0) {
                 const float *uv = s->uv + 2 * (size_t)s->info[i].uv0;
@@ -471,9 +489,15 @@ static void test_loading(void)
         CHECK(textured == 2);
     }
     appm_scene_destroy(s);
-    /* malformed vt and texture index */
-    CHECK(appm_scene_load_obj_memory("v 0 0 0\nvt x\n", 13, NULL, 0, "m.obj", NULL, &s, &d) == APPM_ERR_PARSE &&
-          d.line == 2);
+    /* a malformed vt is 0 with one warning (most files never read theirs); a bad texture index is an error */
+    memset(&lb, 0, sizeof lb);
+    {
+        static const char bad_vt[] = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt x nan\nvt 1e300 2\nf 1/1 2/2 3/1\n";
+        CHECK(appm_scene_load_obj_memory(bad_vt, strlen(bad_vt), NULL, 0, "m.obj", &cfg, &s, &d) == APPM_OK);
+    }
+    CHECK_MSG(lb.n == 1 && strstr(lb.last, "vt") != NULL && lb.line == 4, "%d warnings, last '%s' at %u", lb.n, lb.last,
+              lb.line); /* one per kind and file */
+    appm_scene_destroy(s);
     CHECK(appm_scene_load_obj_memory("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/2 2/1 3/1\n", 43, NULL, 0, "m.obj", NULL,
                                      &s, &d) == APPM_ERR_PARSE &&
           d.line == 5 && strstr(d.message, "texture index") != NULL);
@@ -499,6 +523,8 @@ static void test_api(void)
     CHECK(appm_scene_load("scenes/cornell-sphere.scene", NULL, &s, &d) == APPM_OK);
     if (!s) return;
     appm__scene_hash(s, h0);
+    /* a missing file first: nothing of the call's own may be freed that it did not make */
+    CHECK(appm_scene_set_environment_map(s, "tests/out/none.pfm", 1.0, 0.0, NULL, &d) == APPM_ERR_IO);
     CHECK(appm_scene_set_environment_map(s, black, 1.0, 0.0, NULL, &d) == APPM_ERR_PARSE);
     CHECK(appm_scene_set_environment_map(s, "tests/out/none.pfm", 1.0, 0.0, NULL, &d) == APPM_ERR_IO);
     CHECK(appm_scene_set_environment_map(s, map, -1.0, 0.0, NULL, &d) == APPM_ERR_INVALID_ARG);
