@@ -5,14 +5,16 @@
 #   make mpi          appm-mpi, the command line over MPI (mpicc); make test-mpi: it against appm;
 #                     make bench-mpi: its speed-up and exchange (bench/mpi.sh)
 #   make portability  gcc, clang, tcc, no threads, mingw-w64 (both thread backends), wasm32-wasi,
-#                     C89/C++ header
+#                     C89/C++ header; QEMU=1: aarch64, s390x, i386 and armhf under qemu-user
+#   make test-crash   SIGKILL/SIGTERM/SIGINT and a full disk against checkpoints (tests/crash.sh)
 #   make bench        the speed/accuracy suite (bench/run.sh); make bench-quick: a subset;
 #                     make bench-glossy: CornellBox-Glossy alone
 #                     make bench-sampler: --sampler qmc against random on every scene
 #                     make bench-envmap: environment-map sampling against uniform directions
 #                     make bench-studio: the bare bunny's studio (form and noise at 10 s)
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
-#   make fuzz         libFuzzer runs of the readers (clang), bounded in time
+#   make fuzz         libFuzzer runs of the readers (clang), bounded in time; make fuzz-long:
+#                     10 million executions each (hours)
 #   make dynamic      valgrind memcheck on a short render, ThreadSanitizer on the threads
 #   make web          web/appm.wasm and the scenes of the classroom page (clang, lld, wasi-libc)
 #   make test-web     the page in headless Chromium against the native build (web/README.md)
@@ -28,7 +30,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h tests/fuzz/targets.h
 
-.PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-studio fuzz web \
+.PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-studio fuzz fuzz-long web \
         test-web clean
 
 all: appm
@@ -116,6 +118,10 @@ bench-studio: appm
 
 fuzz:
 	sh tests/fuzz/run.sh
+
+# every target to 10 million executions (hours; outside CI): docs/testing.md has the figures
+fuzz-long:
+	FUZZ_RUNS=10000000 FUZZ_SECONDS=86400 sh tests/fuzz/run.sh
 
 # WebAssembly: appm.c unchanged, no threads, as a WASI reactor (no main; the page
 # calls the exports of web/shim.c).  Debian's wasi-libc installs under /usr.  The

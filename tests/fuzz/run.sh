@@ -6,6 +6,8 @@
 #
 # Environment:
 #   FUZZ_SECONDS=30    seconds per target
+#   FUZZ_RUNS=N        stop a target after N executions instead (make fuzz-long: 10 M, at
+#                      most a day each)
 #   FUZZ_OPTIONAL=1    exit 0 (with a message) when clang's libFuzzer is missing
 #   FUZZ_CC=clang      the compiler
 #
@@ -77,8 +79,10 @@ fuzz_$t: BUILD FAILED"
     cp tests/fuzz/corpus/"$t"/* "$corpus"/ 2>/dev/null
     seeds=""
     [ -d tests/fuzz/regressions ] && seeds=tests/fuzz/regressions
-    echo "fuzz: running $t for $SECONDS_EACH s"
-    "./$OUT/fuzz_$t" -max_total_time="$SECONDS_EACH" -rss_limit_mb=2000 -timeout=10 \
+    runs=""
+    [ -n "${FUZZ_RUNS:-}" ] && runs="-runs=$FUZZ_RUNS"
+    echo "fuzz: running $t for $SECONDS_EACH s${runs:+ or $FUZZ_RUNS executions}"
+    "./$OUT/fuzz_$t" -max_total_time="$SECONDS_EACH" $runs -rss_limit_mb=2000 -timeout=10 \
         -max_len=8192 -print_final_stats=1 \
         -artifact_prefix="$OUT/artifacts/$t/" "$corpus" $seeds >"$OUT/fuzz_$t.log" 2>&1
     rc=$?
@@ -87,7 +91,8 @@ fuzz_$t: BUILD FAILED"
     execs=${execs:-0}
     crashes=$(find "$OUT/artifacts/$t" -type f | wc -l | tr -d ' ')
     size=$(find "$corpus" -type f | wc -l | tr -d ' ')
-    line="fuzz_$t: $execs executions, corpus $size files, $crashes crashes"
+    cov=$(sed -n 's/.* cov: \([0-9]*\) .*/\1/p' "$OUT/fuzz_$t.log" | tail -n 1)
+    line="fuzz_$t: $execs executions, corpus $size files, coverage ${cov:-?} edges, $crashes crashes"
     if [ "$crashes" -ne 0 ] || [ "$rc" -ne 0 ]; then
         grep -E 'ERROR|SUMMARY|invariant|leaked|runtime error|deadly signal|Test unit written' \
             "$OUT/fuzz_$t.log" | head -n 20
