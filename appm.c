@@ -1183,9 +1183,11 @@ static void appm__smp_camera(const appm__sampler *s, int lens, float *u)
  * OpenEXR is linear float or half.  PNG and ZIP-compressed EXR use the deflate
  * compressor of 3.1 (no zlib): CRC-32 per PNG chunk, Adler-32 over each zlib
  * stream.  Every writer
- * writes "<name>.tmp" and renames it, so a failed write never leaves a
- * half-written file under the final name (a destination that exists and is not
- * a regular file - /dev/stdout, a FIFO - is written in place).
+ * writes "<name>.tmp", flushes it to the disk and renames it, so a failed
+ * write (or a crash) never leaves a half-written file under the final name (a
+ * destination that exists and is not a regular file - /dev/stdout, a FIFO - is
+ * written in place).  3.4 - 3.10 read what textures and environment maps come
+ * in: PNG, JPEG, TGA, PPM/PGM, PFM, OpenEXR and Radiance HDR.
  */
 static int appm__host_little_endian(void)
 {

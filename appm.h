@@ -328,8 +328,8 @@ typedef struct appm_config {
      * half or more of the gain on diffuse boxes at 256 passes), 8 K bytes a pixel. */
     unsigned chains;
     appm_emission emission;   /* APPM_EMISSION_LIGHT                                 */
-    appm_file_reader reader;  /* every file a load reads (scenes, meshes, materials,
-                               * PFM images, a renderer's checkpoints): NULL read
+    appm_file_reader reader;  /* every file a load reads (scenes, meshes, materials, maps,
+                               * images, a renderer's checkpoints): NULL read
                                * hook: the file system                              */
     appm_missing_textures missing_textures; /* APPM_MISSING_TEXTURES_ERROR            */
     appm_stand_in stand_in;   /* APPM_STAND_IN_STUDIO                                */
