@@ -38,7 +38,7 @@ static void write_plane(const char *obj, const char *mtl_name)
 {
     char text[512];
     snprintf(text, sizeof text,
-             "mtllib %s\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+             "mtllib %.200s\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
              "usemtl m\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
              mtl_name);
     CHECK(check_write_file(obj, text));
@@ -46,6 +46,29 @@ static void write_plane(const char *obj, const char *mtl_name)
 
 /* A camera looking at the unit square from +z, the square filling the image. */
 static const char *const PLANE_CAMERA = "camera eye 0.5 0.5 2 target 0.5 0.5 0 fov 28.0724869\nimage 32 32\n";
+
+/* The unit square in material m of MTL text mtl_text (whose maps name files
+ * in tests/out), seen by PLANE_CAMERA under a constant white sky, written as
+ * tests/out/texture-NAME.{mtl,obj,scene} and loaded (NULL on failure). */
+static appm_scene *load_plane(const char *name, const char *mtl_text)
+{
+    char mtl[256], obj[256], scn[256], text[512];
+    appm_scene *s = NULL;
+    appm_diag d;
+    snprintf(text, sizeof text, "%s.mtl", name);
+    tpath(mtl, text);
+    snprintf(text, sizeof text, "%s.obj", name);
+    tpath(obj, text);
+    snprintf(text, sizeof text, "%s.scene", name);
+    tpath(scn, text);
+    CHECK(check_write_file(mtl, mtl_text));
+    snprintf(text, sizeof text, "texture-%s.mtl", name);
+    write_plane(obj, text);
+    snprintf(text, sizeof text, "%smesh texture-%s.obj\nenvironment 1 1 1\n", PLANE_CAMERA, name);
+    CHECK(check_write_file(scn, text));
+    CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
+    return s;
+}
 
 static void render(const appm_scene *s, appm_method method, unsigned passes, appm_image *out)
 {
@@ -132,36 +155,19 @@ static void test_lookup(void)
 static void test_textured_plane(void)
 {
     char tex[256];
-    tpath(tex, "kd.pfm");
-    char mtl[256];
-    tpath(mtl, "plane.mtl");
-    char obj[256];
-    tpath(obj, "plane.obj");
-    char scn[256];
-    tpath(scn, "plane.scene");
-    /* 4 x 4 texels of distinct colours */
-    float rgb[4 * 4 * 3];
-    char text[512];
-    appm_scene *s = NULL;
-    appm_diag d;
+    float rgb[4 * 4 * 3]; /* 4 x 4 texels of distinct colours */
+    appm_scene *s;
     appm_image img;
     int k, worst_k = -1;
     double worst = 0.0;
+    tpath(tex, "kd.pfm");
     for (k = 0; k < 16; ++k) {
         rgb[3 * k] = 0.1f + 0.05f * (float)k;
         rgb[3 * k + 1] = 0.9f - 0.05f * (float)k;
         rgb[3 * k + 2] = (k & 1) ? 0.7f : 0.2f;
     }
     CHECK(write_pfm(tex, 4, 4, rgb));
-    CHECK(check_write_file(mtl, "newmtl m\nKd 0.5 1 1\nmap_Kd texture-kd.pfm\n"));
-    write_plane(obj, "texture-plane.mtl");
-    snprintf(text, sizeof text, "%smesh texture-plane.obj\nenvironment 1 1 1\n", PLANE_CAMERA);
-    CHECK(check_write_file(scn, text));
-    CHECK(appm_scene_load(scn, NULL, &s, &d) == APPM_OK);
-    if (!s) {
-        fprintf(stderr, "%s\n", d.message);
-        return;
-    }
+    if (!(s = load_plane("plane", "newmtl m\nKd 0.5 1 1\nmap_Kd texture-kd.pfm\n"))) return;
     CHECK(s->ntex == 1 && s->uv != NULL);
     render(s, APPM_METHOD_PT, 16, &img);
     if (img.rgb) {
@@ -189,31 +195,18 @@ static void test_textured_plane(void)
 }
 
 /* map_d: where the mask is 0 the plane is not there.  A camera ray through the
- * hole sees the environment (1), one on the solid half sees albedo 0.5; and
- * a second plane behind the first, lit through the hole only, receives light
- * only through the hole. */
+ * hole sees the environment (1), one on the solid half sees albedo 0.5; the
+ * closest-hit and the any-hit (shadow) searches both pass the hole and stop
+ * on the solid half. */
 static void test_cutout(void)
 {
     char mask[256];
-    tpath(mask, "mask.pfm");
-    char mtl[256];
-    tpath(mtl, "cut.mtl");
-    char obj[256];
-    tpath(obj, "cut.obj");
-    char scn[256];
-    tpath(scn, "cut.scene");
     float rgb[2 * 1 * 3] = {0, 0, 0, 1, 1, 1}; /* left half a hole, right half solid */
-    char text[512];
-    appm_scene *s = NULL;
-    appm_diag d;
+    appm_scene *s;
     appm_image img;
+    tpath(mask, "mask.pfm");
     CHECK(write_pfm(mask, 2, 1, rgb));
-    CHECK(check_write_file(mtl, "newmtl m\nKd 0.5 0.5 0.5\nmap_d texture-mask.pfm\n"));
-    write_plane(obj, "texture-cut.mtl");
-    snprintf(text, sizeof text, "%smesh texture-cut.obj\nenvironment 1 1 1\n", PLANE_CAMERA);
-    CHECK(check_write_file(scn, text));
-    CHECK(appm_scene_load(scn, NULL, &s, &d) == APPM_OK);
-    if (!s) return;
+    if (!(s = load_plane("cut", "newmtl m\nKd 0.5 0.5 0.5\nmap_d texture-mask.pfm\n"))) return;
     CHECK(s->cutouts);
     render(s, APPM_METHOD_PT, 2, &img);
     if (img.rgb) {
@@ -353,20 +346,17 @@ static void test_env_orientation(void)
  * the cosine and the photon weights all cancel. */
 static void test_env_furnace(void)
 {
-    char map[256];
-    tpath(map, "white.pfm");
-    char mtl[256];
-    tpath(mtl, "white.mtl");
-    char obj[256];
-    tpath(obj, "sphere.obj");
-    char scn[256];
-    tpath(scn, "furnace.scene");
+    static const appm_method methods[3] = {APPM_METHOD_PT, APPM_METHOD_APPM, APPM_METHOD_PPM};
+    char map[256], mtl[256], obj[256], scn[256];
     float *white = (float *)malloc(32 * 16 * 3 * sizeof(float));
     FILE *f;
     int i, j, n = 16, mi;
     appm_scene *s = NULL;
     appm_diag d;
-    static const appm_method methods[3] = {APPM_METHOD_PT, APPM_METHOD_APPM, APPM_METHOD_PPM};
+    tpath(map, "white.pfm");
+    tpath(mtl, "white.mtl");
+    tpath(obj, "sphere.obj");
+    tpath(scn, "furnace.scene");
     if (!white) return;
     for (i = 0; i < 32 * 16 * 3; ++i) white[i] = 1.0f;
     CHECK(write_pfm(map, 32, 16, white));
@@ -435,17 +425,15 @@ static void on_log(void *user, const char *file, unsigned line, const char *msg)
 
 static void test_loading(void)
 {
-    char tex[256];
-    tpath(tex, "grey.pfm");
-    char mtl[256];
-    tpath(mtl, "two.mtl");
-    char obj[256];
-    tpath(obj, "two.obj");
+    char tex[256], mtl[256], obj[256];
     float g[3] = {0.25f, 0.25f, 0.25f};
     appm_scene *s = NULL;
     appm_diag d;
     appm_config cfg;
     logbuf lb;
+    tpath(tex, "grey.pfm");
+    tpath(mtl, "two.mtl");
+    tpath(obj, "two.obj");
     CHECK(write_pfm(tex, 1, 1, g));
     CHECK(check_write_file(mtl, "newmtl a\nmap_Kd texture-grey.pfm\nnewmtl b\nmap_Kd texture-grey.pfm\n"
                                 "map_Ks texture-grey.pfm\nnewmtl c\nKd 1 1 1\nmap_Kd texture-none.png\n"
@@ -508,15 +496,14 @@ static void test_loading(void)
  * texture's samples. */
 static void test_api(void)
 {
-    char map[256];
-    tpath(map, "sky.pfm");
-    char black[256];
-    tpath(black, "black.pfm");
+    char map[256], black[256];
     float sky[8 * 4 * 3], zero[3] = {0, 0, 0};
     appm_scene *s = NULL;
     appm_diag d;
     uint64_t h0[APPM__SH_PARTS], h1[APPM__SH_PARTS], h2[APPM__SH_PARTS];
     int i;
+    tpath(map, "sky.pfm");
+    tpath(black, "black.pfm");
     for (i = 0; i < 8 * 4 * 3; ++i) sky[i] = 0.5f + 0.01f * (float)i;
     CHECK(write_pfm(map, 8, 4, sky));
     CHECK(write_pfm(black, 1, 1, zero));
