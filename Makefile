@@ -11,6 +11,7 @@
 #                     make bench-glossy: CornellBox-Glossy alone
 #                     make bench-sampler: --sampler qmc against random on every scene
 #                     make bench-envmap: environment-map sampling against uniform directions
+#                     make bench-errbar: est_relerr against the true error, every scene and method
 #                     make bench-studio: the bare bunny's studio (form and noise at 10 s)
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time; make fuzz-long:
@@ -30,7 +31,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h tests/fuzz/targets.h
 
-.PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-studio fuzz fuzz-long web \
+.PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-errbar bench-studio fuzz fuzz-long web \
         test-web clean
 
 all: appm
@@ -110,6 +111,9 @@ bench-bvh:
 bench-sampler: appm
 	sh bench/sampler.sh
 
+bench-errbar: appm
+	sh bench/errbar.sh
+
 bench-envmap:
 	sh bench/envmap.sh
 
@@ -148,4 +152,4 @@ test-web: web appm
 	python3 tests/web.py
 
 clean:
-	rm -rf appm appm.exe appm-mpi build tests/out bench/report web/appm.wasm web/scenes
+	rm -rf appm appm.exe appm-mpi build tests/out tests/out-* bench/report web/appm.wasm web/scenes

@@ -10603,12 +10603,14 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 92 
     uint8_t pad[2];
 } appm__vp;
 
-/* Per-pixel state every method keeps across passes (40 bytes).  What a method
+/* Per-pixel state every method keeps across passes (56 bytes).  What a method
  * keeps beyond this (PPM's I, SPPM's tau, N, R, APPM's S, dI, ...) is its own
  * struct in section 10, in a separate array sized by its estimator entry. */
 typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pixel_fields (section 13) */
     double ld[3];      /* sum over passes of emission + direct light (pt: of the whole path) */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
+    double lh[2];      /* the luminance summed over the first P/2 and the first P passes, P the
+                        * last power of two passed: the halves of appm__var_scale */
 } appm__pixel;
 
 struct appm__estimator; /* a method's entry in the table of section 10 */
@@ -10660,6 +10662,7 @@ struct appm_renderer {
     unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
     int cut;             /* the kernel renormalised where the surface ends inside it (10.4, step 6) */
     double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
+    double var_scale;    /* the spread of the passes times this is the variance (appm__var_scale) */
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
     appm__pixel *pix;
@@ -11704,18 +11707,24 @@ static double *appm__chain_sums(const appm_renderer *r, size_t i)
 }
 
 /* The per-pass estimate v of pixel px in this pass, for the noise estimate:
- * its Welford statistics and its chain's sum. */
+ * its Welford statistics, its chain's sum and, after a power of two of
+ * passes, the sums of the two halves (appm__var_scale). */
 static void appm__pass_value(appm_renderer *r, appm__pixel *px, double v)
 {
     appm__welford(px, r->pass, v);
     appm__chain_add(appm__chain_sums(r, (size_t)(px - r->pix)), r->chains, r->pass, v);
+    if ((r->pass & (r->pass - 1)) == 0) {
+        px->lh[0] = px->lh[1];
+        px->lh[1] = px->wmean * (double)r->pass;
+    }
 }
 
 /* The variance of a pixel's mean over j passes (luminance).
  *   independent passes (random): Var = s^2 / j with s^2 = M2 / (j - 1).
  *   one sequence (qmc, 1 chain): the same formula.  Successive passes are then
  *           negatively correlated (that is the point of the sequence), so it
- *           overstates the error where the sequence helps: an upper bound.
+ *           overstates the error where the sequence helps: an upper bound,
+ *           which appm__var_scale brings down to size.
  *   K >= 2 chains (sums, section 2.3): independent randomizations.  With n_c
  *           passes and mean m_c in chain c and the overall mean m,
  *           sum_c n_c (m_c - m)^2 has expectation (K - 1) sigma^2, sigma^2 / n_c
@@ -13086,6 +13095,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     }
     r->stats.threads = r->threads;
     r->stats.est_relerr = -1.0;
+    r->var_scale = 1.0;
     r->stats.clamped = -1.0;
     r->mem.diag = &r->diag;
     *out = r;
@@ -13163,25 +13173,98 @@ static int appm__photon_term(const appm_renderer *r, size_t i, double j, double 
     return r->est->photon_term && r->est->photon_term(r, appm__state(r, i), j, out);
 }
 
+/* Pixel i's luminance after j passes, and the weight 1 / (I^2 + 0.01) of its
+ * squared error in the relative error (appm_image_compare's relmse). */
+static double appm__rel_weight(const appm_renderer *r, size_t i, double j)
+{
+    double I = appm__lumd(r->pix[i].ld) / j, t[3];
+    if (appm__photon_term(r, i, j, t)) I += appm__lumd(t);
+    return 1.0 / (I * I + 0.01);
+}
+
+/* The variance of a pixel's mean with one low-discrepancy sequence: the spread
+ * of its passes (appm__mean_var) times this factor, the same for the whole
+ * image.  Successive passes of one sequence are negatively correlated, so
+ * their spread overstates the variance of their mean (6-8x measured on bunny
+ * and teapot).  But the first and the second half of P = 2^k passes are each
+ * a whole net of the sequence (section 2.3), two estimates of the pixel whose
+ * errors are close to independent: their difference measures the variance of
+ * the mean of P passes, (H1 - H2)^2 / 4, the way two chains would, without
+ * the chains' coarser nets.  One degree of freedom a pixel is noisy, so the
+ * halves only set the scale:
+ *   c = sum_i w_i (H1 - H2)_i^2 / 4 * P / j  /  sum_i w_i Var_spread,i,
+ * P/j carrying the variance of P passes to j >= P (the halves show the
+ * sequence's gain has run out at that scale: the variance falls as 1/j there),
+ * w_i the weight of pixel i in the relative error.  At most 1, the spread's
+ * bound; 1 with random numbers (independent passes: the spread is right and
+ * has j - 1 degrees of freedom a pixel) and with chains (their spread is
+ * honest), and before 2 passes. */
+static double appm__var_scale(const appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    uint64_t P = r->pass;
+    double j = (double)r->pass, a = 0.0, b = 0.0, c;
+    if (!r->sobol || r->chains >= 2 || r->pass < 2) return 1.0;
+    while (P & (P - 1)) P &= P - 1; /* the largest power of two <= j */
+    for (i = 0; i < npix; ++i) {
+        const appm__pixel *p = &r->pix[i];
+        double w = appm__rel_weight(r, i, j), h = 0.5 * (double)P;
+        double d = p->lh[0] / h - (p->lh[1] - p->lh[0]) / h;
+        a += w * 0.25 * d * d * ((double)P / j);
+        b += w * appm__mean_var(p, NULL, 1, r->pass);
+    }
+    c = b > 0.0 ? a / b : 1.0;
+    return c < 1.0 ? c : 1.0;
+}
+
+/* The squared bias of pixel i after j passes, as the error estimate takes it:
+ * of the (up to) 3 x 3 pixels around i, the mean of the method's bias^2 with the
+ * largest left out.  A kernel estimate's bias is a field as smooth as the
+ * kernel, which spans several pixels, so a pixel whose model bias stands alone
+ * holds a noisy Laplacian, not a bias: on the teapot one pixel of its silhouette
+ * (a stencil off a surface curving away at a grazing angle) held 42 % of the
+ * image's squared model bias, 6x the true squared bias in all; without it,
+ * 1.05x at 256 passes.  A band two pixels wide or more, as a shadow's edge
+ * leaves, keeps its bias (docs/algorithm.md 7.3). */
+static double appm__bias2(const appm_renderer *r, size_t i, double j)
+{
+    int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
+    double sum = 0.0, top = 0.0;
+    int n = 0;
+    if (!r->est->bias) return 0.0;
+    for (dy = -1; dy <= 1; ++dy)
+        for (dx = -1; dx <= 1; ++dx) {
+            int64_t x = x0 + dx, y = y0 + dy;
+            double b;
+            if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
+            b = r->est->bias(appm__state(r, (size_t)(y * (int64_t)r->w + x)), j);
+            b *= b;
+            sum += b;
+            if (b > top) top = b;
+            n++;
+        }
+    return n > 1 ? (sum - top) / (double)(n - 1) : sum;
+}
+
 /* The estimated relative error of the image (appm_stats.est_relerr):
  *   sqrt( mean over pixels of (bias^2 + Var) / (I^2 + 0.01) ),
- * Var from the Welford spread of the per-pass estimates divided by j, or from
- * the spread between the chains (appm__mean_var). */
+ * bias^2 from appm__bias2, Var from the Welford spread of the per-pass
+ * estimates divided by j, scaled by appm__var_scale, or from the spread between
+ * the chains (appm__mean_var). */
 static void appm__estimate_error(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     double j = (double)r->pass, sum = 0.0;
+    r->var_scale = 1.0;
     if (r->pass < 2 || !(r->est->caps & APPM__CAP_ERROR)) {
         r->stats.est_relerr = -1.0;
         return;
     }
+    r->var_scale = appm__var_scale(r);
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass), bias = 0.0, I, t[3];
-        if (r->est->bias) bias = r->est->bias(appm__state(r, i), j);
-        I = appm__lumd(p->ld) / j;
-        if (appm__photon_term(r, i, j, t)) I += appm__lumd(t);
-        sum += (bias * bias + var) / (I * I + 0.01);
+        double var = r->var_scale * appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass);
+        sum += (appm__bias2(r, i, j) + var) * appm__rel_weight(r, i, j);
     }
     r->stats.est_relerr = sqrt(sum / (double)npix);
 }
@@ -13595,7 +13678,7 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
     a = r->aux[which];
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double var = appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass), v;
+        double var = r->var_scale * appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass), v;
         switch (which) {
         case APPM_AUX_RADIUS:
         case APPM_AUX_RADIUS_CAUSTIC:
@@ -13603,8 +13686,7 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
         case APPM_AUX_LAPLACIAN: v = r->est->aux_value(r, appm__state(r, i), which); break;
         case APPM_AUX_VARIANCE: v = var; break;
         default: /* the error bar |bias| + 1.645 sigma */
-            v = 1.645 * sqrt(var);
-            if (r->est->bias) v += fabs(r->est->bias(appm__state(r, i), j));
+            v = 1.645 * sqrt(var) + sqrt(appm__bias2(r, i, j));
             break;
         }
         a[i] = (float)v;
@@ -13701,7 +13783,8 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  * listed here (t_checkpoint checks that the list tiles the struct). */
 static const appm__field appm__pixel_fields[] = {{"ld", offsetof(appm__pixel, ld), 3, 0},
                                                  {"wmean", offsetof(appm__pixel, wmean), 1, 0},
-                                                 {"wm2", offsetof(appm__pixel, wm2), 1, 0}};
+                                                 {"wm2", offsetof(appm__pixel, wm2), 1, 0},
+                                                 {"lh", offsetof(appm__pixel, lh), 2, 0}};
 
 /* The field lists one checkpoint is written with, per pixel: the shared
  * pixel's, the method's state's, and the chains' sums (section 2.3; a list of

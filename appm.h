@@ -320,12 +320,14 @@ typedef struct appm_config {
     unsigned max_depth;       /* longest counted path, in segments: 32               */
     appm_sampler sampler;     /* APPM_SAMPLER_QMC                                    */
     /* qmc: passes dealt to this many independently scrambled, interleaved chains
-     * (at most 64).  1 (default): one sequence, the best image; est_relerr is
-     * then the spread of the per-pass estimates, which successive points of one
-     * sequence make an overestimate (2-2.5x measured where the sequence helps
-     * most).  K >= 2: est_relerr from the spread between the chains, honest, at
-     * a price in accuracy (each chain's nets are K times coarser; 4 chains lost
-     * half or more of the gain on diffuse boxes at 256 passes), 8 K bytes a pixel. */
+     * (at most 64).  1 (default): one sequence, the best image; est_relerr then
+     * takes the spread of the per-pass estimates, scaled by the difference of
+     * the two halves of the last power of two of passes (each a whole net of the
+     * sequence): successive passes are correlated, and their spread alone
+     * overstates the error where the sequence helps.  K >= 2: est_relerr from
+     * the spread between the chains, at a price in accuracy (each chain's nets
+     * are K times coarser; 4 chains lost half or more of the gain on diffuse
+     * boxes at 256 passes), 8 K bytes a pixel. */
     unsigned chains;
     appm_emission emission;   /* APPM_EMISSION_LIGHT                                 */
     appm_file_reader reader;  /* every file a load reads (scenes, meshes, materials, maps,
@@ -517,7 +519,8 @@ typedef struct appm_stats {
     double est_relerr;              /* appm, pt: estimated image relative error, the     */
                                     /* root mean over pixels of (bias^2 + var) /         */
                                     /* (I^2 + 0.01); var from the spread between the     */
-                                    /* chains (chains >= 2) or the passes; < 0: none      */
+                                    /* chains (chains >= 2) or the passes (one chain:    */
+                                    /* scaled by the sequence's halves); < 0: none       */
     double clamped;                 /* appm: fraction of gathering pixels at a radius bound
                                        after the last pass (< 0: none)                     */
     unsigned threads;

@@ -7,13 +7,7 @@ set -u
 dir=$1
 sed 's/^/    /' "$dir/meta.txt"
 echo
-awk -F, -v W="${SAMPLER_WINDOW:-32}" '
-function med(s,   n, a, i, j, t) {
-    n = split(s, a, " ")
-    for (i = 1; i <= n; ++i) for (j = i + 1; j <= n; ++j) if (a[j] + 0 < a[i] + 0) { t = a[i]; a[i] = a[j]; a[j] = t }
-    if (n == 0) return 0
-    return n % 2 ? a[(n + 1) / 2] : (a[n / 2] + a[n / 2 + 1]) / 2
-}
+awk -F, -v W="${SAMPLER_WINDOW:-32}" "$(cat bench/median.awk)"'
 function add(k, v) { val[k] = (k in val) ? val[k] " " v : v }
 function m(sc, smp, f) { return med(val[sc SUBSEP smp SUBSEP f]) }
 function truth(r, n,   x) { x = r * r - n; return x > 0 ? sqrt(x) : 0 }
@@ -105,12 +99,7 @@ if [ -f "$dir/regions.csv" ]; then
     echo "**caustic-glass per region, equal passes** (RMSE, median over the seeds; the reference's"
     echo "noise not subtracted):"
     echo
-    awk -F, '
-    function med(s,   n, a, i, j, t) {
-        n = split(s, a, " ")
-        for (i = 1; i <= n; ++i) for (j = i + 1; j <= n; ++j) if (a[j] + 0 < a[i] + 0) { t = a[i]; a[i] = a[j]; a[j] = t }
-        return n % 2 ? a[(n + 1) / 2] : (a[n / 2] + a[n / 2 + 1]) / 2
-    }
+    awk -F, "$(cat bench/median.awk)"'
     {
         for (f = 3; f <= NF; ++f) {
             if ($f == "") continue

@@ -70,19 +70,29 @@ static inline int check_quick(void)
     return q && q[0] == '1';
 }
 
-/* A scratch folder for the test's files: tests/out/<group>-<file>.  The first
- * call creates tests/out (an existing one is fine), so a test binary also runs
- * on its own from the repository root.  Returns a static buffer: copy if needed. */
+/* A scratch file for the test: tests/out/<group>-<file>, or with APPM_TEST_OUT
+ * set (tests/run.sh gives each command its own, so that two builds of one test
+ * may run side by side) tests/out-<APPM_TEST_OUT>/<group>-<file>: one folder
+ * beside tests/out, so that files naming each other (a scene and its mesh, or
+ * ../fixtures/) still find each other.  The first call creates the folder (an
+ * existing one is fine), so a test binary also runs on its own from the
+ * repository root.  Returns a static buffer: copy if needed. */
 static inline const char *check_path(const char *group, const char *file)
 {
-    static char buf[2][1024];
+    static char buf[2][1024], dir[64];
     static int k, made;
     if (!made) {
+        const char *tag = getenv("APPM_TEST_OUT");
         (void)check_mkdir_("tests/out");
+        snprintf(dir, sizeof dir, "tests/out");
+        if (tag && tag[0] && strlen(tag) < 32 && !strpbrk(tag, "/\\.")) {
+            snprintf(dir, sizeof dir, "tests/out-%s", tag);
+            (void)check_mkdir_(dir);
+        }
         made = 1;
     }
     k ^= 1;
-    snprintf(buf[k], sizeof buf[k], "tests/out/%s-%s", group, file);
+    snprintf(buf[k], sizeof buf[k], "%s/%s-%s", dir, group, file);
     return buf[k];
 }
 

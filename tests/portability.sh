@@ -104,17 +104,28 @@ run_test() {
 }
 
 # suite NAME COMPILER-COMMAND LIBS: every tests/t_*.c built with the given
-# compiler command and run through tests/run.sh in quick mode
-# (APPM_TEST_QUICK=1); ok if the runner's total has no failure.
+# compiler command (as many at a time as there are processors) and run through
+# tests/run.sh in quick mode (APPM_TEST_QUICK=1); ok if the runner's total has
+# no failure.
 suite() {
     name=$1 cc=$2 libs=$3
     dir="$OUT/suite-$(printf '%s' "$1" | tr -c 'A-Za-z0-9_\n' '_')"
     mkdir -p "$dir"
-    set --
+    jobs=$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
+    k=0
     for t in tests/t_*.c; do
         n=$(basename "$t" .c)
         # shellcheck disable=SC2086
-        if ! $cc "$t" -o "$dir/$n" $libs >"$log" 2>&1; then
+        { $cc "$t" -o "$dir/$n" $libs >"$dir/$n.log" 2>&1; echo $? >"$dir/$n.rc"; } &
+        k=$((k + 1))
+        [ $((k % jobs)) -eq 0 ] && wait
+    done
+    wait
+    set --
+    for t in tests/t_*.c; do
+        n=$(basename "$t" .c)
+        if [ "$(cat "$dir/$n.rc" 2>/dev/null)" != 0 ]; then
+            cat "$dir/$n.log" >"$log" 2>/dev/null
             bad "$name: the test suite ($n does not build)"
             return
         fi

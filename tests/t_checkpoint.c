@@ -11,8 +11,9 @@
  *   2. Nothing is left out: a checkpoint written and read with any one field
  *      of the per-pixel lists left out resumes to another render, so every
  *      listed field is state the next passes depend on (the round trip of 1
- *      would fail if the estimator table missed a field).  And the pixel list
- *      tiles appm__pixel as the estimator entries tile their states.
+ *      would fail if the estimator table missed a field; the halves of the
+ *      error estimate on a render long enough to read them).  And the pixel
+ *      list tiles appm__pixel as the estimator entries tile their states.
  *   3. Refusals: a checkpoint of another method, seed, photon count, alpha,
  *      radius, depth, direct mode, image size, sampler, chain count, scene,
  *      format version, library version or field list is refused with
@@ -305,9 +306,13 @@ static void test_fields_matter(const appm_scene *s)
         appm__ck_layout_of(whole, &L);
         for (t = 0; t < 2; ++t)
             for (f = 0; f < L.n[t]; ++f) {
-                /* sppm keeps no spread of its per-pass estimates (no VARIANCE map) */
-                int unused = m == APPM_METHOD_SPPM && t == 0 && f > 0;
-                int same = resumes_same_without(s, (appm_method)m, t, f, whole, SPARSE);
+                /* sppm keeps no spread of its per-pass estimates (no VARIANCE map); the
+                 * halves (lh) serve only the error estimate, which ppm has not, and on
+                 * these 120 pixels its scale sits at its bound 1: test_halves_matter */
+                int halves = t == 0 && strcmp(L.f[t][f].name, "lh") == 0, same;
+                int unused = (m == APPM_METHOD_SPPM && t == 0 && f > 0) || halves;
+                if (halves && m != APPM_METHOD_PPM && m != APPM_METHOD_SPPM) continue;
+                same = resumes_same_without(s, (appm_method)m, t, f, whole, SPARSE);
                 /* appm's caustic radius is read only once a pixel has seen enough
                  * caustic photons, which the sparse render never reaches */
                 if (same == 1 && dense) same = resumes_same_without(s, (appm_method)m, t, f, dense, DENSE);
@@ -317,6 +322,52 @@ static void test_fields_matter(const appm_scene *s)
         appm_renderer_destroy(whole);
         appm_renderer_destroy(dense);
     }
+}
+
+/* The halves of appm__var_scale are state: the path tracer on the bunny, 24 x 24,
+ * saved after 20 passes without them, resumes to 40 passes with another error
+ * estimate (the scale of pass 40 reads the halves of pass 32: S(16) was saved),
+ * and with them to the same one. */
+static void test_halves_matter(void)
+{
+    appm_scene *s = check_load_scene("scenes/bunny.scene");
+    appm_config c;
+    appm_renderer *whole = NULL, *a = NULL, *b = NULL, *b2 = NULL;
+    appm__ck_layout L;
+    appm__field less[APPM__CK_MAXFIELDS];
+    unsigned char *buf = NULL, *full = NULL;
+    size_t n = 0, k, j = 0;
+    if (!s) return;
+    c = config(APPM_METHOD_PT, 1);
+    c.width = c.height = 24;
+    whole = make(s, &c, 40);
+    a = make(s, &c, 20);
+    b = make(s, &c, 0);
+    b2 = make(s, &c, 0);
+    if (!whole || !a || !b || !b2) goto done;
+    CHECK_MSG(whole->var_scale < 1.0, "var_scale %.4f: the halves' scale should be below its bound here",
+              whole->var_scale);
+    appm__ck_layout_of(a, &L);
+    for (k = 0; k < L.n[0]; ++k)
+        if (strcmp(L.f[0][k].name, "lh") != 0) less[j++] = L.f[0][k];
+    CHECK(j + 1 == L.n[0]);
+    L.f[0] = less;
+    L.n[0] = (unsigned)j;
+    if (appm__ck_save_mem(a, &L, NULL, 0, &n, NULL) != APPM_OK || !(buf = (unsigned char *)malloc(n))) goto done;
+    if (appm__ck_save_mem(a, &L, buf, n, &n, NULL) != APPM_OK) goto done;
+    if (appm__ck_load_mem(b, &L, buf, n, NULL) != APPM_OK || !check_passes(b, 20)) goto done;
+    CHECK_MSG(b->stats.est_relerr != whole->stats.est_relerr, "without the halves: est_relerr %.6g, whole %.6g",
+              b->stats.est_relerr, whole->stats.est_relerr);
+    if (!(full = save(a, &n))) goto done;
+    CHECK(appm_renderer_load(b2, full, n, NULL) == APPM_OK && check_passes(b2, 20) && same_render(whole, b2));
+done:
+    free(buf);
+    free(full);
+    appm_renderer_destroy(whole);
+    appm_renderer_destroy(a);
+    appm_renderer_destroy(b);
+    appm_renderer_destroy(b2);
+    appm_scene_destroy(s);
 }
 
 /* 3. Refusals.  `fresh` (0 passes) must stay untouched by a refused load. */
@@ -514,8 +565,8 @@ static void test_byte_order(const appm_scene *s)
     u = get_le(buf + OFF_R1, 8);
     memcpy(&r1, &u, sizeof r1);
     CHECK(r1 == a->r1 && r1 > 0.0);
-    /* ppm: 5 pixel values + I[3]; then per guided light 2 counts and 2 x RES^2 doubles */
-    pix0 = n - 8 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (5 + 3);
+    /* ppm: 7 pixel values + I[3]; then per guided light 2 counts and 2 x RES^2 doubles */
+    pix0 = n - 8 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (7 + 3);
     u = get_le(buf + pix0, 8);
     memcpy(&ld0, &u, sizeof ld0);
     CHECK(ld0 == a->pix[0].ld[0]);
@@ -753,6 +804,7 @@ int main(void)
         test_scene_hash(s);
     }
     test_point_light();
+    test_halves_matter();
     test_edits();
     test_config_tripwire();
     appm_scene_destroy(s);

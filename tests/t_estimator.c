@@ -15,6 +15,10 @@
  *   5. appm-paper (the paper's selector, 10.3): its radius case by case
  *      against the pseudocode of docs/algorithm.md 4.8, and in a render its
  *      bandwidth on every pass, its bounds, no kernel cut, its RADIUS map.
+ *   6. The error estimate's bias (appm__bias2): a pixel's model bias that
+ *      stands alone is left out, a band two pixels wide keeps 7/8 of its
+ *      squared bias, numbers against the 3 x 3 rule worked by hand (a corner
+ *      has 4 pixels), and the ERROR map and est_relerr read the same value.
  */
 #include "../appm.c"
 #include "check.h"
@@ -218,6 +222,51 @@ static void test_paper_render(appm_scene *s)
     appm_renderer_destroy(r);
 }
 
+/* Every pixel's model bias set by hand (appm-paper: b = (mu2 / 2) dI R2sum / j). */
+static void set_bias(appm_renderer *r, double j, int what, double b)
+{
+    size_t i, n = (size_t)r->w * r->h;
+    for (i = 0; i < n; ++i) {
+        appm__paper_state *p = (appm__paper_state *)appm__state(r, i);
+        size_t x = i % r->w, y = i / r->w;
+        int on = what == 0 ? (x == 5 && y == 5) : what == 1 ? (x == 5 || x == 6) : (x == 0 && y == 0);
+        p->R2sum = j;
+        p->dI = on ? b / (0.5 * APPM__MU2) : 0.0;
+    }
+}
+
+static void test_bias2(appm_scene *s)
+{
+    appm_renderer *r = render(s, APPM_METHOD_APPM_PAPER, 2);
+    const double b = 0.3, b2 = b * b, j = 2.0;
+    const float *err;
+    double row = 0.0;
+    size_t x;
+    if (!r) return;
+    /* a lone spike: gone, at itself and at its neighbours */
+    set_bias(r, j, 0, b);
+    CHECK_NEAR(r->est->bias(appm__state(r, 5 * r->w + 5), j), b, 1e-12);
+    CHECK(appm__bias2(r, 5 * r->w + 5, j) == 0.0 && appm__bias2(r, 4 * r->w + 6, j) == 0.0);
+    /* columns 5 and 6: 5/8 b^2 on them, 2/8 b^2 beside, 7/8 of the row's 2 b^2 kept */
+    set_bias(r, j, 1, b);
+    CHECK_NEAR(appm__bias2(r, 3 * r->w + 5, j), 5.0 / 8.0 * b2, 1e-12);
+    CHECK_NEAR(appm__bias2(r, 3 * r->w + 4, j), 2.0 / 8.0 * b2, 1e-12);
+    CHECK_NEAR(appm__bias2(r, 3 * r->w + 3, j), 0.0, 1e-12);
+    for (x = 0; x < r->w; ++x) row += appm__bias2(r, 3 * r->w + x, j);
+    CHECK_NEAR(row, 14.0 / 8.0 * b2, 1e-12);
+    /* the top row: a 2 x 3 window, 4 band values of 6, the largest left out */
+    CHECK_NEAR(appm__bias2(r, 5, j), 3.0 / 5.0 * b2, 1e-12);
+    /* the ERROR map: |bias| + 1.645 sigma with that bias */
+    err = appm_renderer_aux(r, APPM_AUX_ERROR);
+    CHECK(err && fabs(err[3 * r->w + 5] - (1.645 * sqrt(r->var_scale * appm__mean_var(&r->pix[3 * r->w + 5], NULL,
+                                                                                          1, r->pass)) +
+                                           sqrt(5.0 / 8.0 * b2))) < 1e-6);
+    /* a corner: 4 pixels, one of them biased and left out */
+    set_bias(r, j, 2, b);
+    CHECK(appm__bias2(r, 0, j) == 0.0);
+    appm_renderer_destroy(r);
+}
+
 int main(void)
 {
     appm_scene *s;
@@ -229,6 +278,7 @@ int main(void)
         test_aux(s);
         test_seam(s);
         test_paper_render(s);
+        test_bias2(s);
     }
     appm_scene_destroy(s);
     return check_finish();

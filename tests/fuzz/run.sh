@@ -10,6 +10,7 @@
 #                      most a day each)
 #   FUZZ_OPTIONAL=1    exit 0 (with a message) when clang's libFuzzer is missing
 #   FUZZ_CC=clang      the compiler
+#   FUZZ_JOBS=N        targets built and run side by side (default: the processors)
 #
 # Each target: clang -g -O1 -fsanitize=fuzzer,address,undefined (UBSan made fatal,
 # so that a report counts as a crash), run with -rss_limit_mb=2000 -timeout=10.
@@ -54,24 +55,23 @@ if ! $CC $FLAGS "$OUT/probe.c" -o "$OUT/probe" >"$OUT/probe.log" 2>&1; then
     unavailable "$CC cannot link a libFuzzer program (-fsanitize=fuzzer)"
 fi
 
-failed=0
-total_execs=0
-total_crashes=0
-summary=""
-for t in $targets; do
+# one TARGET: builds and runs it; its summary line goes to $OUT/result-TARGET, and
+# its executions, crashes and whether it failed to $OUT/count-TARGET
+one() {
+    t=$1
     src=tests/fuzz/fuzz_$t.c
+    rm -f "$OUT/result-$t" "$OUT/count-$t"
     if [ ! -f "$src" ]; then
-        echo "fuzz: no target $t ($src)"
-        failed=1
-        continue
+        echo "fuzz: no target $t ($src)" | tee "$OUT/result-$t"
+        echo "0 0 1" >"$OUT/count-$t"
+        return
     fi
     echo "fuzz: building $t"
     if ! $CC $FLAGS -std=c99 "$src" -o "$OUT/fuzz_$t" -lm -pthread; then
         echo "FAIL fuzz_$t: build failed"
-        summary="$summary
-fuzz_$t: BUILD FAILED"
-        failed=1
-        continue
+        echo "fuzz_$t: BUILD FAILED" >"$OUT/result-$t"
+        echo "0 0 1" >"$OUT/count-$t"
+        return
     fi
     corpus="$OUT/corpus-$t"
     rm -rf "$corpus" "$OUT/artifacts/$t"
@@ -93,16 +93,46 @@ fuzz_$t: BUILD FAILED"
     size=$(find "$corpus" -type f | wc -l | tr -d ' ')
     cov=$(sed -n 's/.* cov: \([0-9]*\) .*/\1/p' "$OUT/fuzz_$t.log" | tail -n 1)
     line="fuzz_$t: $execs executions, corpus $size files, coverage ${cov:-?} edges, $crashes crashes"
+    bad=0
     if [ "$crashes" -ne 0 ] || [ "$rc" -ne 0 ]; then
         grep -E 'ERROR|SUMMARY|invariant|leaked|runtime error|deadly signal|Test unit written' \
             "$OUT/fuzz_$t.log" | head -n 20
         line="$line (exit status $rc; inputs in $OUT/artifacts/$t/, log $OUT/fuzz_$t.log)"
         [ "$crashes" -eq 0 ] && crashes=1
-        failed=1
+        bad=1
     fi
-    echo "$line"
+    echo "$line" | tee "$OUT/result-$t"
+    echo "$execs $crashes $bad" >"$OUT/count-$t"
+}
+
+# FUZZ_JOBS targets at a time (each one libFuzzer process on one core)
+jobs=${FUZZ_JOBS:-$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)}
+case $jobs in '' | *[!0-9]* | 0) jobs=1 ;; esac
+running=0
+for t in $targets; do
+    one "$t" &
+    running=$((running + 1))
+    if [ "$running" -ge "$jobs" ]; then
+        wait
+        running=0
+    fi
+done
+wait
+
+failed=0
+total_execs=0
+total_crashes=0
+summary=""
+for t in $targets; do
+    if [ -f "$OUT/count-$t" ]; then
+        read -r execs crashes bad <"$OUT/count-$t"
+    else
+        execs=0 crashes=0 bad=1
+        echo "fuzz_$t: no result" >"$OUT/result-$t"
+    fi
+    [ "$bad" -ne 0 ] && failed=1
     summary="$summary
-$line"
+$(cat "$OUT/result-$t")"
     total_execs=$((total_execs + execs))
     total_crashes=$((total_crashes + crashes))
 done
