@@ -7,7 +7,9 @@
  * runs them all and adds the counts up.
  *
  * APPM_TEST_QUICK=1 in the environment (set for the sanitizer builds) asks
- * slow tests to use fewer samples; tolerances must stay honest for both. */
+ * slow tests to use fewer samples; tolerances must stay honest for both.
+ * APPM_TEST_QUICK=2 (emulated targets) is quick, with check_count's loops
+ * shorter still. */
 #ifndef APPM_TEST_CHECK_H
 #define APPM_TEST_CHECK_H
 
@@ -67,7 +69,18 @@ static inline int check_finish(void)
 static inline int check_quick(void)
 {
     const char *q = getenv("APPM_TEST_QUICK");
-    return q && q[0] == '1';
+    return q && (q[0] == '1' || q[0] == '2');
+}
+
+/* A loop's length: FULL, QUICK with APPM_TEST_QUICK=1, and QUICK / 5 with
+ * APPM_TEST_QUICK=2 (an emulator, some 50 times slower: tests/portability.sh's
+ * qemu runs), never below 1.  Only loops whose tolerance does not depend on
+ * their length may use it. */
+static inline long check_count(long full, long quick)
+{
+    const char *q = getenv("APPM_TEST_QUICK");
+    if (q && q[0] == '2') return quick / 5 > 0 ? quick / 5 : 1;
+    return check_quick() ? quick : full;
 }
 
 /* A scratch file for the test: tests/out/<group>-<file>, or with APPM_TEST_OUT

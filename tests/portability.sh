@@ -7,6 +7,7 @@
 #                   reference (APPM_PORTABLE_REF) for every other run of it below
 #   tcc             -Wall -Werror, appm.c + main.c, and tests/t_portable.c built and run
 #   no threads      -DAPPM_THREADS=0: no pthread symbol in the object (nm), t_portable runs
+#                   (the wasm32 tests below are built without threads too)
 #   mingw-w64       Win32 threads (the default) and -DAPPM_THREADS=1 (winpthreads)
 #   the header      C89 and C++98, syntax only
 #   -ffast-math     must fail, with the library's #error
@@ -17,7 +18,8 @@
 #                   Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
-#   QEMU=1          the test suite (quick) built for 32-bit i386 (i686-linux-gnu-gcc) and
+#   QEMU=1          (in a lane of its own, beside the other steps)
+#                   the test suite (quick) built for 32-bit i386 (i686-linux-gnu-gcc) and
 #                   armhf (arm-linux-gnueabihf-gcc), under qemu-user: 32-bit size_t;
 #                   t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
 #                   with -DAPPM_SIMD=0) and big-endian s390x (scalar) run under qemu-user,
@@ -136,6 +138,93 @@ suite() {
     RUN_LIMIT=600
 }
 
+# ---- the emulated builds: a lane of their own -------------------------------------------
+# qemu runs one thread and most steps below build or run one program at a time,
+# so the emulated builds run beside them (qemu_lane, started once the native
+# t_portable has set the reference) with their own log and counts; their lines
+# are printed, with the seconds each took, when they are done.
+qemu_lane() {
+    # ---- 32-bit Linux under qemu-user (i386, armhf) --------------------------------------
+    # every size_t multiplication the library guards is 32 bits wide here: the tests' overflow
+    # checks (t_alloc, t_extremes, t_decode's size limits) run where they can actually trip
+
+    # PORTABILITY_32: the tests to run [t_portable t_alloc t_decode t_texture t_extremes
+    # t_checkpoint: about 4 minutes for both]; "all": every tests/t_*.c (about half an hour).
+    # i386 gets -msse2 -mfpmath=sse (x87 arithmetic would round otherwise than every other
+    # build, and qemu emulates it slowly) and no threads: qemu-user 7.2 hangs i386 programs
+    # whose threads wait on each other (threads are tested natively and under armhf).
+    T32=${PORTABILITY_32:-"t_portable t_alloc t_decode t_texture t_extremes t_checkpoint"}
+    [ "$T32" = all ] && T32=$(cd tests && ls t_*.c | sed 's/\.c$//')
+    for triple in i686-linux-gnu arm-linux-gnueabihf; do
+        case $triple in
+        i686*) q=i386 flags="-msse2 -mfpmath=sse -DAPPM_THREADS=0" ;;
+        *) q=arm flags="" ;;
+        esac
+        what="$triple: the test suite under qemu-$q"
+        if have $triple-gcc "$what" && have qemu-$q "$what"; then
+            step "$triple-gcc -Werror: appm.c main.c" $triple-gcc $C99 -O2 $flags appm.c main.c -o "$OUT/appm-$q" -lm -pthread
+            for n in $T32; do
+                if $triple-gcc $C99 -O2 $flags "tests/$n.c" -o "$OUT/$n-$q" -lm -pthread >"$log" 2>&1; then
+                    run_test "qemu-$q: $n" env APPM_TEST_QUICK=1 qemu-$q -L /usr/$triple "$OUT/$n-$q"
+                else
+                    bad "$triple-gcc: tests/$n.c"
+                fi
+            done
+        fi
+    done
+
+    # ---- aarch64 and big-endian s390x under qemu-user ------------------------------------
+    for triple in aarch64-linux-gnu s390x-linux-gnu; do
+        arch=${triple%%-*}
+        what="$arch: t_portable under qemu"
+        if have $triple-gcc "$what" && have qemu-$arch "$what"; then
+            step "$triple-gcc -Werror: appm.c main.c" \
+                $triple-gcc $C99 -O2 appm.c main.c -o "$OUT/appm-$arch" -lm -pthread
+            # a checkpoint written here resumes there: the scene hash takes values as the
+            # files state them (teapot: a framed camera and a spot light; cornell-glossy:
+            # smooth triangles, a glossy lobe), never ones that the machine rounds its own way
+            for sc in teapot cornell-glossy; do
+                what="qemu-$arch: resumes a checkpoint of scenes/$sc.scene written by the native build"
+                if [ ! -x "$OUT/appm-gcc" ] || [ ! -x "$OUT/appm-$arch" ]; then continue; fi
+                ck="$OUT/move-$sc.ckpt"
+                if "$OUT/appm-gcc" render "scenes/$sc.scene" --size 24x16 --passes 2 --threads 1 -q \
+                    --checkpoint "$ck" -o "$OUT/move-$sc.pfm" >"$log" 2>&1 &&
+                    qemu-$arch -L /usr/$triple "$OUT/appm-$arch" render "scenes/$sc.scene" --size 24x16 \
+                        --passes 3 --threads 1 -q --resume "$ck" -o "$OUT/move-$sc-$arch.pfm" >"$log" 2>&1 &&
+                    grep -q ' resumed=2' "$log"; then
+                    ok "$what"
+                else
+                    bad "$what"
+                fi
+            done
+            if $triple-gcc $C99 -O2 tests/t_portable.c -o "$OUT/t_portable-$arch" -lm -pthread \
+                >"$log" 2>&1; then
+                run_test "qemu-$arch: t_portable" qemu-$arch -L /usr/$triple "$OUT/t_portable-$arch"
+            else
+                bad "$triple-gcc: tests/t_portable.c"
+            fi
+            # t_decode: every image decoder on a big-endian host (s390x) too
+            if $triple-gcc $C99 -O2 tests/t_decode.c -o "$OUT/t_decode-$arch" -lm -pthread >"$log" 2>&1; then
+                run_test "qemu-$arch: t_decode" env APPM_TEST_QUICK=1 qemu-$arch -L /usr/$triple "$OUT/t_decode-$arch"
+            else
+                bad "$triple-gcc: tests/t_decode.c"
+            fi
+            # t_bvh: NEON on aarch64, and its -DAPPM_SIMD=0 twin; s390x has no SIMD
+            # path, so its default build is the scalar one already
+            for simd in "" -DAPPM_SIMD=0; do
+                [ "$arch" = s390x ] && [ -n "$simd" ] && continue
+                if $triple-gcc $C99 -O2 $simd tests/t_bvh.c -o "$OUT/t_bvh-$arch$simd" -lm -pthread \
+                    >"$log" 2>&1; then
+                    run_test "qemu-$arch: t_bvh $simd" env APPM_TEST_QUICK=2 \
+                        qemu-$arch -L /usr/$triple "$OUT/t_bvh-$arch$simd"
+                else
+                    bad "$triple-gcc $simd: tests/t_bvh.c"
+                fi
+            done
+        fi
+    done
+}
+
 # ---- native compilers -----------------------------------------------------------
 
 for cc in gcc clang; do
@@ -156,6 +245,19 @@ if have gcc "gcc: tests/t_portable.c runs (the reference)"; then
     fi
 fi
 export APPM_PORTABLE_REF
+
+qemu_pid=
+if [ "${QEMU:-0}" = 1 ]; then
+    rm -f "$OUT/qemu.count"
+    (
+        log="$OUT/step-qemu.log" pass=0 fail=0 lap_t=$(date +%s)
+        APPM_TEST_OUT=qemu # the tests' scratch files: tests/out-qemu, apart from the other lane's
+        export APPM_TEST_OUT
+        qemu_lane
+        echo "$pass $fail" >"$OUT/qemu.count"
+    ) >"$OUT/qemu.out" 2>&1 &
+    qemu_pid=$!
+fi
 
 if have tcc "tcc -Wall -Werror"; then
     step "tcc -Wall -Werror: appm.c main.c" \
@@ -195,7 +297,6 @@ if have gcc "-DAPPM_THREADS=0"; then
     if gcc $C99 -O2 -DAPPM_THREADS=0 tests/t_portable.c -o "$OUT/t_portable-nothreads" -lm \
         >"$log" 2>&1; then
         run_test "-DAPPM_THREADS=0: tests/t_portable.c runs" "./$OUT/t_portable-nothreads"
-        suite "gcc -DAPPM_THREADS=0" "gcc $C99 -O2 -DAPPM_THREADS=0" "-lm"
     else
         bad "gcc -DAPPM_THREADS=0: tests/t_portable.c"
     fi
@@ -365,92 +466,15 @@ else
     echo "skip wine: set WINE=1 to run a mingw-w64 build under wine $took"
 fi
 
-# ---- optional: 32-bit Linux under qemu-user (i386, armhf) --------------------------------------
-# every size_t multiplication the library guards is 32 bits wide here: the tests' overflow
-# checks (t_alloc, t_extremes, t_decode's size limits) run where they can actually trip
-
-# PORTABILITY_32: the tests to run [t_portable t_alloc t_decode t_texture t_extremes
-# t_checkpoint: about 4 minutes for both]; "all": every tests/t_*.c (about half an hour).
-# i386 gets -msse2 -mfpmath=sse (x87 arithmetic would round otherwise than every other
-# build, and qemu emulates it slowly) and no threads: qemu-user 7.2 hangs i386 programs
-# whose threads wait on each other (threads are tested natively and under armhf).
-if [ "${QEMU:-0}" = 1 ]; then
-    T32=${PORTABILITY_32:-"t_portable t_alloc t_decode t_texture t_extremes t_checkpoint"}
-    [ "$T32" = all ] && T32=$(cd tests && ls t_*.c | sed 's/\.c$//')
-    for triple in i686-linux-gnu arm-linux-gnueabihf; do
-        case $triple in
-        i686*) q=i386 flags="-msse2 -mfpmath=sse -DAPPM_THREADS=0" ;;
-        *) q=arm flags="" ;;
-        esac
-        what="$triple: the test suite under qemu-$q"
-        if have $triple-gcc "$what" && have qemu-$q "$what"; then
-            step "$triple-gcc -Werror: appm.c main.c" $triple-gcc $C99 -O2 $flags appm.c main.c -o "$OUT/appm-$q" -lm -pthread
-            for n in $T32; do
-                if $triple-gcc $C99 -O2 $flags "tests/$n.c" -o "$OUT/$n-$q" -lm -pthread >"$log" 2>&1; then
-                    run_test "qemu-$q: $n" env APPM_TEST_QUICK=1 qemu-$q -L /usr/$triple "$OUT/$n-$q"
-                else
-                    bad "$triple-gcc: tests/$n.c"
-                fi
-            done
-        fi
-    done
-fi
-
-# ---- optional: qemu-user -----------------------------------------------------------------------
-
-if [ "${QEMU:-0}" = 1 ]; then
-    for triple in aarch64-linux-gnu s390x-linux-gnu; do
-        arch=${triple%%-*}
-        what="$arch: t_portable under qemu"
-        if have $triple-gcc "$what" && have qemu-$arch "$what"; then
-            step "$triple-gcc -Werror: appm.c main.c" \
-                $triple-gcc $C99 -O2 appm.c main.c -o "$OUT/appm-$arch" -lm -pthread
-            # a checkpoint written here resumes there: the scene hash takes values as the
-            # files state them (teapot: a framed camera and a spot light; cornell-glossy:
-            # smooth triangles, a glossy lobe), never ones that the machine rounds its own way
-            for sc in teapot cornell-glossy; do
-                what="qemu-$arch: resumes a checkpoint of scenes/$sc.scene written by the native build"
-                if [ ! -x "$OUT/appm-gcc" ] || [ ! -x "$OUT/appm-$arch" ]; then continue; fi
-                ck="$OUT/move-$sc.ckpt"
-                if "$OUT/appm-gcc" render "scenes/$sc.scene" --size 24x16 --passes 2 --threads 1 -q \
-                    --checkpoint "$ck" -o "$OUT/move-$sc.pfm" >"$log" 2>&1 &&
-                    qemu-$arch -L /usr/$triple "$OUT/appm-$arch" render "scenes/$sc.scene" --size 24x16 \
-                        --passes 3 --threads 1 -q --resume "$ck" -o "$OUT/move-$sc-$arch.pfm" >"$log" 2>&1 &&
-                    grep -q ' resumed=2' "$log"; then
-                    ok "$what"
-                else
-                    bad "$what"
-                fi
-            done
-            if $triple-gcc $C99 -O2 tests/t_portable.c -o "$OUT/t_portable-$arch" -lm -pthread \
-                >"$log" 2>&1; then
-                run_test "qemu-$arch: t_portable" qemu-$arch -L /usr/$triple "$OUT/t_portable-$arch"
-            else
-                bad "$triple-gcc: tests/t_portable.c"
-            fi
-            # t_decode: every image decoder on a big-endian host (s390x) too
-            if $triple-gcc $C99 -O2 tests/t_decode.c -o "$OUT/t_decode-$arch" -lm -pthread >"$log" 2>&1; then
-                run_test "qemu-$arch: t_decode" env APPM_TEST_QUICK=1 qemu-$arch -L /usr/$triple "$OUT/t_decode-$arch"
-            else
-                bad "$triple-gcc: tests/t_decode.c"
-            fi
-            # t_bvh: NEON on aarch64, and its -DAPPM_SIMD=0 twin; s390x has no SIMD
-            # path, so its default build is the scalar one already
-            for simd in "" -DAPPM_SIMD=0; do
-                [ "$arch" = s390x ] && [ -n "$simd" ] && continue
-                if $triple-gcc $C99 -O2 $simd tests/t_bvh.c -o "$OUT/t_bvh-$arch$simd" -lm -pthread \
-                    >"$log" 2>&1; then
-                    run_test "qemu-$arch: t_bvh $simd" env APPM_TEST_QUICK=1 \
-                        qemu-$arch -L /usr/$triple "$OUT/t_bvh-$arch$simd"
-                else
-                    bad "$triple-gcc $simd: tests/t_bvh.c"
-                fi
-            done
-        fi
-    done
+if [ -n "$qemu_pid" ]; then
+    wait "$qemu_pid"
+    cat "$OUT/qemu.out"
+    read -r qpass qfail <"$OUT/qemu.count" || { qpass=0 qfail=1; echo "FAIL the qemu lane gave no count"; }
+    pass=$((pass + qpass))
+    fail=$((fail + qfail))
 else
     lap
-    echo "skip qemu: set QEMU=1 to run aarch64 and big-endian s390x builds under qemu-user $took"
+    echo "skip qemu: set QEMU=1 to run 32-bit i386 and armhf, aarch64 and big-endian s390x builds under qemu-user $took"
 fi
 
 echo "$pass passed, $fail failed"

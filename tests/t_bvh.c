@@ -624,7 +624,6 @@ static void test_bvh_vs_brute(void)
     const char *path = check_path(GROUP, "bunny.scene");
     appm_scene *s = NULL;
     appm_diag d;
-    int quick = check_quick();
     /* The bunny has no light of its own; a point light makes it a valid scene. */
     CHECK(check_write_file(path, "mesh ../../scenes/stanford-bunny.obj\n"
                                  "light point position 0 1 0 intensity 1 1 1\n"));
@@ -632,7 +631,7 @@ static void test_bvh_vs_brute(void)
     if (on_path(s)) {
         CHECK(s->ntri > 60000);
         CHECK(check_leaf_sizes(s, "bunny") > 8); /* it has flat leaves, traced below */
-        bvh_vs_brute(s, "bunny", quick ? 10000 : 100000, quick ? 100 : 1000, 1);
+        bvh_vs_brute(s, "bunny", check_count(100000, 10000), check_count(1000, 100), 1);
         appm_scene_destroy(s);
     }
     /* A scene of axis-aligned walls with shared edges and exactly coplanar
@@ -641,7 +640,7 @@ static void test_bvh_vs_brute(void)
     CHECK_MSG(appm_scene_load("scenes/CornellBox-Original.obj", NULL, &s, &d) == APPM_OK, "%s:%u: %s", d.file,
               d.line, d.message);
     if (on_path(s)) {
-        bvh_vs_brute(s, "cornell", quick ? 5000 : 50000, 0, 0);
+        bvh_vs_brute(s, "cornell", check_count(50000, 5000), 0, 0);
         appm_scene_destroy(s);
     }
 }
@@ -710,7 +709,7 @@ static void watertight(double cx, double cy, double cz, double R, long n, const 
 
 static void test_watertight(void)
 {
-    long n = check_quick() ? 20000 : 100000;
+    long n = check_count(100000, 20000);
     watertight(1e5, 1e3, -2e5, 2.0, n, "sphere R=2 at (1e5,1e3,-2e5)");
     watertight(148376, 1234, -223423, 2.0, n / 4, "sphere R=2 at Embree's point");
     watertight(1e-3, -2e-3, 5e-4, 1e-4, n, "sphere R=1e-4");
