@@ -140,9 +140,8 @@ suite() {
 
 # ---- the emulated builds: a lane of their own -------------------------------------------
 # qemu runs one thread and most steps below build or run one program at a time,
-# so the emulated builds run beside them (qemu_lane, started once the native
-# t_portable has set the reference) with their own log and counts; their lines
-# are printed, with the seconds each took, when they are done.
+# so the emulated builds run beside them (qemu_lane) with their own log and
+# counts; their lines are printed, with the seconds each took, when they are done.
 qemu_lane() {
     # ---- 32-bit Linux under qemu-user (i386, armhf) --------------------------------------
     # every size_t multiplication the library guards is 32 bits wide here: the tests' overflow
@@ -165,7 +164,9 @@ qemu_lane() {
             step "$triple-gcc -Werror: appm.c main.c" $triple-gcc $C99 -O2 $flags appm.c main.c -o "$OUT/appm-$q" -lm -pthread
             for n in $T32; do
                 if $triple-gcc $C99 -O2 $flags "tests/$n.c" -o "$OUT/$n-$q" -lm -pthread >"$log" 2>&1; then
+                    RUN_LIMIT=1800 # t_appm alone takes some 8 minutes under qemu-i386
                     run_test "qemu-$q: $n" env APPM_TEST_QUICK=1 qemu-$q -L /usr/$triple "$OUT/$n-$q"
+                    RUN_LIMIT=600
                 else
                     bad "$triple-gcc: tests/$n.c"
                 fi
@@ -246,6 +247,20 @@ if have gcc "gcc: tests/t_portable.c runs (the reference)"; then
 fi
 export APPM_PORTABLE_REF
 
+if have tcc "tcc -Wall -Werror"; then
+    step "tcc -Wall -Werror: appm.c main.c" \
+        tcc -Wall -Werror appm.c main.c -o "$OUT/appm-tcc" -lm -lpthread
+    if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
+        >"$log" 2>&1; then
+        run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
+        suite tcc "tcc -Wall" "-lm -lpthread"
+    else
+        bad "tcc -Wall -Werror: tests/t_portable.c"
+    fi
+fi
+
+# The emulated builds start here, once the tcc suite (whose threads suffer most
+# from a busy core) is done and the native t_portable has set the reference.
 qemu_pid=
 if [ "${QEMU:-0}" = 1 ]; then
     rm -f "$OUT/qemu.count"
@@ -257,18 +272,6 @@ if [ "${QEMU:-0}" = 1 ]; then
         echo "$pass $fail" >"$OUT/qemu.count"
     ) >"$OUT/qemu.out" 2>&1 &
     qemu_pid=$!
-fi
-
-if have tcc "tcc -Wall -Werror"; then
-    step "tcc -Wall -Werror: appm.c main.c" \
-        tcc -Wall -Werror appm.c main.c -o "$OUT/appm-tcc" -lm -lpthread
-    if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
-        >"$log" 2>&1; then
-        run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
-        suite tcc "tcc -Wall" "-lm -lpthread"
-    else
-        bad "tcc -Wall -Werror: tests/t_portable.c"
-    fi
 fi
 
 # ---- no threads -------------------------------------------------------------------
