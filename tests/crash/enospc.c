@@ -27,10 +27,13 @@ static long long left(void)
     return budget;
 }
 
-FILE *fopen(const char *path, const char *mode)
+/* Opens through the C library's NAME ("fopen", or "fopen64", which a program
+ * built with _FILE_OFFSET_BITS 64 calls, as appm is) and tracks a .tmp file
+ * opened for writing. */
+static FILE *open_tracked(const char *name, const char *path, const char *mode)
 {
-    FILE *(*real)(const char *, const char *) = (FILE * (*)(const char *, const char *)) dlsym(RTLD_NEXT, "fopen");
-    FILE *f = real(path, mode);
+    FILE *(*real)(const char *, const char *) = (FILE * (*)(const char *, const char *)) dlsym(RTLD_NEXT, name);
+    FILE *f = real ? real(path, mode) : NULL;
     size_t n = strlen(path);
     int k;
     if (f && strchr(mode, 'w') && n > 4 && strcmp(path + n - 4, ".tmp") == 0)
@@ -41,6 +44,10 @@ FILE *fopen(const char *path, const char *mode)
             }
     return f;
 }
+
+FILE *fopen(const char *path, const char *mode) { return open_tracked("fopen", path, mode); }
+FILE *fopen64(const char *path, const char *mode);
+FILE *fopen64(const char *path, const char *mode) { return open_tracked("fopen64", path, mode); }
 
 int fclose(FILE *f)
 {
