@@ -68,7 +68,8 @@
 #endif
 /* 64-bit file offsets on 32-bit glibc: without it fopen refuses a file over
  * 2 GiB (a big render's checkpoint) and readdir fails on a file system whose
- * inode numbers need 64 bits (seen under qemu-i386); a no-op elsewhere. */
+ * inode numbers need 64 bits (seen under qemu-i386).  64-bit systems have
+ * such offsets already (glibc then names its calls fopen64 and the like). */
 #ifndef _FILE_OFFSET_BITS
 #define _FILE_OFFSET_BITS 64
 #endif
