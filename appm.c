@@ -780,17 +780,6 @@ static const uint32_t appm__sobol_v[6][32] = {
      0xd6c81ec8u, 0xbb249f24u, 0x80d6d6d6u, 0x40bbbbbbu}
 };
 
-/* Point i of Sobol' dimension d (0..5), 32 bits: x = XOR of v_k over the set
- * bits k of i (natural order, not Gray code: the point set of the first 2^k is
- * the same, and the order does not matter after the index shuffle). */
-static uint32_t appm__sobol(uint32_t i, unsigned d)
-{
-    const uint32_t *v = appm__sobol_v[d];
-    uint32_t x = 0;
-    for (; i; i >>= 1, ++v) x ^= *v & (0u - (i & 1u)); /* no branch on a random bit */
-    return x;
-}
-
 /* Bit reversal, rev.  The Owen scramble of a 32-bit fraction x / 2^32 (most
  * significant digit first) is owen(x, seed) = rev(appm__lk_permute(rev(x), seed)). */
 static inline uint32_t appm__reverse32(uint32_t x)
@@ -854,13 +843,22 @@ static void appm__sobol_table(appm__sobol_tab *tab)
         tab->rev[1][v] = r * (1.0f / 65536.0f);
         tab->rev[2][v] = r * (1.0f / 16777216.0f);
     }
+    /* Sobol' is linear over the bits of its index, and so is T: the entry of a
+     * byte is the XOR of the entries of its set bits.  Bit v of byte b is bit
+     * 8b + v of ir, so bit j = 31 - 8b - v of the index, whose point is the
+     * direction number v_j; every other entry is the XOR of two earlier ones. */
     for (p = 0; p < APPM__LD_PAIRS; ++p)
-        for (b = 0; b < 4; ++b)
-            for (v = 0; v < 256; ++v) {
-                uint32_t i = appm__reverse32((uint32_t)v << (8 * b));
-                tab->pair[p][b][v] = appm__reverse32(appm__sobol(i, 2 * p)) |
-                                     (uint64_t)appm__reverse32(appm__sobol(i, 2 * p + 1)) << 32;
+        for (b = 0; b < 4; ++b) {
+            uint64_t *t = tab->pair[p][b];
+            t[0] = 0;
+            for (v = 0; v < 8; ++v) {
+                const unsigned j = 31 - 8 * b - v;
+                t[1u << v] = appm__reverse32(appm__sobol_v[2 * p][j]) |
+                             (uint64_t)appm__reverse32(appm__sobol_v[2 * p + 1][j]) << 32;
             }
+            for (v = 3; v < 256; ++v)
+                if (v & (v - 1)) t[v] = t[v & (v - 1)] ^ t[v & (0u - v)];
+        }
 }
 
 /* The Owen scramble rev(lk(y, s)) as a float in [0, 1) with 24 bits. */
@@ -8980,6 +8978,49 @@ static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v
 /* The map's radiances (linear RGB times scale) and its sampling CDFs, from
  * the decoded file in e->px.  A map that holds NaN or infinity, or that is
  * black, is refused; negative samples (a lossy encoder's ringing) become 0. */
+/* out[x]: the largest mean of RGB of texels x - 1, x, x + 1 of row y
+ * (wrapping); mean: w floats of scratch. */
+static void appm__env_row_max(const appm__envmap *e, uint32_t y, float *mean, float *out)
+{
+    const uint32_t w = e->w;
+    uint32_t x;
+    for (x = 0; x < w; ++x) {
+        const float *t = appm__env_texel(e, x, y);
+        mean[x] = (t[0] + t[1] + t[2]) / 3.0f;
+    }
+    for (x = 0; x < w; ++x) {
+        float best = mean[x], l = mean[x ? x - 1 : w - 1], r = mean[x + 1 < w ? x + 1 : 0];
+        if (l > best) best = l;
+        if (r > best) best = r;
+        out[x] = best;
+    }
+}
+
+/* f[y w + x]: the mean of RGB, the largest over the 3 x 3 texels around
+ * (x, y), wrapping in x, clipped at the poles.  The maximum is separable: the
+ * largest of three in each row (ring: rows y - 1, y, y + 1 by y mod 3), then
+ * of those three rows.  scratch: 4 w floats. */
+static void appm__env_dilate(const appm__envmap *e, float *f, float *scratch)
+{
+    const uint32_t w = e->w, h = e->h;
+    float *mean = scratch + 3 * (size_t)w;
+    uint32_t x, y, row;
+    for (row = 0; row < h && row < 2; ++row) appm__env_row_max(e, row, mean, scratch + (size_t)row * w);
+    for (y = 0; y < h; ++y) {
+        const float *mid = scratch + (size_t)(y % 3) * w;
+        const float *up = y > 0 ? scratch + (size_t)((y + 2) % 3) * w : mid;
+        const float *down = y + 1 < h ? scratch + (size_t)((y + 1) % 3) * w : mid;
+        float *out = f + (size_t)y * w;
+        for (x = 0; x < w; ++x) {
+            float best = mid[x];
+            if (up[x] > best) best = up[x];
+            if (down[x] > best) best = down[x];
+            out[x] = best;
+        }
+        if (y + 2 < h) appm__env_row_max(e, y + 2, mean, scratch + (size_t)((y + 2) % 3) * w);
+    }
+}
+
 static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *name, appm_diag *diag)
 {
     uint32_t w = e->px.w, h = e->px.h, x, y;
@@ -8992,7 +9033,7 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
     e->rot = (float)(fmod(e->rotate, 360.0) * APPM__PI / 180.0); /* |rotate| <= 1e6: no precision lost */
     e->rgb = (float *)appm__alloc(m, n, 3 * sizeof(float));
     e->cdf = (double *)appm__alloc(m, (size_t)h + 1 + (size_t)h * ((size_t)w + 1), sizeof(double));
-    f = (float *)appm__alloc(m, n, sizeof(float));
+    f = (float *)appm__alloc(m, n + 4 * (size_t)w, sizeof(float));
     if (!e->rgb || !e->cdf || !f) {
         appm__free(m, f);
         return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "out of memory for the environment map");
@@ -9008,21 +9049,7 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
             }
             e->rgb[3 * i + k] = v > 0.0 ? (float)v : 0.0f;
         }
-    for (y = 0; y < h; ++y) /* f: the mean of RGB, the largest over the 3 x 3 neighbourhood */
-        for (x = 0; x < w; ++x) {
-            float best = 0.0f;
-            int dy, dx;
-            for (dy = -1; dy <= 1; ++dy)
-                for (dx = -1; dx <= 1; ++dx) {
-                    int64_t yy = (int64_t)y + dy;
-                    uint32_t xx = (uint32_t)(((int64_t)x + dx + w) % w);
-                    const float *t;
-                    if (yy < 0 || yy >= (int64_t)h) continue;
-                    t = appm__env_texel(e, xx, (uint32_t)yy);
-                    if ((t[0] + t[1] + t[2]) / 3.0f > best) best = (t[0] + t[1] + t[2]) / 3.0f;
-                }
-            f[(size_t)y * w + x] = best;
-        }
+    appm__env_dilate(e, f, f + n);
     rows = e->cdf;
     cols = e->cdf + h + 1;
     rows[0] = 0.0;
@@ -12945,10 +12972,14 @@ static void appm__renderer_free_parts(appm_renderer *r)
 /* Photons per task region of the first store, 1.5 per path plus slack, in
  * double and clamped before the conversion: 1.5 x 2^32 paths exceed a 32-bit
  * size_t (wasm32), and cap * tasks must fit the store's uint32 indices, the
- * limit appm__photon_pass grows to.  Too large a store fails to allocate. */
+ * limit appm__photon_pass grows to.  Too large a store fails to allocate.
+ * The slack (4096, or one more per path and 256 for passes of fewer paths)
+ * spares most renders the retrace of a first pass that overflows; a tiny
+ * pass (a preview, a test, a fuzzed checkpoint) does not pay 160 KB for it. */
 static size_t appm__store_guess(uint64_t paths, unsigned tasks)
 {
-    const double guess = (double)paths * 1.5 / (double)tasks + 4096.0;
+    const double per_task = (double)paths / (double)tasks;
+    const double guess = per_task * 1.5 + (per_task + 256.0 < 4096.0 ? per_task + 256.0 : 4096.0);
     const size_t limit = (size_t)0xFFFFFFF0u / tasks;
     return guess < (double)limit ? (size_t)guess : limit;
 }

@@ -938,9 +938,10 @@ static void test_determinism(void)
  * appm.h: "Rendering allocates at renderer creation and, rarely, when a pass
  * stores more photons than any pass before it; memory does not grow from pass
  * to pass after that."  Two checks of that sentence:
- *   - a small render whose photon store fits from the first pass on (the first
- *     guess holds 1.5 photons per path, at least 4096 per thread, and this
- *     scene stores about one per path) holds the same bytes after pass 5 and
+ *   - a small render whose photon store fits from the first pass on (for
+ *     passes this small the first guess holds 2.5 photons per path and 256
+ *     more per thread, and this scene stores about one per path) holds the
+ *     same bytes after pass 5 and
  *     after pass 50, and nothing changes in between;
  *   - in any render, the bytes held change only after a pass that stored more
  *     photons than every pass before it.  About 1000 photons per pass on the

@@ -77,6 +77,19 @@ static uint32_t radical_inverse2(uint32_t i)
     return x;
 }
 
+/* Point i of Sobol' dimension d (0..5), 32 bits, by the definition: the XOR
+ * of v_k over the set bits k of i (natural order, not Gray code).  appm.c
+ * keeps only its tables, built from single bits by linearity; section 2
+ * checks them against this. */
+static uint32_t sobol_point(uint32_t i, unsigned d)
+{
+    const uint32_t *v = appm__sobol_v[d];
+    uint32_t x = 0;
+    for (; i; i >>= 1, ++v)
+        if (i & 1u) x ^= *v;
+    return x;
+}
+
 static void test_sobol(void)
 {
     static const unsigned m2[] = {1}, m3[] = {1, 3}, m4[] = {1, 3, 1}, m5[] = {1, 1, 1}, m6[] = {1, 1, 3, 3};
@@ -114,12 +127,12 @@ static void test_sobol(void)
     CHECK_MSG(bad == 0, "%u direction numbers differ from the Joe-Kuo recurrence", bad);
     for (i = 0; i < 16; ++i)
         for (d = 0; d < 6; ++d) {
-            double x = appm__sobol(i ^ (i >> 1), d) / 4294967296.0;
+            double x = sobol_point(i ^ (i >> 1), d) / 4294967296.0;
             CHECK_MSG(x == first[i][d], "Sobol' point %u (Gray code) dim %u: %.9g, published %.9g", i, d + 1,
                       x, first[i][d]);
         }
     for (bad = 0, i = 0; i < 100000; ++i)
-        bad += appm__sobol(i * 2654435761u, 0) != radical_inverse2(i * 2654435761u);
+        bad += sobol_point(i * 2654435761u, 0) != radical_inverse2(i * 2654435761u);
     CHECK_MSG(bad == 0, "dimension 1 differs from the radical inverse %u times", bad);
     CHECK(appm__reverse32(1u) == 0x80000000u && appm__reverse32(0x12345678u) == 0x1E6A2C48u);
 }
@@ -145,7 +158,7 @@ static void test_fast_path(void)
         appm__ld(&g_tab, key, appm__reverse32(index), group, 63u, u);
         for (d = 0; d < 6; ++d) {
             uint32_t i = owen_ref(index, (uint32_t)g);
-            uint32_t x = owen_ref(appm__sobol(i, d), (uint32_t)(g >> 32) + d * 0x9E3779B9u);
+            uint32_t x = owen_ref(sobol_point(i, d), (uint32_t)(g >> 32) + d * 0x9E3779B9u);
             bad += u[d] != (float)(x >> 8) * (1.0f / 16777216.0f);
             bad_range += !(u[d] >= 0.0f && u[d] < 1.0f);
         }
@@ -259,8 +272,8 @@ static void test_joint_dims(void)
         for (pr = 0; pr < sizeof pairs / sizeof pairs[0]; ++pr) {
             unsigned a = pairs[pr][0], b = pairs[pr][1], n = 1u << k, t0;
             for (i = 0; i < n; ++i) {
-                g_xi[0][i] = appm__sobol(i, a);
-                g_xi[1][i] = appm__sobol(i, b);
+                g_xi[0][i] = sobol_point(i, a);
+                g_xi[1][i] = sobol_point(i, b);
             }
             t0 = net_t(NULL, NULL, g_xi[0], g_xi[1], k);
             if (t0 > tmax) tmax = t0;
@@ -351,8 +364,8 @@ static void photon_nets(unsigned K)
         unsigned d, t, t0;
         for (d = 0; d < 2; ++d) {
             for (i = 0; i < 256; ++i) {
-                g_xi[0][i] = appm__sobol(i, d);
-                g_xi[1][i] = appm__sobol(i, 4);
+                g_xi[0][i] = sobol_point(i, d);
+                g_xi[1][i] = sobol_point(i, 4);
             }
             t0 = net_t(NULL, NULL, g_xi[0], g_xi[1], 8);
             t = net_t(g_x[d], g_x[5], NULL, NULL, 8);
