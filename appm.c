@@ -9164,6 +9164,21 @@ static void appm__light_surface(const appm_scene *s, uint32_t tri, float b1, flo
     appm__surface(s, &h, sf);
 }
 
+/* Whether the point (b1, b2) of emitting triangle tri lies in a hole of its
+ * map_d cut-out.  Light there is not emitted: a sample of the whole triangle
+ * that lands in a hole carries nothing (the estimate stays unbiased, and the
+ * holes' share of the samples is lost). */
+static int appm__light_cut(const appm_scene *s, uint32_t tri, float b1, float b2)
+{
+    appm__hit h;
+    if (!s->cutouts) return 0;
+    h.t = 0.0f;
+    h.b1 = b1;
+    h.b2 = b2;
+    h.tri = tri;
+    return appm__cut_away(s, &h);
+}
+
 typedef struct appm__photon_start {
     appm__ray ray;
     appm__v3 gamma;     /* photon weight: flux per emitted path, before dividing by M */
@@ -9173,7 +9188,9 @@ typedef struct appm__photon_start {
 /* The power Phi (W, RGB) light l emits: what appm__emit's photon weight gamma
  * carries on average, E[gamma] = Phi / pick, so the two must agree (lights are
  * picked by power: pick = mean(Phi) / sum of mean(Phi)).
- *   area         Phi = pi A Le               (a Lambertian emitter)
+ *   area         Phi = pi A Le               (a Lambertian emitter; with a map_d
+ *                cut-out, pi A Le of the whole triangle: the holes emit
+ *                nothing, so E[gamma] is the solid share of Phi / pick)
  *   point        Phi = 4 pi I
  *   spot         Phi = 2 pi I [(1 - cos_inner) + (cos_inner - cos_cone) / 5]
  *                (the d^4 ramp integrates to a fifth of its width in cos theta)
@@ -9222,6 +9239,7 @@ static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, ap
         float b1, b2;
         appm__surf sf;
         appm__tri_point(&s->tri[l->tri], u1, u2, &b1, &b2);
+        if (appm__light_cut(s, l->tri, b1, b2)) return 0;
         appm__light_surface(s, l->tri, b1, b2, &sf);
         d = appm__cosine_dir(sf.ng, u3, u4);
         o = appm__offset(&sf, d);
@@ -9327,6 +9345,7 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
         float b1, b2, cos_l, dist;
         appm__surf lf;
         appm__tri_point(&s->tri[l->tri], u1, u2, &b1, &b2);
+        if (appm__light_cut(s, l->tri, b1, b2)) return 0;
         appm__light_surface(s, l->tri, b1, b2, &lf);
         d = appm__sub(lf.p, sf->p);
         dist2 = appm__dot(d, d);

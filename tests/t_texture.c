@@ -1,7 +1,7 @@
 /* tests/t_texture.c - texture maps (vt, map_Kd, map_Ks, map_d) and environment
  * maps (section 4.5, 6.2): lookups against hand-computed bilinear values, a
  * textured plane whose rendered value is its texel times the light, cut-outs
- * that let light and rays through, the environment sampler against its own
+ * that let light and rays through, an emitter whose cut-out holes emit nothing, the environment sampler against its own
  * density (chi-square) and against a quadrature of the sphere, a white-map
  * furnace, rotation, missing maps, and the checkpoint hash. */
 #include "../appm.c"
@@ -227,6 +227,83 @@ static void test_cutout(void)
         CHECK(appm__intersect(s, &r, UINT32_MAX, &h) && fabsf(h.t - 1.0f) < 1e-5f);
         CHECK(appm__occluded(s, &r, UINT32_MAX, UINT32_MAX));
     }
+    appm_scene_destroy(s);
+}
+
+/* Howell's view factor from a point to a parallel rectangle a x b at distance
+ * 1 whose corner lies above it (catalogue B-3). */
+static double corner_view_factor(double a, double b)
+{
+    const double pa = sqrt(1.0 + a * a), pb = sqrt(1.0 + b * b);
+    return (a / pa * atan(b / pa) + b / pb * atan(a / pb)) / (2.0 * APPM__PI);
+}
+
+/* An emitting unit square at z = 1, facing down (Le = 1), whose map_d cuts
+ * away its half u < 1/2, over a floor at z = 0.  Light samples and photon
+ * starts that land in the hole carry nothing; what they carry on average is
+ * what the solid half [1/2, 1] x [0, 1] emits:
+ *   - next-event estimates of the irradiance at (3/4, 1/2, 0): pi Le times the
+ *     view factor of the solid half, four rectangles 1/4 x 1/2 with a corner
+ *     above the point (the uncut square would give 1.7 times as much);
+ *   - the photon weight over light picks and emission samples: the power of
+ *     the solid half, pi A Le = pi / 2 (the uncut square: pi);
+ *   - half the samples of each kind land in the hole.
+ * Stratified samples: 2 light picks x 256 x 256 points. */
+static void test_cut_emitter(void)
+{
+    char mask[256], mtl[256], obj[256], scn[256];
+    float rgb[2 * 1 * 3] = {0, 0, 0, 1, 1, 1};
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm__ray ray;
+    appm__hit h;
+    appm__surf sf;
+    double e_sum = 0.0, g_sum = 0.0, want_e = APPM__PI * 4.0 * corner_view_factor(0.25, 0.5);
+    long n = 0, e_zero = 0, g_zero = 0;
+    unsigned pick, i, j;
+    const unsigned K = 256;
+    tpath(mask, "emask.pfm");
+    tpath(mtl, "lamp.mtl");
+    tpath(obj, "lamp.obj");
+    tpath(scn, "lamp.scene");
+    CHECK(write_pfm(mask, 2, 1, rgb));
+    CHECK(check_write_file(mtl, "newmtl lamp\nKd 0 0 0\nKe 1 1 1\nmap_d texture-emask.pfm\n"
+                                "newmtl floor\nKd 0.5 0.5 0.5\n"));
+    CHECK(check_write_file(obj, "mtllib texture-lamp.mtl\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+                                "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl lamp\n"
+                                "f 1/1 3/3 2/2\nf 1/1 4/4 3/3\nusemtl floor\n"
+                                "v -2 -2 0\nv 3 -2 0\nv 3 3 0\nv -2 3 0\nf 5 6 7\nf 5 7 8\n"));
+    CHECK(check_write_file(scn, "camera eye 0.5 0.5 0.5 target 0.5 0.5 0 fov 60\nimage 8 8\n"
+                                "mesh texture-lamp.obj\n"));
+    CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
+    if (!s) return;
+    CHECK(s->cutouts && s->nlight == 2);
+    appm__ray_init(&ray, appm__v(0.75f, 0.5f, 0.5f), appm__v(0, 0, -1), FLT_MAX);
+    CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
+    appm__surface(s, &h, &sf);
+    for (pick = 0; pick < 2; ++pick)
+        for (j = 0; j < K; ++j)
+            for (i = 0; i < K; ++i) {
+                const float u0 = ((float)pick + 0.5f) / 2.0f, u1 = ((float)i + 0.5f) / (float)K,
+                            u2 = ((float)j + 0.5f) / (float)K;
+                const float ue[5] = {u0, u1, u2, 0.3f, 0.6f};
+                appm__light_sample ls;
+                appm__photon_start ps;
+                if (appm__sample_light(s, &sf, appm__v(0, 0, 1), u0, u1, u2, &ls))
+                    e_sum += (double)ls.li.x * ls.wi.z;
+                else
+                    e_zero++;
+                if (appm__emit(s, ue, &ps)) g_sum += ps.gamma.y;
+                else g_zero++;
+                n++;
+            }
+    CHECK_MSG(fabs(e_sum / (double)n / want_e - 1.0) < 5e-3, "cut emitter: irradiance %.6f, the solid half's %.6f",
+              e_sum / (double)n, want_e);
+    CHECK_MSG(fabs(g_sum / (double)n / (0.5 * APPM__PI) - 1.0) < 5e-3,
+              "cut emitter: mean photon weight %.6f, the solid half's power %.6f", g_sum / (double)n,
+              0.5 * APPM__PI);
+    CHECK_MSG(labs(2 * e_zero - n) < n / 100 && labs(2 * g_zero - n) < n / 100,
+              "cut emitter: %ld and %ld of %ld samples in the hole, not half", e_zero, g_zero, n);
     appm_scene_destroy(s);
 }
 
@@ -536,6 +613,7 @@ int main(void)
     test_lookup();
     test_textured_plane();
     test_cutout();
+    test_cut_emitter();
     test_env_sampler();
     test_env_orientation();
     test_env_furnace();
