@@ -9027,15 +9027,17 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
     size_t n = (size_t)w * h, i;
     unsigned c3 = e->px.channels >= 3 ? 3 : 1, k;
     double total = 0.0, *rows, *cols;
-    float *f;
+    float *f, *scratch;
     e->w = w;
     e->h = h;
     e->rot = (float)(fmod(e->rotate, 360.0) * APPM__PI / 180.0); /* |rotate| <= 1e6: no precision lost */
     e->rgb = (float *)appm__alloc(m, n, 3 * sizeof(float));
     e->cdf = (double *)appm__alloc(m, (size_t)h + 1 + (size_t)h * ((size_t)w + 1), sizeof(double));
-    f = (float *)appm__alloc(m, n + 4 * (size_t)w, sizeof(float));
-    if (!e->rgb || !e->cdf || !f) {
+    f = (float *)appm__alloc(m, n, sizeof(float));
+    scratch = (float *)appm__alloc(m, w, 4 * sizeof(float));
+    if (!e->rgb || !e->cdf || !f || !scratch) {
         appm__free(m, f);
+        appm__free(m, scratch);
         return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "out of memory for the environment map");
     }
     for (i = 0; i < n; ++i)
@@ -9043,13 +9045,15 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
             double v = appm__pixels_linear(&e->px, i, c3 == 3 ? k : 0) * e->scale;
             if (!(v == v) || !(fabs(v) <= FLT_MAX)) {
                 appm__free(m, f);
+                appm__free(m, scratch);
                 return appm__fail(diag, APPM_ERR_PARSE, name, 0,
                                   "environment map: pixel (%u, %u) is not a finite number",
                                   (unsigned)(i % w), (unsigned)(i / w));
             }
             e->rgb[3 * i + k] = v > 0.0 ? (float)v : 0.0f;
         }
-    appm__env_dilate(e, f, f + n);
+    appm__env_dilate(e, f, scratch);
+    appm__free(m, scratch);
     rows = e->cdf;
     cols = e->cdf + h + 1;
     rows[0] = 0.0;
@@ -9185,12 +9189,31 @@ typedef struct appm__photon_start {
     uint32_t skip;      /* the emitting triangle, or UINT32_MAX */
 } appm__photon_start;
 
+/* The solid share of emitting triangle tri under its map_d cut-out, counted on
+ * a 16 x 16 stratified grid of points; at least 1/256, so that a light whose
+ * solid part the grid misses is still picked now and then.  It only steers
+ * the choice of lights (the estimates stay unbiased whatever it is): a
+ * mostly cut-away emitter gets a matching share of the samples. */
+static double appm__light_solid(const appm_scene *s, uint32_t tri)
+{
+    const appm__material *m = &s->mat[s->info[tri].mat];
+    unsigned i, j, n = 0;
+    if (!s->cutouts || !m->map_d || s->info[tri].uv0 < 0) return 1.0;
+    for (j = 0; j < 16; ++j)
+        for (i = 0; i < 16; ++i) {
+            float b1, b2;
+            appm__tri_point(&s->tri[tri], ((float)i + 0.5f) / 16.0f, ((float)j + 0.5f) / 16.0f, &b1, &b2);
+            n += !appm__light_cut(s, tri, b1, b2);
+        }
+    return (double)(n ? n : 1) / 256.0;
+}
+
 /* The power Phi (W, RGB) light l emits: what appm__emit's photon weight gamma
  * carries on average, E[gamma] = Phi / pick, so the two must agree (lights are
  * picked by power: pick = mean(Phi) / sum of mean(Phi)).
  *   area         Phi = pi A Le               (a Lambertian emitter; with a map_d
- *                cut-out, pi A Le of the whole triangle: the holes emit
- *                nothing, so E[gamma] is the solid share of Phi / pick)
+ *                cut-out, times its solid share, appm__light_solid: E[gamma]
+ *                agrees to that count's accuracy)
  *   point        Phi = 4 pi I
  *   spot         Phi = 2 pi I [(1 - cos_inner) + (cos_inner - cos_cone) / 5]
  *                (the d^4 ramp integrates to a fifth of its width in cos theta)
@@ -9201,7 +9224,7 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
 {
     double f;
     if (l->kind == APPM__LIGHT_AREA) {
-        double a = (double)s->info[l->tri].area;
+        double a = (double)s->info[l->tri].area * appm__light_solid(s, l->tri);
         power[0] = APPM__PI * a * l->value.x;
         power[1] = APPM__PI * a * l->value.y;
         power[2] = APPM__PI * a * l->value.z;
@@ -12992,12 +13015,16 @@ static void appm__renderer_free_parts(appm_renderer *r)
  * double and clamped before the conversion: 1.5 x 2^32 paths exceed a 32-bit
  * size_t (wasm32), and cap * tasks must fit the store's uint32 indices, the
  * limit appm__photon_pass grows to.  Too large a store fails to allocate.
- * The slack (4096, or one more per path and 256 for passes of fewer paths)
- * spares most renders the retrace of a first pass that overflows; a tiny
- * pass (a preview, a test, a fuzzed checkpoint) does not pay 160 KB for it. */
+ * The guess is for the busiest task (its whole chunks); the slack (4096, or
+ * one more per path and 256 for a task of fewer paths) spares most renders
+ * the retrace of a first pass that overflows, and a tiny pass (a preview, a
+ * test, a fuzzed checkpoint) does not pay 160 KB a thread for it. */
 static size_t appm__store_guess(uint64_t paths, unsigned tasks)
 {
-    const double per_task = (double)paths / (double)tasks;
+    /* the busiest task's paths: chunks of APPM__CHUNK go to the tasks in turn */
+    const uint64_t chunks = (paths + APPM__CHUNK - 1) / APPM__CHUNK;
+    const uint64_t busiest = (chunks + tasks - 1) / tasks * APPM__CHUNK;
+    const double per_task = (double)(busiest < paths ? busiest : paths);
     const double guess = per_task * 1.5 + (per_task + 256.0 < 4096.0 ? per_task + 256.0 : 4096.0);
     const size_t limit = (size_t)0xFFFFFFF0u / tasks;
     return guess < (double)limit ? (size_t)guess : limit;

@@ -939,29 +939,31 @@ static void test_determinism(void)
  * stores more photons than any pass before it; memory does not grow from pass
  * to pass after that."  Two checks of that sentence:
  *   - a small render whose photon store fits from the first pass on (for
- *     passes this small the first guess holds 2.5 photons per path and 256
- *     more per thread, and this scene stores about one per path) holds the
- *     same bytes after pass 5 and
+ *     passes this small the first guess holds 2.5 photons per path of the
+ *     busiest thread and 256 more, and this scene stores about one per path)
+ *     keeps its first photon store through the first pass, and the same bytes after pass 5 and
  *     after pass 50, and nothing changes in between;
  *   - in any render, the bytes held change only after a pass that stored more
  *     photons than every pass before it.  About 1000 photons per pass on the
  *     original box store about 1000 photons, so the count wanders across 1024,
  *     where a hash table sized by the count of the pass would change size.
  */
-static void memory_case(const appm_scene *s, appm_method m, uint64_t photons, int strict)
+static void memory_case(const appm_scene *s, appm_method m, uint64_t photons, int strict, unsigned threads)
 {
     appm_config cfg;
     appm_renderer *r;
     appm_stats st;
     uint64_t mem5 = 0, prev_mem = 0, most = 0;
+    size_t slots0;
     int j, changes = 0, unexplained = 0, first_bad = 0;
     appm_config_init(&cfg);
     cfg.method = m;
     cfg.width = cfg.height = 16;
     cfg.photons = photons;
-    cfg.threads = 1;
+    cfg.threads = threads;
     r = check_renderer(s, &cfg);
     if (!r) return;
+    slots0 = r->store_slots;
     for (j = 1; j <= 50; ++j) {
         if (!check_passes(r, 1)) break;
         appm_renderer_stats(r, &st);
@@ -972,6 +974,10 @@ static void memory_case(const appm_scene *s, appm_method m, uint64_t photons, in
         if (st.photons_stored > most) most = st.photons_stored;
         prev_mem = st.memory_bytes;
         if (j == 5) mem5 = st.memory_bytes;
+        if (strict && j == 1) /* the first guess held: the first pass was not traced again */
+            CHECK_MSG(r->store_slots == slots0, "%s, %u photons per pass, %u threads: the store grew "
+                      "from %lu to %lu photons in the first pass", method_name(m), (unsigned)photons, threads,
+                      (unsigned long)slots0, (unsigned long)r->store_slots);
     }
     CHECK_MSG(unexplained == 0,
               "%s, %u photons per pass: memory changed after %d passes that stored no more photons than "
@@ -991,10 +997,11 @@ static void test_memory(void)
 {
     appm_scene *s = check_load_scene("scenes/cornell-original.scene");
     if (!s) return;
-    memory_case(s, APPM_METHOD_PPM, 256, 1);
-    memory_case(s, APPM_METHOD_APPM, 256, 1);
-    memory_case(s, APPM_METHOD_PPM, 1000, 0);
-    memory_case(s, APPM_METHOD_APPM, 1000, 0);
+    memory_case(s, APPM_METHOD_PPM, 256, 1, 1);
+    memory_case(s, APPM_METHOD_APPM, 256, 1, 1);
+    memory_case(s, APPM_METHOD_APPM, 1024, 1, 8); /* one chunk: one task holds every path */
+    memory_case(s, APPM_METHOD_PPM, 1000, 0, 1);
+    memory_case(s, APPM_METHOD_APPM, 1000, 0, 1);
     appm_scene_destroy(s);
 }
 

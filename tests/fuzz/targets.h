@@ -31,8 +31,9 @@
  * Every input runs a second time with one allocation made to fail (which one
  * is derived from the input's bytes): the result must then be APPM_ERR_NOMEM,
  * with nothing leaked.  A bare OBJ without light is lit by the studio for one
- * input in eight (by the hash), by the white stand-in otherwise.  Whatever loads is rendered: 4x4 pixels, 32 photons, two
- * passes, one thread, the method chosen by the input's hash.
+ * input in eight (by the hash; corpus/obj/no-light-studio.obj is one), by the
+ * white stand-in otherwise.  Whatever loads is rendered: 4x4 pixels, 32
+ * photons, two passes, one thread, the method chosen by the input's hash.
  *
  * Hermetic: every file name points into a folder that does not exist, the MTL
  * text of in-memory loads is always given (so `mtllib` never opens a file), and
