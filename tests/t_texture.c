@@ -315,15 +315,31 @@ static void test_cut_emitter(void)
     appm_scene_destroy(s);
 }
 
+/* An appm__envmap built from w x h linear RGB floats px (taken: freed by the
+ * build), as the loader hands a decoded map over; 1 on success. */
+static int take_env(appm__mem *m, appm__envmap *e, float *px, uint32_t w, uint32_t h, double rotate)
+{
+    appm__envmap from;
+    appm_diag d;
+    memset(&from, 0, sizeof from);
+    from.px.w = w;
+    from.px.h = h;
+    from.px.channels = 3;
+    from.px.depth = 32;
+    from.px.data = px;
+    from.scale = 1.0;
+    from.rotate = rotate;
+    appm__diag_clear(&d);
+    return appm__envmap_take(m, e, &from, "env", &d) == APPM_OK;
+}
+
 /* An environment map of w x h texels with a bright texel at (sx, sy) on a
  * dim background, decoded straight into a scene-less appm__envmap. */
 static int make_env(appm__mem *m, appm__envmap *e, uint32_t w, uint32_t h, uint32_t sx, uint32_t sy,
                     double rotate)
 {
-    appm__envmap from;
     float *f = (float *)appm__alloc(m, (size_t)w * h, 3 * sizeof(float));
     uint32_t x, y;
-    appm_diag d;
     if (!f) return 0;
     for (y = 0; y < h; ++y)
         for (x = 0; x < w; ++x) {
@@ -332,16 +348,7 @@ static int make_env(appm__mem *m, appm__envmap *e, uint32_t w, uint32_t h, uint3
             f[3 * ((size_t)y * w + x) + 1] = 0.5f * v;
             f[3 * ((size_t)y * w + x) + 2] = 0.25f * v;
         }
-    memset(&from, 0, sizeof from);
-    from.px.w = w;
-    from.px.h = h;
-    from.px.channels = 3;
-    from.px.depth = 32;
-    from.px.data = f;
-    from.scale = 1.0;
-    from.rotate = rotate;
-    appm__diag_clear(&d);
-    return appm__envmap_take(m, e, &from, "env", &d) == APPM_OK;
+    return take_env(m, e, f, w, h, rotate);
 }
 
 /* The environment's sampling density on small maps (1..5 x 1..5 texels, where
@@ -361,23 +368,14 @@ static void test_env_small_maps(void)
                 size_t n = (size_t)w * h, i;
                 float *px = (float *)appm__alloc(&m, n, 3 * sizeof(float)), f[25];
                 double want[6 + 5 * 6], total;
-                appm__envmap from, e;
-                appm_diag d;
+                appm__envmap e;
                 if (!px) return;
                 for (i = 0; i < 3 * n; ++i) { /* levels 0, 0.25, 0.5, 0.75: ties and zeros */
                     seed = seed * 1664525u + 1013904223u;
                     px[i] = 0.25f * (float)(seed >> 30);
                 }
                 px[3 * (size_t)(seed % n) + 1] = 40.0f;
-                memset(&from, 0, sizeof from);
-                from.px.w = w;
-                from.px.h = h;
-                from.px.channels = 3;
-                from.px.depth = 32;
-                from.px.data = px;
-                from.scale = 1.0;
-                appm__diag_clear(&d);
-                if (appm__envmap_take(&m, &e, &from, "env", &d) != APPM_OK) {
+                if (!take_env(&m, &e, px, w, h, 0.0)) {
                     bad++;
                     continue;
                 }
