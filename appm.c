@@ -7137,6 +7137,9 @@ struct appm_scene {
     uint32_t ntri;
     appm__v3 *normals;     /* shading normals, three per smooth triangle */
     uint32_t nnormals;
+    uint32_t *open_off;    /* per triangle (ntri + 1): its span of open_ref; NULL: no open edge (5.5) */
+    uint32_t *open_ref;    /* the open edges near each triangle, as 3 t + k (corners k, k + 1 of t) */
+    uint32_t nopen;        /* open edges */
     appm__material *mat;
     uint32_t nmat;
     appm__texture *tex;    /* the maps materials name (appm__material.map_kd, ...) */
@@ -8646,6 +8649,211 @@ static void appm__ray_init(appm__ray *r, appm__v3 o, appm__v3 d, float tmax)
     appm__ray_setup(r);
 }
 
+/* ---- 5.5 Open edges ------------------------------------------------------------
+ *
+ * An edge that no other triangle shares is where a surface ends against
+ * nothing: the front of an open box's floor, a table's rim, a leaf's margin.  A
+ * density estimate near it loses the kernel's mass beyond the edge, a bias of
+ * -(1 - m) L as at a corner (10.4, step 6, whose lines come from the pixels);
+ * but no pixel shows a surface beyond it, while the mesh knows the line
+ * exactly.  Two edges are the same if their corners are, in either order (by
+ * position: an OBJ's separate objects rarely share vertex indices).  An edge
+ * seen once counts as open only if a probe just beyond its middle, in its
+ * triangle's plane, finds no surface there: tiles that meet without sharing
+ * corners (a T-junction, unwelded copies) go on, and their photons are
+ * gathered.  Each triangle lists the open edges of itself and of every
+ * triangle that shares a corner with it (at most APPM__OPEN_NEAR): the lines
+ * within reach of a kernel on a surface whose triangles are no smaller than it
+ * (a quad's two halves see all four of its edges).  Finer meshes keep the bias
+ * of the edges beyond their one-ring (docs/algorithm.md 5.6). */
+#define APPM__OPEN_NEAR 8
+
+static appm__v3 appm__corner(const appm__tri *t, uint32_t k) { return k == 0 ? t->p0 : (k == 1 ? t->p1 : t->p2); }
+
+static int appm__same_pos(appm__v3 a, appm__v3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+static uint64_t appm__pos_key(appm__v3 p)
+{
+    float f[3];
+    uint32_t u[3];
+    f[0] = p.x + 0.0f; /* -0 + 0 = +0: one key for positions that compare equal */
+    f[1] = p.y + 0.0f;
+    f[2] = p.z + 0.0f;
+    memcpy(u, f, sizeof u);
+    return appm__mix64(((uint64_t)u[0] << 32 | u[1]) ^ appm__mix64(u[2]));
+}
+
+/* Edge e = 3 t + k runs from corner k of triangle t to corner k + 1 (mod 3). */
+static void appm__edge_ends(const appm_scene *s, uint32_t e, appm__v3 *a, appm__v3 *b)
+{
+    *a = appm__corner(&s->tri[e / 3], e % 3);
+    *b = appm__corner(&s->tri[e / 3], (e % 3 + 1) % 3);
+}
+
+/* The slot of edge e in an open-addressing table (mask + 1 slots) whose entries
+ * are 1 + the first edge seen with the same corners (low 32 bits; 0: empty) and
+ * the high half of the corners' key (high 32 bits: most other edges are told
+ * apart without reading their triangle). */
+static size_t appm__edge_slot(const appm_scene *s, const uint64_t *tab, size_t mask, uint32_t e)
+{
+    appm__v3 a, b, c, d;
+    uint64_t key;
+    size_t i;
+    appm__edge_ends(s, e, &a, &b);
+    key = appm__pos_key(a) + appm__pos_key(b);
+    for (i = (size_t)key & mask;; i = (i + 1) & mask) {
+        if (tab[i] == 0) return i;
+        if (tab[i] >> 32 != key >> 32) continue;
+        appm__edge_ends(s, (uint32_t)tab[i] - 1, &c, &d);
+        if ((appm__same_pos(a, c) && appm__same_pos(b, d)) || (appm__same_pos(a, d) && appm__same_pos(b, c)))
+            return i;
+    }
+}
+
+/* Whether a surface goes on just beyond edge e in its triangle's plane: a probe
+ * a thousandth of the edge's length beyond its middle, cast down onto the plane
+ * from as far above it, meets a triangle within 60 degrees of parallel. */
+static int appm__edge_continues(const appm_scene *s, uint32_t e)
+{
+    const uint32_t ti = e / 3;
+    appm__v3 a, b, c = appm__corner(&s->tri[ti], (e % 3 + 2) % 3), ng = s->info[ti].ng, o, p;
+    float len, dl;
+    appm__ray ray;
+    appm__hit h;
+    appm__edge_ends(s, e, &a, &b);
+    o = appm__cross(appm__sub(b, a), ng);
+    len = appm__length(appm__sub(b, a));
+    if (!(appm__length(o) > 0.0f) || !(len > 0.0f)) return 1; /* degenerate: no line to cut along */
+    o = appm__normalize(o);
+    if (appm__dot(o, appm__sub(c, a)) > 0.0f) o = appm__neg(o); /* away from the triangle */
+    dl = 1e-3f * len;
+    p = appm__add(appm__scale(appm__add(a, b), 0.5f), appm__add(appm__scale(o, dl), appm__scale(ng, dl)));
+    appm__ray_init(&ray, p, appm__neg(ng), 2.0f * dl);
+    return appm__intersect(s, &ray, ti, &h) && fabsf(appm__dot(s->info[h.tri].ng, ng)) >= 0.5f;
+}
+
+/* The slot of position p in a table (mask + 1 slots) of 1 + the first of the
+ * open edges' ends at each position (end j: end j % 2 of open edge j / 2). */
+static size_t appm__end_slot(const appm_scene *s, const uint32_t *tab, size_t mask, const uint32_t *oe,
+                             appm__v3 p)
+{
+    size_t i;
+    for (i = (size_t)appm__pos_key(p) & mask;; i = (i + 1) & mask) {
+        appm__v3 a, b;
+        uint32_t j;
+        if (tab[i] == 0) return i;
+        j = tab[i] - 1;
+        appm__edge_ends(s, oe[j / 2], &a, &b);
+        if (appm__same_pos(p, j % 2 ? b : a)) return i;
+    }
+}
+
+/* The open edges near triangle t (its own, then those ending at its corners,
+ * each once, at most APPM__OPEN_NEAR) into out; returns how many. */
+static uint32_t appm__open_near(const appm_scene *s, uint32_t t, const uint8_t *open, const uint32_t *vtab,
+                                size_t vmask, const uint32_t *next, const uint32_t *oe, uint32_t *out)
+{
+    uint32_t n = 0, k, j, i;
+    for (k = 0; k < 3 && n < APPM__OPEN_NEAR; ++k)
+        if (open[3 * t + k]) out[n++] = 3 * t + k;
+    for (k = 0; k < 3; ++k) {
+        uint32_t head = vtab[appm__end_slot(s, vtab, vmask, oe, appm__corner(&s->tri[t], k))];
+        for (j = head; j != 0; j = next[j - 1]) {
+            uint32_t e = oe[(j - 1) / 2];
+            for (i = 0; i < n && out[i] != e; ++i) continue;
+            if (i == n && n < APPM__OPEN_NEAR) out[n++] = e;
+        }
+    }
+    return n;
+}
+
+/* Power of two >= 2 n (n > 0), or 0 on overflow. */
+static size_t appm__table_size(size_t n)
+{
+    size_t c = 16;
+    while (c < 2 * n) {
+        if (c > SIZE_MAX / 4) return 0;
+        c *= 2;
+    }
+    return c;
+}
+
+/* Finds the open edges and each triangle's list of those near it (s->open_off,
+ * s->open_ref; both NULL when no edge is open).  After the BVH: the probes
+ * trace rays. */
+static appm_status appm__open_edges(appm_scene *s)
+{
+    appm__mem *m = &s->mem;
+    const size_t ne = (size_t)s->ntri * 3;
+    size_t cap, vcap, i, nref = 0;
+    uint64_t *tab = NULL;
+    uint32_t *slot = NULL, *vtab = NULL, *oe = NULL, *next = NULL, t, near[APPM__OPEN_NEAR];
+    uint8_t *cnt = NULL, *open = NULL;
+    appm_status st = APPM_ERR_NOMEM;
+    s->nopen = 0;
+    if (s->ntri == 0 || s->ntri > UINT32_MAX / APPM__OPEN_NEAR || !(cap = appm__table_size(ne))) return APPM_OK;
+    tab = (uint64_t *)appm__alloc(m, cap, sizeof *tab);
+    slot = (uint32_t *)appm__alloc(m, ne, sizeof *slot);
+    cnt = (uint8_t *)appm__alloc(m, cap, 1);
+    open = (uint8_t *)appm__alloc(m, ne, 1);
+    if (!tab || !slot || !cnt || !open) goto done;
+    for (i = 0; i < ne; ++i) { /* how many triangles have each edge (2: two or more) */
+        size_t k = appm__edge_slot(s, tab, cap - 1, (uint32_t)i);
+        if (tab[k] == 0) {
+            appm__v3 a, b;
+            appm__edge_ends(s, (uint32_t)i, &a, &b);
+            tab[k] = ((appm__pos_key(a) + appm__pos_key(b)) & ~(uint64_t)0xFFFFFFFFu) | ((uint64_t)i + 1);
+        }
+        if (cnt[k] < 2) cnt[k]++;
+        slot[i] = (uint32_t)k; /* cap <= 2^32: 3 ntri <= 3 UINT32_MAX / 8 */
+    }
+    for (i = 0; i < ne; ++i)
+        if (cnt[slot[i]] == 1 && !appm__edge_continues(s, (uint32_t)i)) {
+            open[i] = 1;
+            s->nopen++;
+        }
+    st = APPM_OK;
+    if (s->nopen == 0 || !(vcap = appm__table_size(2 * (size_t)s->nopen))) goto done;
+    st = APPM_ERR_NOMEM;
+    vtab = (uint32_t *)appm__alloc(m, vcap, sizeof *vtab);
+    oe = (uint32_t *)appm__alloc(m, s->nopen, sizeof *oe);
+    next = (uint32_t *)appm__alloc(m, 2 * (size_t)s->nopen, sizeof *next);
+    s->open_off = (uint32_t *)appm__alloc(m, (size_t)s->ntri + 1, sizeof *s->open_off);
+    if (!vtab || !oe || !next || !s->open_off) goto done;
+    for (i = 0, t = 0; i < ne; ++i)
+        if (open[i]) oe[t++] = (uint32_t)i;
+    for (i = 0; i < 2 * (size_t)s->nopen; ++i) { /* each end joins the chain of its position */
+        appm__v3 a, b;
+        size_t k;
+        appm__edge_ends(s, oe[i / 2], &a, &b);
+        k = appm__end_slot(s, vtab, vcap - 1, oe, i % 2 ? b : a);
+        next[i] = vtab[k];
+        vtab[k] = (uint32_t)i + 1;
+    }
+    for (t = 0; t < s->ntri; ++t) {
+        s->open_off[t] = (uint32_t)nref;
+        nref += appm__open_near(s, t, open, vtab, vcap - 1, next, oe, near); /* <= 8 ntri: fits */
+    }
+    s->open_off[s->ntri] = (uint32_t)nref;
+    if (nref == 0 || !(s->open_ref = (uint32_t *)appm__alloc(m, nref, sizeof *s->open_ref))) goto done;
+    for (t = 0; t < s->ntri; ++t)
+        appm__open_near(s, t, open, vtab, vcap - 1, next, oe, s->open_ref + s->open_off[t]);
+    st = APPM_OK;
+done:
+    if (st != APPM_OK || !s->open_ref) {
+        appm__free(m, s->open_off);
+        s->open_off = NULL;
+    }
+    appm__free(m, tab);
+    appm__free(m, slot);
+    appm__free(m, cnt);
+    appm__free(m, open);
+    appm__free(m, vtab);
+    appm__free(m, oe);
+    appm__free(m, next);
+    return st;
+}
+
 /* ==== 6. MATERIALS AND LIGHTS ============================================
  *
  * BSDFs: Lambert (cosine-weighted directions, weight = albedo), perfect mirror
@@ -9517,6 +9725,8 @@ static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
     appm__free(m, s->tri);
     appm__free(m, s->info);
     appm__free(m, s->normals);
+    appm__free(m, s->open_off);
+    appm__free(m, s->open_ref);
     appm__free(m, s->mat);
     appm__free(m, s->light);
     appm__free(m, s->light_cdf);
@@ -9749,6 +9959,7 @@ static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char
     s->center = appm__scale(appm__add(bb.lo, bb.hi), 0.5f);
     s->radius = 0.5f * appm__length(appm__sub(bb.hi, bb.lo));
     if ((st = appm__bvh_build(s, L->diag)) != APPM_OK) return st;
+    if ((st = appm__open_edges(s)) != APPM_OK) return st;
     if ((st = appm__scene_lights(s, L, name)) != APPM_OK) return st;
     if (!L->have_camera) { /* frame the bounding sphere, looking along -z (the studio's: from 20 degrees above) */
         int studio = L->stand_in && !L->white;
@@ -9929,6 +10140,7 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
     if (!s) return;
     info->triangles = s->ntri;
     info->dropped_triangles = s->dropped;
+    info->open_edges = s->nopen;
     for (i = 0; i < s->nmat; ++i) {
         const appm__material *m = &s->mat[i];
         if (i == 0) { /* the implicit default counts only if some face uses it */
@@ -10662,7 +10874,7 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
 /* Everything a pass computes for a pixel stays here until the gather commits
  * it to the pixel's state, so a pass that fails (out of memory in the photon
  * pass) leaves no trace and can simply be run again. */
-typedef struct appm__vp { /* visible point of one pixel in the current pass: 92 bytes */
+typedef struct appm__vp { /* visible point of one pixel in the current pass: 96 bytes */
     appm__v3 x;           /* position */
     appm__v3 n;           /* unit geometric normal on the eye's side */
     appm__v3 wf;          /* W f = W albedo / pi: multiplies each photon's gamma */
@@ -10677,6 +10889,7 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 92 
     uint8_t edge_dist;    /* how many pixels along the row to the nearest pixel with a neighbour
                            * on another surface (0: this one; 255: none near; 10.4, step 6) */
     uint8_t pad[2];
+    uint32_t tri;         /* the triangle of x: its open edges (5.5) cut the kernel */
 } appm__vp;
 
 /* Per-pixel state every method keeps across passes (56 bytes).  What a method
@@ -10922,6 +11135,7 @@ static void appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__surf *s
         vp->ns = m->ns;
     }
     vp->segs = (uint8_t)(segs > 255 ? 255 : segs);
+    vp->tri = sf->tri;
     vp->footprint = travelled * r->pixel_angle;
     if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth)
         *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1)));
@@ -12530,6 +12744,56 @@ static void appm__edge_row(appm_renderer *r, uint32_t row)
     }
 }
 
+/* Adds to g the open edges (5.5) near x's triangle that cut its kernel: an edge
+ * of a triangle within 60 degrees of x's plane, lying in that plane (within
+ * 0.1 Rm at both ends), x on its triangle's side, x's foot within the edge and
+ * within reach Rm.  Of two parallel lines on the same side only the nearer
+ * cuts (a floor that runs on under a wall ends at the wall). */
+static void appm__open_lines(const appm_renderer *r, const appm__vp *v, appm__gather *g, float Rm)
+{
+    const appm_scene *s = r->scene;
+    uint32_t j, j1;
+    if (!s || !s->open_off || v->tri >= s->ntri) return;
+    for (j = s->open_off[v->tri], j1 = s->open_off[v->tri + 1]; j < j1; ++j) {
+        const uint32_t e = s->open_ref[j];
+        appm__v3 a, b, c = appm__sub(appm__corner(&s->tri[e / 3], (e % 3 + 2) % 3), v->x);
+        float ex, ey, len, ux, uy, d, foot;
+        int k;
+        appm__edge_ends(s, e, &a, &b);
+        a = appm__sub(a, v->x);
+        b = appm__sub(b, v->x);
+        if (fabsf(appm__dot(s->info[e / 3].ng, v->n)) < 0.5f || fabsf(appm__dot(a, v->n)) > 0.1f * Rm ||
+            fabsf(appm__dot(b, v->n)) > 0.1f * Rm)
+            continue;
+        ex = appm__dot(b, g->t) - appm__dot(a, g->t);
+        ey = appm__dot(b, g->b) - appm__dot(a, g->b);
+        len = sqrtf(ex * ex + ey * ey);
+        if (!(len > 0.0f)) continue;
+        ex /= len;
+        ey /= len;
+        ux = ey; /* the line's normal, then turned away from the edge's triangle */
+        uy = -ex;
+        d = appm__dot(a, g->t) * ux + appm__dot(a, g->b) * uy;
+        if (appm__dot(c, g->t) * ux + appm__dot(c, g->b) * uy > d) {
+            ux = -ux;
+            uy = -uy;
+            d = -d;
+        }
+        foot = -(appm__dot(a, g->t) * ex + appm__dot(a, g->b) * ey);
+        if (!(d >= 0.0f && d < Rm && foot >= 0.0f && foot <= len)) continue;
+        for (k = 0; k < g->ncut; ++k)
+            if (g->cut_u[k][0] * ux + g->cut_u[k][1] * uy > 0.995f) break;
+        if (k < g->ncut) {
+            if (d < g->cut_d[k]) g->cut_d[k] = d;
+        } else if (g->ncut < APPM__CUT_LINES) {
+            g->cut_u[k][0] = ux;
+            g->cut_u[k][1] = uy;
+            g->cut_d[k] = d;
+            g->ncut++;
+        }
+    }
+}
+
 static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
 {
     const appm__vp *v = &r->vp[i];
@@ -12600,6 +12864,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
         g->ncut++;
         ls[best] = 0;
     }
+    appm__open_lines(r, v, g, Rm);
 }
 
 

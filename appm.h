@@ -433,6 +433,9 @@ typedef struct appm_scene_info {
     uint64_t texture_bytes;         /* their samples (part of memory_bytes)              */
     uint32_t materials_cutout;      /* materials with a map_d cut-out                    */
     uint32_t environment_map_width, environment_map_height; /* 0: no map                */
+    uint64_t open_edges;            /* edges where a surface ends against nothing: no
+                                     * other triangle shares them and no surface goes on
+                                     * beyond; appm's kernel is cut along them           */
 } appm_scene_info;
 
 APPM_API void appm_scene_get_info(const appm_scene *scene, appm_scene_info *info);

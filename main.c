@@ -1010,6 +1010,7 @@ static int cmd_info(int argc, char **argv)
     printf("bounds      (%.5g, %.5g, %.5g) .. (%.5g, %.5g, %.5g)\n", in.bbox_min[0], in.bbox_min[1],
            in.bbox_min[2], in.bbox_max[0], in.bbox_max[1], in.bbox_max[2]);
     printf("bvh         %llu nodes, depth %u\n", (unsigned long long)in.bvh_nodes, in.bvh_depth);
+    printf("open edges  %llu (appm cuts its kernel along them)\n", (unsigned long long)in.open_edges);
     printf("image       %ux%u\n", in.width, in.height);
     if (in.textures)
         printf("textures    %u maps, %.1f KiB (%u materials with cut-outs)\n", in.textures,
