@@ -8756,9 +8756,11 @@ static uint32_t appm__open_near(const appm_scene *s, uint32_t t, const uint8_t *
     uint32_t n = 0, k, j, i;
     for (k = 0; k < 3 && n < APPM__OPEN_NEAR; ++k)
         if (open[3 * t + k]) out[n++] = 3 * t + k;
-    for (k = 0; k < 3; ++k) {
+    for (k = 0; k < 3 && n < APPM__OPEN_NEAR; ++k) {
         uint32_t head = vtab[appm__end_slot(s, vtab, vmask, oe, appm__corner(&s->tri[t], k))];
-        for (j = head; j != 0; j = next[j - 1]) {
+        /* a chain's edges are distinct (but for one whose two ends meet): the walk stops once the
+         * list is full, so a corner that thousands of open edges share costs no more */
+        for (j = head; j != 0 && n < APPM__OPEN_NEAR; j = next[j - 1]) {
             uint32_t e = oe[(j - 1) / 2];
             for (i = 0; i < n && out[i] != e; ++i) continue;
             if (i == n && n < APPM__OPEN_NEAR) out[n++] = e;
