@@ -8789,7 +8789,7 @@ static appm_status appm__open_edges(appm_scene *s)
     const size_t ne = (size_t)s->ntri * 3;
     size_t cap, vcap, i, nref = 0;
     uint64_t *tab = NULL;
-    uint32_t *slot = NULL, *vtab = NULL, *oe = NULL, *next = NULL, t, near[APPM__OPEN_NEAR];
+    uint32_t *slot = NULL, *vtab = NULL, *oe = NULL, *next = NULL, t, nearby[APPM__OPEN_NEAR];
     uint8_t *cnt = NULL, *open = NULL;
     appm_status st = APPM_ERR_NOMEM;
     s->nopen = 0;
@@ -8834,7 +8834,7 @@ static appm_status appm__open_edges(appm_scene *s)
     }
     for (t = 0; t < s->ntri; ++t) {
         s->open_off[t] = (uint32_t)nref;
-        nref += appm__open_near(s, t, open, vtab, vcap - 1, next, oe, near); /* <= 8 ntri: fits */
+        nref += appm__open_near(s, t, open, vtab, vcap - 1, next, oe, nearby); /* <= 8 ntri: fits */
     }
     s->open_off[s->ntri] = (uint32_t)nref;
     if (nref == 0 || !(s->open_ref = (uint32_t *)appm__alloc(m, nref, sizeof *s->open_ref))) goto done;

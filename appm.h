@@ -216,8 +216,9 @@ typedef struct appm_file_reader {
  * on fewer passes with a wider bandwidth, its square corrected for noise and
  * pooled over neighbouring pixels, a k-nearest-neighbour widening where photons
  * are sparse, per-component bounds, and the kernel renormalised where the
- * surface ends inside it (a wall meeting the floor, a box's edge: without it
- * every seam is dark by the kernel's missing part).  ppm and sppm keep their
+ * surface ends inside it (a wall meeting the floor, a box's edge, a mesh's
+ * open edge where the surface ends against nothing: without it every seam and
+ * rim is dark by the kernel's missing part).  ppm and sppm keep their
  * papers' estimators. */
 typedef enum appm_method {
     APPM_METHOD_APPM = 0,   /* adaptive bandwidth, per pixel and pass (default)       */

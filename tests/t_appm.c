@@ -1149,7 +1149,7 @@ static void test_open_edges(void)
 static void test_open_edge_bias(void)
 {
     static float ref[32 * 32 * 3], img[2][32 * 32 * 3];
-    static uint8_t near[32 * 32];
+    static uint8_t cut[32 * 32];
     appm_scene *s = NULL;
     appm_diag d;
     uint32_t *off;
@@ -1174,12 +1174,12 @@ static void test_open_edge_bias(void)
             memset(&g, 0, sizeof g);
             appm__basis(r->vp[i].n, &g.t, &g.b);
             if (r->vp[i].segs) appm__open_lines(r, &r->vp[i], &g, r->vp[i].R > r->vp[i].Rc ? r->vp[i].R : r->vp[i].Rc);
-            near[i] = g.ncut > 0;
+            cut[i] = g.ncut > 0;
         }
         appm_renderer_destroy(r);
     }
     s->open_off = off;
-    n = masked_error(ref, img, near, err);
+    n = masked_error(ref, img, cut, err);
     CHECK_MSG(n >= 30, "%.0f pixels near an open edge", n);
     printf("CornellBox-Empty-White 32x32, 256 passes: %.0f pixels near an open edge, mean error against the path "
            "tracer with the open edges %+.4f, without %+.4f\n", n, err[0], err[1]);
