@@ -1123,7 +1123,9 @@ static uint64_t open_edges_of(const char *obj)
 /* A quad's four edges are open and its diagonal is not; a closed cube has none;
  * two tiles that share corners by position (not by index) end only along their
  * outline; a tile beside two smaller ones (a T-junction: no edge shared) is
- * joined by the probes, so only the outline of the three is open (7 edges). */
+ * joined by the probes, so only the outline of the three is open (7 edges); a
+ * rug lying a little above a floor ends over the floor, whose photons its
+ * kernel gathers: only the floor's four edges are open. */
 static void test_open_edges(void)
 {
     static const char quad[] = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
@@ -1134,10 +1136,13 @@ static void test_open_edges(void)
     static const char tee[] = "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\n"
                               "v 2 0 0\nv 3 0 0\nv 3 0.7 0\nv 2 0.7 0\nv 2 0.7 0\nv 3 0.7 0\nv 3 2 0\nv 2 2 0\n"
                               "f 1 2 3 4\nf 5 6 7 8\nf 9 10 11 12\n";
+    static const char rug[] = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                              "v 0.3 0.3 0.002\nv 0.7 0.3 0.002\nv 0.7 0.7 0.002\nv 0.3 0.7 0.002\nf 1 2 3 4\nf 5 6 7 8\n";
     CHECK(open_edges_of(quad) == 4);
     CHECK(open_edges_of(cube) == 0);
     CHECK(open_edges_of(tiles) == 6);
     CHECK(open_edges_of(tee) == 7);
+    CHECK(open_edges_of(rug) == 4);
 }
 
 /* The open front of CornellBox-Empty-White at 32 x 32: the pixels whose kernel an
