@@ -52,13 +52,23 @@ test-mpi: appm appm-mpi
 bench-mpi: appm appm-mpi
 	sh bench/mpi.sh
 
-build/%: tests/%.c $(DEPS)
+# The tests: every tests/t_*.c in one program (tests/all.c), so that appm.c is
+# compiled once per build rather than once per test; build/t_NAME is a link to
+# it, and the program runs the test it is named after.  Each t_*.c still builds
+# alone (cc tests/t_image.c -lm -pthread), as make portability's tcc suite does.
+build/tests: tests/all.c $(TESTSRC) $(DEPS)
 	@mkdir -p build
-	$(CC) $(WARN) $(CFLAGS) -g $< -o $@ $(LDLIBS)
+	$(CC) $(WARN) $(CFLAGS) -g tests/all.c -o $@ $(LDLIBS)
 
-build/san/%: tests/%.c $(DEPS)
+build/san/tests: tests/all.c $(TESTSRC) $(DEPS)
 	@mkdir -p build/san
-	$(CC) $(WARN) $(SAN) $< -o $@ $(LDLIBS)
+	$(CC) $(WARN) $(SAN) tests/all.c -o $@ $(LDLIBS)
+
+build/t_%: build/tests
+	ln -sf tests $@
+
+build/san/t_%: build/san/tests
+	ln -sf tests $@
 
 # the CLI with every local variable pre-filled (where the compiler can), so that
 # tests/cli.sh sees a read of a never-written variable
@@ -75,9 +85,9 @@ build/embed: examples/embed.c appm.c appm.h
 	@mkdir -p build
 	$(CC) $(WARN) $(CFLAGS) examples/embed.c appm.c -o $@ $(LDLIBS)
 
-test: appm build/embed build/appm-pattern build/quickstart $(TESTS) $(STESTS)
+test: build/san/tests build/tests appm build/embed build/appm-pattern build/quickstart $(TESTS) $(STESTS)
 	@mkdir -p tests/out
-	@sh tests/run.sh $(TESTS) $(foreach t,$(STESTS),"APPM_TEST_QUICK=1 $(t)") "APPM_PATTERN=build/appm-pattern sh tests/cli.sh ./appm build/embed" \
+	@sh tests/run.sh $(foreach t,$(STESTS),"APPM_TEST_QUICK=1 $(t)") $(TESTS) "APPM_PATTERN=build/appm-pattern sh tests/cli.sh ./appm build/embed" \
 		"sh tests/alone.sh build/t_image build/t_loader" "sh tests/quickstart.sh build/quickstart" \
 		"sh tests/layout.sh"
 

@@ -39,6 +39,12 @@
  *   W (eye-path weight), gamma (photon weight), Psi = W f gamma.
  */
 
+/* One copy per program: tests/all.c builds every test into one program, and
+ * each test includes this file (to reach the internals) as a program of its own
+ * does; the second inclusion is empty. */
+#ifndef APPM_C_INCLUDED
+#define APPM_C_INCLUDED
+
 /* ==== 1. PLATFORM AND THREADS ============================================
  *
  * Everything that differs between operating systems lives here.  The thread
@@ -14960,6 +14966,8 @@ APPM_API appm_status appm_renderer_load_file(appm_renderer *r, const char *path,
     }
     return appm__ck_load_file(r, &L, path, diag);
 }
+
+#endif /* APPM_C_INCLUDED */
 
 /* ==== LICENSE =============================================================
  *

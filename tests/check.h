@@ -4,7 +4,8 @@
  * Every tests/t_*.c is its own program: it includes "../appm.c" (to reach the
  * static internals) and this file, runs its checks and ends with
  * `return check_finish();`, which prints "N passed, N failed".  tests/run.sh
- * runs them all and adds the counts up.
+ * runs them all and adds the counts up.  make test builds them as one program
+ * (tests/all.c), so the helpers they share live here; they need appm.h first.
  *
  * APPM_TEST_QUICK=1 in the environment (set for the sanitizer builds) asks
  * slow tests to use fewer samples; tolerances must stay honest for both.
@@ -142,6 +143,29 @@ static inline unsigned char *check_read_file(const char *path, size_t *len)
 }
 
 #define CHECK_PI 3.14159265358979323846
+
+/* A float's bits, for comparisons that must be exact (and see -0 and NaNs). */
+static inline uint32_t check_fbits(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return u;
+}
+
+/* The mean of every channel of every pixel. */
+static inline double check_image_mean(const appm_image *img)
+{
+    size_t i, n = (size_t)img->width * img->height * 3;
+    double s = 0.0;
+    for (i = 0; i < n; ++i) s += img->rgb[i];
+    return s / (double)n;
+}
+
+static inline const char *check_method_name(appm_method m)
+{
+    static const char *const names[APPM_METHOD_COUNT] = {"appm", "ppm", "sppm", "pt", "appm-paper"};
+    return names[m];
+}
 
 /* The glossy lobe's albedo A(theta) of appm.c section 6.1,
  * int (Ns+2)/(2 pi) cos^Ns(a) max(0, n.wi) dw at incidence theta (st = sin

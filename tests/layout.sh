@@ -4,7 +4,9 @@
 #      first line of its signature to its closing brace (a body opens with "{"
 #      alone on a line and closes with "}" alone on a line);
 #   2. appm.c's sections are numbered 1, 2, ... in order, each number once, and
-#      every subsection "N.M" lies in section N, numbered 1, 2, ... in order.
+#      every subsection "N.M" lies in section N, numbered 1, 2, ... in order;
+#   3. every tests/t_*.c is in tests/all.c (included and in its table), so that
+#      make test runs it.
 # Prints one line per broken rule and "N passed, N failed" as its last line.
 cd "$(dirname "$0")/.." || exit 2
 pass=0
@@ -34,5 +36,12 @@ bad=$(awk '
     END { if (sec < 10) printf "appm.c: only %d numbered sections\n", sec }
 ' appm.c)
 if [ -z "$bad" ]; then pass=$((pass + 1)); else printf '%s\n' "$bad"; fail=$((fail + 1)); fi
+missing=""
+for t in tests/t_*.c; do
+    n=$(basename "$t" .c)
+    grep -q "^#include \"$n.c\"" tests/all.c && grep -q "{\"$n\", ${n}_main}" tests/all.c ||
+        missing="$missing $n"
+done
+if [ -z "$missing" ]; then pass=$((pass + 1)); else echo "tests/all.c lacks:$missing"; fail=$((fail + 1)); fi
 echo "$pass passed, $fail failed"
 [ "$fail" -eq 0 ]

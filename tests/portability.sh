@@ -5,7 +5,8 @@
 #   gcc, clang      -std=c99 -pedantic -Wall -Wextra -Wshadow -Wvla -Werror, appm.c + main.c;
 #                   tests/t_portable.c built by gcc and run: its furnace means are the
 #                   reference (APPM_PORTABLE_REF) for every other run of it below
-#   tcc             -Wall -Werror, appm.c + main.c, and tests/t_portable.c built and run
+#   tcc             -Wall -Werror, appm.c + main.c, and tests/t_portable.c built and run;
+#                   every test built, and every one but t_appm run (quick)
 #   no threads      -DAPPM_THREADS=0: no pthread symbol in the object (nm), t_portable runs
 #                   (the wasm32 tests below are built without threads too)
 #   mingw-w64       Win32 threads (the default) and -DAPPM_THREADS=1 (winpthreads)
@@ -18,12 +19,12 @@
 #                   Node's WASI
 # Optional, each behind a variable:
 #   WINE=1          t_portable built by mingw-w64 runs under wine (both thread backends)
-#   QEMU=1          (in a lane of its own, beside the other steps)
-#                   the test suite (quick) built for 32-bit i386 (i686-linux-gnu-gcc) and
-#                   armhf (arm-linux-gnueabihf-gcc), under qemu-user: 32-bit size_t;
-#                   t_portable and t_bvh built for aarch64 (NEON box test; t_bvh also
-#                   with -DAPPM_SIMD=0) and big-endian s390x (scalar) run under qemu-user,
-#                   and their appm resumes checkpoints that the native appm wrote
+#   QEMU=1          (in a lane of its own, beside the other steps from the start)
+#                   every test built for 32-bit i386 (i686-linux-gnu-gcc) and armhf
+#                   (arm-linux-gnueabihf-gcc), those of PORTABILITY_32 run (quick) under
+#                   qemu-user: 32-bit size_t; t_portable and t_decode built for aarch64
+#                   and big-endian s390x, t_bvh for aarch64 (NEON box test), run under
+#                   qemu-user, and their appm resumes checkpoints that the native appm wrote
 # The BVH's box test: t_bvh built with SSE2, -DAPPM_SIMD=0, -mavx2 (where the CPU
 # has AVX2; clang with -mfma too), and renders of each SIMD build and its scalar
 # twin compared byte for byte.
@@ -105,13 +106,14 @@ run_test() {
     fi
 }
 
-# suite NAME COMPILER-COMMAND LIBS [QUICK]: every tests/t_*.c built with the
-# given compiler command (as many at a time as there are processors) and run
-# through tests/run.sh in quick mode (APPM_TEST_QUICK=QUICK, default 1; 2 takes a
-# fifth of the loops whose tolerance does not depend on their length); ok if
-# the runner's total has no failure.
+# suite NAME COMPILER-COMMAND LIBS [QUICK [BUILT-ONLY]]: every tests/t_*.c built
+# with the given compiler command (as many at a time as there are processors)
+# and run through tests/run.sh in quick mode (APPM_TEST_QUICK=QUICK, default 1;
+# 2 takes a fifth of the loops whose tolerance does not depend on their length),
+# except the tests named in BUILT-ONLY, which are only built; ok if the runner's
+# total has no failure.
 suite() {
-    name=$1 cc=$2 libs=$3 quick=${4:-1}
+    name=$1 cc=$2 libs=$3 quick=${4:-1} only_built=${5:-}
     dir="$OUT/suite-$(printf '%s' "$1" | tr -c 'A-Za-z0-9_\n' '_')"
     mkdir -p "$dir"
     jobs=$(getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
@@ -132,6 +134,7 @@ suite() {
             bad "$name: the test suite ($n does not build)"
             return
         fi
+        case " $only_built " in *" $n "*) continue ;; esac
         set -- "$@" "APPM_TEST_QUICK=$quick $dir/$n"
     done
     RUN_LIMIT=1200
@@ -165,13 +168,15 @@ qemu_lane() {
         what="$triple: the test suite under qemu-$q"
         if have $triple-gcc "$what" && have qemu-$q "$what"; then
             step "$triple-gcc -Werror: appm.c main.c" $triple-gcc $C99 -O2 $flags appm.c main.c -o "$OUT/appm-$q" -lm -pthread
-            for n in $T32; do
-                if $triple-gcc $C99 -O2 $flags "tests/$n.c" -o "$OUT/$n-$q" -lm -pthread >"$log" 2>&1; then
-                    run_test "qemu-$q: $n" env APPM_TEST_QUICK=1 qemu-$q -L /usr/$triple "$OUT/$n-$q"
-                else
-                    bad "$triple-gcc: tests/$n.c"
-                fi
-            done
+            # every test built (tests/all.c), the ones of PORTABILITY_32 run
+            if $triple-gcc $C99 -O2 $flags tests/all.c -o "$OUT/tests-$q" -lm -pthread >"$log" 2>&1; then
+                ok "$triple-gcc -Werror: tests/all.c (every test)"
+                for n in $T32; do
+                    run_test "qemu-$q: $n" env APPM_TEST_QUICK=1 qemu-$q -L /usr/$triple "$OUT/tests-$q" "$n"
+                done
+            else
+                bad "$triple-gcc -Werror: tests/all.c (every test)"
+            fi
         fi
     done
 
@@ -211,18 +216,16 @@ qemu_lane() {
             else
                 bad "$triple-gcc: tests/t_decode.c"
             fi
-            # t_bvh: NEON on aarch64, and its -DAPPM_SIMD=0 twin; s390x has no SIMD
-            # path, so its default build is the scalar one already
-            for simd in "" -DAPPM_SIMD=0; do
-                [ "$arch" = s390x ] && [ -n "$simd" ] && continue
-                if $triple-gcc $C99 -O2 $simd tests/t_bvh.c -o "$OUT/t_bvh-$arch$simd" -lm -pthread \
-                    >"$log" 2>&1; then
-                    run_test "qemu-$arch: t_bvh $simd" env APPM_TEST_QUICK=2 \
-                        qemu-$arch -L /usr/$triple "$OUT/t_bvh-$arch$simd"
+            # t_bvh: the NEON box test on aarch64 (the scalar one, which s390x would
+            # run, is the native -DAPPM_SIMD=0 build's: the same C, no byte order in it)
+            if [ "$arch" = aarch64 ]; then
+                if $triple-gcc $C99 -O2 tests/t_bvh.c -o "$OUT/t_bvh-$arch" -lm -pthread >"$log" 2>&1; then
+                    run_test "qemu-$arch: t_bvh (NEON)" env APPM_TEST_QUICK=2 \
+                        qemu-$arch -L /usr/$triple "$OUT/t_bvh-$arch"
                 else
-                    bad "$triple-gcc $simd: tests/t_bvh.c"
+                    bad "$triple-gcc: tests/t_bvh.c"
                 fi
-            done
+            fi
         fi
     done
 }
@@ -248,21 +251,9 @@ if have gcc "gcc: tests/t_portable.c runs (the reference)"; then
 fi
 export APPM_PORTABLE_REF
 
-if have tcc "tcc -Wall -Werror"; then
-    step "tcc -Wall -Werror: appm.c main.c" \
-        tcc -Wall -Werror appm.c main.c -o "$OUT/appm-tcc" -lm -lpthread
-    if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
-        >"$log" 2>&1; then
-        run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
-        # unoptimised code: the loops at a fifth (the suite took 280 s at QUICK=1 on 2 cores)
-        suite tcc "tcc -Wall" "-lm -lpthread" 2
-    else
-        bad "tcc -Wall -Werror: tests/t_portable.c"
-    fi
-fi
-
-# The emulated builds start here, once the tcc suite (whose threads suffer most
-# from a busy core) is done and the native t_portable has set the reference.
+# The emulated builds start here, once the native t_portable has set the
+# reference: the lane takes longest, and it runs one process at a time beside
+# the steps below.
 qemu_pid=
 if [ "${QEMU:-0}" = 1 ]; then
     rm -f "$OUT/qemu.count"
@@ -275,6 +266,21 @@ if [ "${QEMU:-0}" = 1 ]; then
         echo "$pass $fail" >"$OUT/qemu.count"
     ) >"$OUT/qemu.out" 2>&1 &
     qemu_pid=$!
+fi
+
+if have tcc "tcc -Wall -Werror"; then
+    step "tcc -Wall -Werror: appm.c main.c" \
+        tcc -Wall -Werror appm.c main.c -o "$OUT/appm-tcc" -lm -lpthread
+    if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
+        >"$log" 2>&1; then
+        run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
+        # unoptimised code: the loops at a fifth (the suite took 280 s at QUICK=1 on 2
+        # cores); t_appm only built (its statistical tests of real scenes, which no
+        # QUICK shortens, took 200 s of the 360 under tcc; make test runs it twice)
+        suite tcc "tcc -Wall" "-lm -lpthread" 2 t_appm
+    else
+        bad "tcc -Wall -Werror: tests/t_portable.c"
+    fi
 fi
 
 # ---- no threads -------------------------------------------------------------------
@@ -425,17 +431,20 @@ if have clang "wasm32-wasi"; then
             # wasm-ld gives the C stack 64 KiB and puts it above the data, where an
             # overflow silently overwrites malloc's state; the tests' big local arrays
             # (t_bvh's most of all) get 32 MiB, below the data, so an overflow traps.
-            for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress t_pmap \
-                t_estimator t_lights t_extremes t_sampler t_checkpoint t_decode; do
-                if $WASM "tests/$n.c" -o "$OUT/$n.wasm" -Wl,-z,stack-size=33554432 \
-                    -Wl,--stack-first >"$log" 2>&1; then
-                    run_test "wasm32-wasi: tests/$n.c under node" env APPM_TEST_QUICK=1 \
+            # Every test is built (tests/all.c: one compilation of appm.c), the ones that
+            # run in seconds are run.
+            if $WASM tests/all.c -o "$OUT/tests.wasm" -Wl,-z,stack-size=33554432 \
+                -Wl,--stack-first >"$log" 2>&1; then
+                ok "clang wasm32-wasi -Werror: tests/all.c (every test)"
+                for n in t_portable t_alloc t_image t_loader t_bvh t_sampling t_fuzz_regress t_pmap \
+                    t_estimator t_lights t_extremes t_sampler t_checkpoint t_decode; do
+                    run_test "wasm32-wasi: $n under node" env APPM_TEST_QUICK=1 \
                         node --experimental-wasi-unstable-preview1 --no-warnings \
-                        tests/wasi-run.mjs "$OUT/$n.wasm"
-                else
-                    bad "clang wasm32-wasi -Werror: tests/$n.c"
-                fi
-            done
+                        tests/wasi-run.mjs "$OUT/tests.wasm" "$n"
+                done
+            else
+                bad "clang wasm32-wasi -Werror: tests/all.c (every test)"
+            fi
         fi
     else
         : >"$log"

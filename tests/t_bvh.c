@@ -37,13 +37,6 @@ static appm__rng g_rng;
 static float uf(void) { return appm__rng_float(&g_rng); }
 static float urange(float a, float b) { return a + (b - a) * uf(); }
 
-static uint32_t fbits(float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    return u;
-}
-
 /* Uniform direction, in double then rounded (independent of the library's own
  * sampling code). */
 static appm__v3 rand_dir(void)
@@ -80,13 +73,13 @@ static appm_scene *load_text(const char *obj, const char *mtl, const char *name)
     return st == APPM_OK ? on_path(s) : NULL;
 }
 
-/* A growing text buffer for generated OBJ files. */
-typedef struct text {
+/* A growing tbuf buffer for generated OBJ files. */
+typedef struct tbuf {
     char *p;
     size_t n, cap;
-} text;
+} tbuf;
 
-static void tputs(text *t, const char *fmt, ...)
+static void tputs(tbuf *t, const char *fmt, ...)
 {
     va_list ap;
     int k;
@@ -113,7 +106,7 @@ static const char *EMIT_MTL = "newmtl glow\nKe 1 1 1\nKd 0.5 0.5 0.5\n";
  * clockwise seen from outside, every triangle emissive so the scene has a light. */
 static appm_scene *uv_sphere(double cx, double cy, double cz, double R, int nseg, int nring)
 {
-    text t = {NULL, 0, 0};
+    tbuf t = {NULL, 0, 0};
     int i, j;
     appm_scene *s;
     tputs(&t, "mtllib m.mtl\nusemtl glow\n");
@@ -147,7 +140,7 @@ static appm_scene *cube(double cx, double cy, double cz, double a)
 {
     static const int f[12][3] = {{1, 3, 2}, {2, 3, 4}, {5, 6, 7}, {6, 8, 7}, {1, 2, 5}, {2, 6, 5},
                                  {3, 7, 4}, {4, 7, 8}, {1, 5, 3}, {3, 5, 7}, {2, 4, 6}, {4, 8, 6}};
-    text t = {NULL, 0, 0};
+    tbuf t = {NULL, 0, 0};
     int i;
     appm_scene *s;
     tputs(&t, "mtllib m.mtl\nusemtl glow\n");
@@ -321,8 +314,8 @@ static void compare_paths(const appm_scene *s, const appm__ray *r, ray_stats *st
 {
     appm__hit a, b;
     int fa = appm__intersect_wide(s, r, UINT32_MAX, &a, 0), fb = appm__intersect_wide(s, r, UINT32_MAX, &b, 1);
-    if (fa != fb || (fa && (fbits(a.t) != fbits(b.t) || fbits(a.b1) != fbits(b.b1) ||
-                            fbits(a.b2) != fbits(b.b2) || a.tri != b.tri)) ||
+    if (fa != fb || (fa && (check_fbits(a.t) != check_fbits(b.t) || check_fbits(a.b1) != check_fbits(b.b1) ||
+                            check_fbits(a.b2) != check_fbits(b.b2) || a.tri != b.tri)) ||
         appm__occluded_wide(s, r, UINT32_MAX, UINT32_MAX, 0) != appm__occluded_wide(s, r, UINT32_MAX, UINT32_MAX, 1)) {
         st->bad_path++;
         report_ray(st, "the SIMD and the scalar box test disagree", o, d);
@@ -346,7 +339,7 @@ static void compare_ray(const appm_scene *s, const cull *cu, appm__v3 o, appm__v
     if (pure && cu) {
         int fp = brute(s, &r, &hp);
         st->pure++;
-        if (fp != ff || (fp && (fbits(hp.t) != fbits(hf.t) || hp.tri != hf.tri))) {
+        if (fp != ff || (fp && (check_fbits(hp.t) != check_fbits(hf.t) || hp.tri != hf.tri))) {
             st->bad_cull++;
             report_ray(st, "culled reference differs from the plain loop", o, d);
         }
@@ -358,7 +351,7 @@ static void compare_ray(const appm_scene *s, const cull *cu, appm__v3 o, appm__v
         return;
     }
     if (ff) {
-        if (fbits(hb.t) != fbits(hf.t)) {
+        if (check_fbits(hb.t) != check_fbits(hf.t)) {
             st->bad_t++;
             report_ray(st, "different t", o, d);
         } else if (hb.tri != hf.tri) {
@@ -366,13 +359,13 @@ static void compare_ray(const appm_scene *s, const cull *cu, appm__v3 o, appm__v
              * at exactly that t (rays through shared edges and vertices). */
             appm__hit ht;
             appm__ray q = r;
-            if (hb.tri < s->ntri && appm__tri_hit(&q, &s->tri[hb.tri], &ht) && fbits(ht.t) == fbits(hf.t)) {
+            if (hb.tri < s->ntri && appm__tri_hit(&q, &s->tri[hb.tri], &ht) && check_fbits(ht.t) == check_fbits(hf.t)) {
                 st->ties++;
             } else {
                 st->bad_tri++;
                 report_ray(st, "different triangle, not a tie", o, d);
             }
-        } else if (fbits(hb.b1) != fbits(hf.b1) || fbits(hb.b2) != fbits(hf.b2)) {
+        } else if (check_fbits(hb.b1) != check_fbits(hf.b1) || check_fbits(hb.b2) != check_fbits(hf.b2)) {
             st->bad_t++;
             report_ray(st, "different barycentrics", o, d);
         }
@@ -395,7 +388,7 @@ static void compare_ray(const appm_scene *s, const cull *cu, appm__v3 o, appm__v
         report_ray(st, "occluded() disagrees with closest t < tmax", o, d);
     }
     fc = appm__intersect(s, &r, UINT32_MAX, &hc);
-    if (fc != expect || (fc && fbits(hc.t) != fbits(hf.t))) {
+    if (fc != expect || (fc && check_fbits(hc.t) != check_fbits(hf.t))) {
         st->bad_clip++;
         report_ray(st, "intersect() with a finite tmax disagrees", o, d);
     }
@@ -985,7 +978,7 @@ static void test_degenerate(void)
 {
     int quick = check_quick();
     long n = quick ? 400 : 4000;
-    text t = {NULL, 0, 0};
+    tbuf t = {NULL, 0, 0};
     appm_scene *s;
     int i;
     appm__tri *tris;

@@ -352,7 +352,7 @@ static long test_bit_flips(const char *set, const char *file, size_t step, int m
 /* rounds random multi-bit damages (1..8 bits, after the first `keep` bytes);
  * a PNG gets its CRCs recomputed.  The invariants must hold; some damage must
  * be refused. */
-static void test_damage(const char *set, const char *file, int rounds, size_t keep, uint32_t seed)
+static void test_damage_file(const char *set, const char *file, int rounds, size_t keep, uint32_t seed)
 {
     size_t len = 0;
     unsigned char *p = read_fixture(set, file, &len), *q;
@@ -402,7 +402,7 @@ static int for_each_listed(const char *set, const char *list, const char *ext, i
         if (ends_with(file, ".zz")) continue; /* zlib streams: test_inflate_fixture */
         test_fixture(set, file);
         if (with_flips == 1) { /* JPEG: random multi-bit damage, whole file after SOI */
-            test_damage(set, file, quick ? 100 : 300, 2, (uint32_t)count * 2654435761u + 1u);
+            test_damage_file(set, file, quick ? 100 : 300, 2, (uint32_t)count * 2654435761u + 1u);
         } else if (with_flips == 2) { /* small: every prefix and every bit */
             test_prefixes(set, file, quick ? 3 : 1);
             test_bit_flips(set, file, quick ? 4 : 1, 0);
@@ -1102,13 +1102,6 @@ static void test_image_read(void)
 #define RT_W 37
 #define RT_H 21 /* two ZIP blocks of 16 lines, the second short */
 
-static uint32_t fbits(float v)
-{
-    uint32_t u;
-    memcpy(&u, &v, 4);
-    return u;
-}
-
 /* Writes img to tests/out/decode-<file> (opt as given), reads it back with
  * appm_image_read; kind 0: 8-bit sRGB (PNG, PPM); 1: bit exact; 2: half. */
 static void roundtrip(const appm_image *img, const char *file, const appm_write_options *opt, int kind)
@@ -1127,7 +1120,7 @@ static void roundtrip(const appm_image *img, const char *file, const appm_write_
     for (i = 0; i < n && back.width == img->width && back.height == img->height; ++i) {
         float v = img->rgb[i], got = back.rgb[i];
         int ok;
-        if (kind == 1) ok = fbits(got) == fbits(v);
+        if (kind == 1) ok = check_fbits(got) == check_fbits(v);
         else if (kind == 2) {
             double av = fabs(v);
             if (av > 65504.0) ok = got == (v > 0 ? 65504.0f : -65504.0f);
@@ -1212,10 +1205,10 @@ int main(void)
     CHECK(test_bit_flips("png", "rgb_half_zips_7x5.exr", step, 0) > 0);
     CHECK(test_bit_flips("png", "appm_zip_float_5x20.exr", step, 0) > 0);
     CHECK(test_bit_flips("png", "rgba_half_rle_9x5.exr", step, 0) > 0);
-    test_damage("png", "t2_d8_adam7_33x17.png", quick ? 1000 : 3000, 8, 99);
-    test_damage("png", "t0_d1_trns_13x7.png", quick ? 1000 : 3000, 8, 98);
-    test_damage("png", "t6_d16_33x17.png", quick ? 1000 : 3000, 8, 97);
-    test_damage("png", "rgb_mixed_zip_9x20.exr", quick ? 1000 : 3000, 4, 96);
+    test_damage_file("png", "t2_d8_adam7_33x17.png", quick ? 1000 : 3000, 8, 99);
+    test_damage_file("png", "t0_d1_trns_13x7.png", quick ? 1000 : 3000, 8, 98);
+    test_damage_file("png", "t6_d16_33x17.png", quick ? 1000 : 3000, 8, 97);
+    test_damage_file("png", "rgb_mixed_zip_9x20.exr", quick ? 1000 : 3000, 4, 96);
     for (i = 0; i < (int)(sizeof zz / sizeof zz[0]); ++i) test_inflate_fixture(zz[i], quick ? 5 : 1);
     test_inflate_handmade();
 

@@ -31,12 +31,6 @@ static int g_verbose;
 
 /* ---- Helpers ---------------------------------------------------------------- */
 
-static const char *method_name(appm_method m)
-{
-    static const char *const names[4] = {"appm", "ppm", "sppm", "pt"};
-    return names[m];
-}
-
 /* A scene written under tests/out/ by this group. */
 static appm_scene *load_scene(const char *file)
 {
@@ -83,7 +77,7 @@ static img_sum summarize(const appm_image *img)
 /* Renders `passes` passes and returns the summary of the image (and, when
  * `copy` is not NULL, a copy of its floats, w*h*3 of them; when `stats` is
  * not NULL, the statistics).  On failure: -1 in lum, zeros in copy and stats. */
-static img_sum render(const appm_scene *s, const appm_config *cfg, int passes, float *copy,
+static img_sum render_sum(const appm_scene *s, const appm_config *cfg, int passes, float *copy,
                       appm_stats *stats)
 {
     img_sum sum;
@@ -184,7 +178,7 @@ static int write_box(const char *name, double s, double tx, unsigned size)
  *
  * Good behaviour (testing.md section 2): a radius of 1e-9 scene units (far
  * below the pixel footprint, so hardly a photon falls inside) and one of 1e9
- * (every photon falls inside every gather) both render to completion with
+ * (every photon falls inside every gather) both render_sum to completion with
  * every pixel finite and non-negative, for ppm, sppm and appm.
  *
  * With r = 1e9 and alpha = 1 the estimate is the fully blurred one.  With
@@ -247,13 +241,13 @@ static void test_radius(void)
             for (i = 0; rad && i < (size_t)img.width * img.height; ++i)
                 bad_r += !(rad[i] > 0.0f && rad[i] < HUGE_VAL);
             CHECK_MSG(sum.nonfinite == 0, "r=%g %s: %lu non-finite values", radii[ri],
-                      method_name(methods[mi]), (unsigned long)sum.nonfinite);
-            CHECK_MSG(sum.min >= 0.0, "r=%g %s: negative pixel %g", radii[ri], method_name(methods[mi]),
+                      check_method_name(methods[mi]), (unsigned long)sum.nonfinite);
+            CHECK_MSG(sum.min >= 0.0, "r=%g %s: negative pixel %g", radii[ri], check_method_name(methods[mi]),
                       sum.min);
             CHECK_MSG(rad != NULL && bad_r == 0, "r=%g %s: %lu radii not finite and > 0", radii[ri],
-                      method_name(methods[mi]), (unsigned long)bad_r);
+                      check_method_name(methods[mi]), (unsigned long)bad_r);
             CHECK_MSG(st.initial_radius == radii[ri], "r=%g %s: initial radius %g", radii[ri],
-                      method_name(methods[mi]), st.initial_radius);
+                      check_method_name(methods[mi]), st.initial_radius);
             if (ri == 1 && methods[mi] != APPM_METHOD_APPM) {
                 const double R = radii[ri];
                 const double expect = PL_RHO / APPM__PI * PL_I * omega / (APPM__PI * R * R);
@@ -261,9 +255,9 @@ static void test_radius(void)
                 /* 1e-6: float rounding of photon powers and of the pixel value */
                 CHECK_MSG(fabs(sum.lum - expect) <= (4.0 * rel_se + 1e-6) * expect,
                           "r=1e9 %s: L = %.6g, blurred value %.6g within 4 SE (%.2g relative)",
-                          method_name(methods[mi]), sum.lum, expect, rel_se);
+                          check_method_name(methods[mi]), sum.lum, expect, rel_se);
                 if (g_verbose)
-                    printf("r=1e9 %-4s L %.6g expected %.6g (%+.2f SE)\n", method_name(methods[mi]),
+                    printf("r=1e9 %-4s L %.6g expected %.6g (%+.2f SE)\n", check_method_name(methods[mi]),
                            sum.lum, expect, (sum.lum / expect - 1.0) / rel_se);
             }
             appm_renderer_destroy(r);
@@ -327,13 +321,13 @@ static void test_alpha(void)
                     prev[i] = rad[i];
                 }
             }
-            CHECK_MSG(finite, "alpha=%g %s: non-finite image", alphas[ai], method_name(methods[mi]));
+            CHECK_MSG(finite, "alpha=%g %s: non-finite image", alphas[ai], check_method_name(methods[mi]));
             CHECK_MSG(positive, "alpha=%g %s: a radius is 0, negative or not finite", alphas[ai],
-                      method_name(methods[mi]));
+                      check_method_name(methods[mi]));
             CHECK_MSG(grows == 0, "alpha=%g %s: the radius grew %d times", alphas[ai],
-                      method_name(methods[mi]), grows);
+                      check_method_name(methods[mi]), grows);
             if (g_verbose)
-                printf("alpha=%-9g %-4s last radius %.4g (r1 %.4g)\n", alphas[ai], method_name(methods[mi]),
+                printf("alpha=%-9g %-4s last radius %.4g (r1 %.4g)\n", alphas[ai], check_method_name(methods[mi]),
                        (double)prev[0], r->r1);
             appm_renderer_destroy(r);
         }
@@ -385,7 +379,7 @@ typedef struct budget {
     long refused, calls;
 } budget;
 
-static void *budget_alloc(void *user, size_t n)
+static void *limited_alloc(void *user, size_t n)
 {
     budget *b = (budget *)user;
     void *p;
@@ -399,7 +393,7 @@ static void *budget_alloc(void *user, size_t n)
     return p;
 }
 
-static void budget_free(void *user, void *p, size_t n)
+static void limited_free(void *user, void *p, size_t n)
 {
     budget *b = (budget *)user;
     if (!p) return;
@@ -411,15 +405,15 @@ static void use_budget(appm_config *cfg, budget *b, long long limit)
 {
     memset(b, 0, sizeof *b);
     b->limit = limit;
-    cfg->allocator.alloc = budget_alloc;
-    cfg->allocator.free = budget_free;
+    cfg->allocator.alloc = limited_alloc;
+    cfg->allocator.free = limited_free;
     cfg->allocator.user = b;
 }
 
-/* Runs the first pass of a ppm render of `s` with `margin` bytes allowed
+/* Runs the first pass of a ppm render_sum of `s` with `margin` bytes allowed
  * beyond what appm_renderer_create took; that pass must fail with
  * APPM_ERR_NOMEM.  Then, with memory to spare, two passes must give the bytes
- * of a clean two-pass render.  `what` says which allocation is expected to
+ * of a clean two-pass render_sum.  `what` says which allocation is expected to
  * fail (for the messages). */
 static void failed_pass(const appm_scene *s, long long margin, const char *what)
 {
@@ -440,7 +434,7 @@ static void failed_pass(const appm_scene *s, long long margin, const char *what)
     cfg.threads = 1;
     cfg.seed = 5;
     if (!ref) return;
-    render(s, &cfg, 2, ref, NULL); /* a renderer that never ran out of memory */
+    render_sum(s, &cfg, 2, ref, NULL); /* a renderer that never ran out of memory */
     use_budget(&cfg, &b, 1ll << 40);
     r = check_renderer(s, &cfg);
     if (r) {
@@ -490,9 +484,9 @@ static void test_photon_counts(void)
         cfg.photons = 1;
         cfg.threads = 2;
         memset(&stats, 0, sizeof stats);
-        sum = render(s, &cfg, 50, NULL, &stats);
+        sum = render_sum(s, &cfg, 50, NULL, &stats);
         CHECK_MSG(sum.lum >= 0.0 && sum.nonfinite == 0 && sum.min >= 0.0,
-                  "1 photon/pass %s: mean %g, %lu non-finite, min %g", method_name(methods[mi]), sum.lum,
+                  "1 photon/pass %s: mean %g, %lu non-finite, min %g", check_method_name(methods[mi]), sum.lum,
                   (unsigned long)sum.nonfinite, sum.min);
         CHECK(stats.passes == 50);
         CHECK(stats.photons_emitted == (methods[mi] == APPM_METHOD_PT ? 0u : 50u));
@@ -517,17 +511,17 @@ static void test_photon_counts(void)
             /* allowed by the contract: then the first pass must fail */
             st = appm_renderer_pass(r);
             CHECK_MSG(st == APPM_ERR_NOMEM, "2^32 photons, %s: first pass gave %d",
-                      method_name(methods[mi]), (int)st);
+                      check_method_name(methods[mi]), (int)st);
             appm_renderer_destroy(r);
         } else {
             CHECK_MSG(st == APPM_ERR_NOMEM && r == NULL && d.status == APPM_ERR_NOMEM && d.message[0],
-                      "2^32 photons, %s: create gave %d (%s)", method_name(methods[mi]), (int)st, d.message);
+                      "2^32 photons, %s: create gave %d (%s)", check_method_name(methods[mi]), (int)st, d.message);
         }
         /* with a 32-bit size_t the store's size overflows and is refused before
          * the allocator is asked */
         CHECK_MSG((b.refused > 0 || sizeof(size_t) < 8) && b.live == 0,
                   "2^32 photons, %s: %ld refused, %lld bytes leaked",
-                  method_name(methods[mi]), b.refused, b.live);
+                  check_method_name(methods[mi]), b.refused, b.live);
     }
 
     /* a pass that runs out of memory, then a retry */
@@ -691,7 +685,7 @@ static void test_accumulators(void)
  *           5 sqrt(2) sigma (sigma from 8 seeds: |t_7| > 5 has probability
  *           1.6e-3), and never more than 3%, "a few percent".  Here sigma is
  *           4% of the mean, so the 3% is the binding one of these two.
- *   coupling  every render below uses the seed of the unit render it is
+ *   coupling  every render_sum below uses the seed of the unit render_sum it is
  *           compared with, so both are the same random experiment on
  *           geometry that differs only by float rounding: 2^-24 relative
  *           for a pure scale, 2^-4 / 1e3 = 6e-5 of the box for the box of
@@ -760,7 +754,7 @@ static void test_scale(void)
         for (mi = 0; mi < 2; ++mi) {
             scale_render(s, methods[mi], 3, &mean[mi][k], &r1[mi][k], &nf);
             CHECK_MSG(nf == 0 && mean[mi][k] > 0.0, "%s %s: %lu non-finite values, mean %g", cases[k].name,
-                      method_name(methods[mi]), (unsigned long)nf, mean[mi][k]);
+                      check_method_name(methods[mi]), (unsigned long)nf, mean[mi][k]);
             if (k == 0) { /* the spread of the image mean over independent seeds */
                 double m[SCALE_SEEDS], sum = 0.0, ss = 0.0, rr;
                 int i;
@@ -781,7 +775,7 @@ static void test_scale(void)
             if (tol > 0.03 * mean[mi][0]) tol = 0.03 * mean[mi][0];
             if (k < 6 && tol > 1e-3 * mean[mi][0]) tol = 1e-3 * mean[mi][0];
             CHECK_MSG(fabs(d) <= tol, "%s %s: mean %.6g vs %.6g at scale 1 (difference %.3g, allowed %.3g)",
-                      cases[k].name, method_name(methods[mi]), mean[mi][k], mean[mi][0], d, tol);
+                      cases[k].name, check_method_name(methods[mi]), mean[mi][k], mean[mi][0], d, tol);
             if (methods[mi] == APPM_METHOD_PPM) {
                 double ratio = r1[mi][k] / r1[mi][0] / cases[k].s;
                 CHECK_MSG(fabs(ratio - 1.0) <= 1e-3, "%s: automatic radius %.6g, %.6g times that at scale 1",
@@ -789,7 +783,7 @@ static void test_scale(void)
             }
             if (g_verbose)
                 printf("%-14s %-4s mean %.6f (scale 1: %.6f, sigma %.2g) relative difference %.2g, r1/s %.6g\n",
-                       cases[k].name, method_name(methods[mi]), mean[mi][k], mean[mi][0], sigma[mi],
+                       cases[k].name, check_method_name(methods[mi]), mean[mi][k], mean[mi][0], sigma[mi],
                        d / mean[mi][0], r1[mi][k] / cases[k].s);
         }
     }
@@ -808,14 +802,14 @@ static void test_scale(void)
  * moved the bounding box).
  *
  * Duplicated triangles (the floor three times over, once with reversed
- * winding) are legal: they load, and render without NaN or dropped samples.
- * With the same seed the render is the same random experiment as the single
+ * winding) are legal: they load, and render_sum without NaN or dropped samples.
+ * With the same seed the render_sum is the same random experiment as the single
  * floor's: whichever copy a ray hits, it finds the same plane, the same
  * two-sided material and the same point up to float rounding (the copies
  * interpolate it from their vertices in another order).  So the means may
  * differ by rounding effects only (3e-8 relative is seen); allowed 1e-3,
  * far below what a copy that shaded differently would change. */
-static void test_degenerate(void)
+static void test_degenerate_scene(void)
 {
     static const appm_method methods[4] = {APPM_METHOD_APPM, APPM_METHOD_PPM, APPM_METHOD_SPPM,
                                            APPM_METHOD_PT};
@@ -875,19 +869,19 @@ static void test_degenerate(void)
             cfg.photons = 4096;
             cfg.seed = 9;
             cfg.threads = 2;
-            sa = render(a, &cfg, 3, ia, NULL);
-            sb = render(b, &cfg, 3, ib, NULL);
+            sa = render_sum(a, &cfg, 3, ia, NULL);
+            sb = render_sum(b, &cfg, 3, ib, NULL);
             CHECK_MSG(sa.lum > 0.0 && memcmp(ia, ib, 8 * 8 * 3 * sizeof(float)) == 0,
                       "%s: 1000 degenerate triangles changed the image (mean %.6g vs %.6g)",
-                      method_name(methods[mi]), sb.lum, sa.lum);
-            sd = render(dup, &cfg, 3, ib, &st);
+                      check_method_name(methods[mi]), sb.lum, sa.lum);
+            sd = render_sum(dup, &cfg, 3, ib, &st);
             CHECK_MSG(sd.nonfinite == 0 && sd.min >= 0.0 && st.dropped_samples == 0,
                       "%s: duplicated triangles give %lu non-finite values, %.0f dropped",
-                      method_name(methods[mi]), (unsigned long)sd.nonfinite, (double)st.dropped_samples);
+                      check_method_name(methods[mi]), (unsigned long)sd.nonfinite, (double)st.dropped_samples);
             CHECK_MSG(fabs(sd.lum - sa.lum) <= 1e-3 * sa.lum, "%s: duplicated floor, mean %.9g vs %.9g",
-                      method_name(methods[mi]), sd.lum, sa.lum);
+                      check_method_name(methods[mi]), sd.lum, sa.lum);
             if (g_verbose)
-                printf("duplicates %-4s mean %.9f single %.9f identical %d\n", method_name(methods[mi]),
+                printf("duplicates %-4s mean %.9f single %.9f identical %d\n", check_method_name(methods[mi]),
                        sd.lum, sa.lum, memcmp(ia, ib, 8 * 8 * 3 * sizeof(float)) == 0);
         }
     }
@@ -985,13 +979,13 @@ static void test_area_lights(void)
             cfg.photons = 4096;
             cfg.seed = 4;
             cfg.threads = 2;
-            a = render(tiny, &cfg, 4, NULL, &st1);
-            b = render(plain, &cfg, 4, NULL, NULL);
+            a = render_sum(tiny, &cfg, 4, NULL, &st1);
+            b = render_sum(plain, &cfg, 4, NULL, NULL);
             CHECK_MSG(a.nonfinite == 0 && a.min >= 0.0 && st1.dropped_samples == 0,
-                      "tiny bright light, %s: %lu non-finite, min %g, %.0f dropped", method_name(methods[mi]),
+                      "tiny bright light, %s: %lu non-finite, min %g, %.0f dropped", check_method_name(methods[mi]),
                       (unsigned long)a.nonfinite, a.min, (double)st1.dropped_samples);
             CHECK_MSG(fabs(a.lum - b.lum) <= 1e-3 * b.lum, "tiny bright light, %s: mean %.7g vs %.7g without",
-                      method_name(methods[mi]), a.lum, b.lum);
+                      check_method_name(methods[mi]), a.lum, b.lum);
         }
     }
     appm_scene_destroy(tiny);
@@ -1002,7 +996,7 @@ static void test_area_lights(void)
  *
  * Good behaviour: with nothing absorbing, photon paths never lose weight, so
  * Russian roulette (continue with probability max(gamma') / max(gamma) = 1)
- * never ends them: only the depth cap does.  The render must still end - each
+ * never ends them: only the depth cap does.  The render_sum must still end - each
  * photon path is cut at max_depth (32) segments, the path tracer's roulette
  * is capped at 0.95 - and every pixel is finite.  Photons are stored at
  * segments 2 .. 31 (two segments at least with shadow rays for the direct
@@ -1031,21 +1025,21 @@ static void test_albedo_one(void)
         cfg.photons = M;
         cfg.seed = 2;
         cfg.threads = 2;
-        deep = render(s, &cfg, 2, NULL, &st32);
+        deep = render_sum(s, &cfg, 2, NULL, &st32);
         cfg.max_depth = 3;
-        shallow = render(s, &cfg, 2, NULL, &st3);
+        shallow = render_sum(s, &cfg, 2, NULL, &st3);
         CHECK_MSG(deep.nonfinite == 0 && shallow.nonfinite == 0 && deep.min >= 0.0 && shallow.min >= 0.0,
-                  "albedo 1, %s: non-finite or negative pixels", method_name(methods[mi]));
+                  "albedo 1, %s: non-finite or negative pixels", check_method_name(methods[mi]));
         CHECK_MSG(deep.lum > 3.0 * shallow.lum && shallow.lum > 0.0,
-                  "albedo 1, %s: mean %.5g at depth 32 vs %.5g at depth 3", method_name(methods[mi]), deep.lum,
+                  "albedo 1, %s: mean %.5g at depth 32 vs %.5g at depth 3", check_method_name(methods[mi]), deep.lum,
                   shallow.lum);
         if (methods[mi] != APPM_METHOD_PT)
             CHECK_MSG(st32.photons_stored <= 30 * M && st32.photons_stored >= 29 * M,
                       "albedo 1, %s: %.0f photons stored from %.0f paths (30 per path expected)",
-                      method_name(methods[mi]), (double)st32.photons_stored, (double)M);
+                      check_method_name(methods[mi]), (double)st32.photons_stored, (double)M);
         if (g_verbose)
             printf("albedo 1 %-4s mean %.5f (depth 32) %.5f (depth 3) photons/path %.3f\n",
-                   method_name(methods[mi]), deep.lum, shallow.lum, (double)st32.photons_stored / (double)M);
+                   check_method_name(methods[mi]), deep.lum, shallow.lum, (double)st32.photons_stored / (double)M);
     }
     appm_scene_destroy(s);
 }
@@ -1115,12 +1109,12 @@ static void test_camera_inside(void)
                 double rhi = APPM__RHI > APPM__RHI_DIFFUSE ? APPM__RHI : APPM__RHI_DIFFUSE;
                 CHECK_MSG(rhi * rb < 2.0, "the appm radius may reach %g", rhi * rb);
             }
-            CHECK_MSG(rmax < 2.0, "inside a closed cube, %s: radius %g", method_name(methods[mi]), rmax);
+            CHECK_MSG(rmax < 2.0, "inside a closed cube, %s: radius %g", check_method_name(methods[mi]), rmax);
             CHECK_MSG(nonzero == 0 && st.dropped_samples == 0, "inside a closed cube, %s: %lu values not 0",
-                      method_name(methods[mi]), (unsigned long)nonzero);
+                      check_method_name(methods[mi]), (unsigned long)nonzero);
             if (methods[mi] != APPM_METHOD_PT)
                 CHECK_MSG(st.photons_stored > 0, "inside a closed cube, %s: the outside got no photons",
-                          method_name(methods[mi]));
+                          check_method_name(methods[mi]));
         }
         appm_renderer_destroy(r);
     }
@@ -1205,16 +1199,16 @@ static void test_overflow_light(void)
         cfg.method = methods[mi];
         cfg.photons = 2048;
         cfg.threads = 2;
-        sum = render(s, &cfg, 2, NULL, &stats);
+        sum = render_sum(s, &cfg, 2, NULL, &stats);
         CHECK_MSG(sum.lum > 0.0 && sum.nonfinite == 0, "huge light, %s: mean %g, %lu non-finite values",
-                  method_name(methods[mi]), sum.lum, (unsigned long)sum.nonfinite);
+                  check_method_name(methods[mi]), sum.lum, (unsigned long)sum.nonfinite);
         if (methods[mi] != APPM_METHOD_PT)
             CHECK_MSG(stats.dropped_samples > 0,
                       "huge light, %s: %.0f photons stored, %.0f samples dropped - photons whose power "
                       "overflows float were discarded without being counted",
-                      method_name(methods[mi]), (double)stats.photons_stored, (double)stats.dropped_samples);
+                      check_method_name(methods[mi]), (double)stats.photons_stored, (double)stats.dropped_samples);
         if (g_verbose)
-            printf("huge light %-4s mean %.4g dropped %.0f stored %.0f\n", method_name(methods[mi]), sum.lum,
+            printf("huge light %-4s mean %.4g dropped %.0f stored %.0f\n", check_method_name(methods[mi]), sum.lum,
                    (double)stats.dropped_samples, (double)stats.photons_stored);
     }
     appm_scene_destroy(s);
@@ -1243,12 +1237,12 @@ static void test_threads(void)
         cfg.photons = 2000;
         cfg.seed = 8;
         cfg.threads = 1;
-        a = render(s, &cfg, 3, one, NULL);
+        a = render_sum(s, &cfg, 3, one, NULL);
         cfg.threads = 64;
-        render(s, &cfg, 3, many, &st);
+        render_sum(s, &cfg, 3, many, &st);
         /* a build without threads runs on 1, whatever it is asked */
         CHECK_MSG(a.lum > 0.0 && memcmp(one, many, sizeof one) == 0 && st.threads == (APPM_THREADS ? 64u : 1u),
-                  "%s: 64 threads differ from 1 (threads used %u)", method_name(methods[mi]), st.threads);
+                  "%s: 64 threads differ from 1 (threads used %u)", check_method_name(methods[mi]), st.threads);
     }
     appm_scene_destroy(s);
 }
@@ -1274,7 +1268,7 @@ int main(void)
     if (wanted('o')) test_photon_counts();
     if (wanted('n')) test_accumulators();
     if (wanted('s')) test_scale();
-    if (wanted('d')) test_degenerate();
+    if (wanted('d')) test_degenerate_scene();
     if (wanted('l')) test_area_lights();
     if (wanted('b')) test_albedo_one();
     if (wanted('c')) test_camera_inside();

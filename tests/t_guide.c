@@ -175,8 +175,8 @@ static const char BOX_OBJ[] =
     "v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n"
     "f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 4 3 7 8\nf 1 4 8 5\nf 2 6 7 3\n"
     "usemtl lamp\nv -0.3 0.99 -0.3\nv 0.3 0.99 -0.3\nv 0.3 0.99 0.3\nv -0.3 0.99 0.3\nf 9 10 11 12\n";
-static const char BOX_MTL[] = "newmtl wall\nKd 0.6 0.6 0.6\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n";
-static const char BOX_SCENE[] = "mesh box.obj\ncamera eye 0 0 0.9 target 0 -0.2 -1 up 0 1 0 fov 70\nimage 24 24\n";
+static const char GUIDE_BOX_MTL[] = "newmtl wall\nKd 0.6 0.6 0.6\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n";
+static const char GUIDE_BOX_SCENE[] = "mesh box.obj\ncamera eye 0 0 0.9 target 0 -0.2 -1 up 0 1 0 fov 70\nimage 24 24\n";
 
 static double box_mean(appm_scene *s, appm_emission e, uint64_t seed, double *guided)
 {
@@ -204,12 +204,12 @@ static double box_mean(appm_scene *s, appm_emission e, uint64_t seed, double *gu
 
 static void test_closed_box(void)
 {
-    appm_memory_file files[2] = {{"box.obj", BOX_OBJ, sizeof BOX_OBJ - 1}, {"box.mtl", BOX_MTL, sizeof BOX_MTL - 1}};
+    appm_memory_file files[2] = {{"box.obj", BOX_OBJ, sizeof BOX_OBJ - 1}, {"box.mtl", GUIDE_BOX_MTL, sizeof GUIDE_BOX_MTL - 1}};
     appm_scene *s = NULL;
     appm_diag d;
     double g[3], l[3], mg = 0.0, ml = 0.0, vg = 0.0, vl = 0.0, share = 0.0, tmp;
     int k;
-    CHECK_MSG(appm_scene_load_memory(BOX_SCENE, sizeof BOX_SCENE - 1, "box.scene", files, 2, NULL, &s, &d) == APPM_OK,
+    CHECK_MSG(appm_scene_load_memory(GUIDE_BOX_SCENE, sizeof GUIDE_BOX_SCENE - 1, "box.scene", files, 2, NULL, &s, &d) == APPM_OK,
               "box: %s", d.message);
     if (!s) return;
     for (k = 0; k < 3; ++k) {
@@ -313,7 +313,7 @@ static void test_glass(void)
     appm_scene_destroy(s);
 }
 
-static void test_checkpoint(void)
+static void test_guide_checkpoint(void)
 {
     static float a[32 * 46 * 3];
     appm_scene *s = check_load_scene("scenes/caustic-glass.scene");
@@ -362,6 +362,6 @@ int main(void)
     test_weights_power();
     test_closed_box();
     test_glass();
-    test_checkpoint();
+    test_guide_checkpoint();
     return check_finish();
 }

@@ -53,13 +53,6 @@ static int host_little(void)
     return b == 1;
 }
 
-static uint32_t fbits(float v)
-{
-    uint32_t u;
-    memcpy(&u, &v, 4);
-    return u;
-}
-
 static float bits_to_float(uint32_t u)
 {
     float v;
@@ -138,7 +131,7 @@ static void test_pfm_round_trip(void)
     CHECK(back.width == W && back.height == H);
     if (back.rgb && back.width == W && back.height == H) {
         int same = 1;
-        for (i = 0; i < (size_t)W * H * 3; ++i) same &= fbits(back.rgb[i]) == fbits(px[i]);
+        for (i = 0; i < (size_t)W * H * 3; ++i) same &= check_fbits(back.rgb[i]) == check_fbits(px[i]);
         CHECK_MSG(same, "PFM round trip is not bit exact");
         CHECK(back.rgb[0] == -1.5f); /* top-left comes back top-left */
     }
@@ -179,7 +172,7 @@ static void test_pfm_big_endian_and_grey(void)
     for (y = 2; y >= 0; --y) /* bottom row first */
         for (x = 0; x < 2; ++x)
             for (c = 0; c < 3; ++c) {
-                uint32_t u = fbits(1.0f + (float)x + 10.0f * (float)y + 0.125f * (float)c);
+                uint32_t u = check_fbits(1.0f + (float)x + 10.0f * (float)y + 0.125f * (float)c);
                 buf[n++] = (unsigned char)(u >> 24);
                 buf[n++] = (unsigned char)(u >> 16);
                 buf[n++] = (unsigned char)(u >> 8);
@@ -202,7 +195,7 @@ static void test_pfm_big_endian_and_grey(void)
     n = (size_t)sprintf((char *)buf, "Pf 3 2 -1\n");
     for (y = 1; y >= 0; --y)
         for (x = 0; x < 3; ++x) {
-            uint32_t u = fbits(0.5f * (float)x - (float)y);
+            uint32_t u = check_fbits(0.5f * (float)x - (float)y);
             buf[n++] = (unsigned char)u;
             buf[n++] = (unsigned char)(u >> 8);
             buf[n++] = (unsigned char)(u >> 16);
@@ -926,7 +919,7 @@ static void test_exr(void)
             CHECK(half == halfs[a] && zip == !comps[b]);
             for (i = 0; i < n; ++i) {
                 float want = halfs[a] ? half_to_float(appm__half(img.rgb[i])) : img.rgb[i];
-                if (fbits(back[i]) != fbits(want)) bad++;
+                if (check_fbits(back[i]) != check_fbits(want)) bad++;
             }
             CHECK_MSG(bad == 0, "%s: %d values differ", path, bad);
             /* mostly noise: a ZIP block that would grow is stored raw, so the
@@ -946,7 +939,7 @@ static void test_exr(void)
         CHECK(appm_image_write(path, &img, 1.0, &d) == APPM_OK);
         p = check_read_file(path, &len);
         CHECK(p && exr_read(p, len, W, H, back, &half, &zip) && !half && zip);
-        for (i = 0; p && i < n; ++i) bad += fbits(back[i]) != fbits(img.rgb[i]);
+        for (i = 0; p && i < n; ++i) bad += check_fbits(back[i]) != check_fbits(img.rgb[i]);
         CHECK(bad == 0);
         CHECK_MSG(len < (size_t)W * H * 12 / 4, "smooth.exr: %.0f bytes", (double)len);
         free(p);

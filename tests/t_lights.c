@@ -53,7 +53,7 @@ static appm_scene *load_quad(const appm_config *cfg)
 }
 
 /* Mean of channel 1 over the pixels of the square [x0, x1) x [y0, y1). */
-static double box_mean(const appm_image *img, uint32_t x0, uint32_t x1, uint32_t y0, uint32_t y1)
+static double rect_mean(const appm_image *img, uint32_t x0, uint32_t x1, uint32_t y0, uint32_t y1)
 {
     double sum = 0.0;
     uint32_t x, y;
@@ -63,7 +63,7 @@ static double box_mean(const appm_image *img, uint32_t x0, uint32_t x1, uint32_t
 }
 
 /* Renders `passes` passes of the path tracer at 32x32 into *img (a copy, to free). */
-static int render(const appm_scene *s, int passes, warnings *w, appm_image *img)
+static int render_lights(const appm_scene *s, int passes, warnings *w, appm_image *img)
 {
     appm_config cfg;
     appm_renderer *r = NULL;
@@ -102,8 +102,8 @@ static void test_white_environment(void)
     CHECK(in.lights_environment == 1 && in.lights_point == 0 && in.lights_area == 0);
     CHECK_NEAR(in.power_environment[0], want, want * 1e-6);
     CHECK_NEAR(in.power_environment[2], want, want * 1e-6);
-    if (render(s, check_quick() ? 16 : 64, &w, &img)) {
-        double centre = box_mean(&img, 12, 20, 12, 20), corner = box_mean(&img, 0, 2, 0, 2);
+    if (render_lights(s, check_quick() ? 16 : 64, &w, &img)) {
+        double centre = rect_mean(&img, 12, 20, 12, 20), corner = rect_mean(&img, 0, 2, 0, 2);
         CHECK_NEAR(centre, 0.5, check_quick() ? 0.04 : 0.02); /* rho L */
         CHECK_NEAR(corner, 1.0, 1e-6);                        /* the environment itself */
         free(img.rgb);
@@ -112,7 +112,7 @@ static void test_white_environment(void)
     appm_scene_destroy(s);
 }
 
-static void test_point_light(void)
+static void test_point_light_falloff(void)
 {
     appm_scene *s = load_quad(NULL);
     appm_scene_info in;
@@ -131,9 +131,9 @@ static void test_point_light(void)
     appm_scene_get_info(s, &in);
     CHECK(in.lights_environment == 0 && in.lights_point == 1); /* the stand-in is gone */
     CHECK_NEAR(in.power_point[1], 16.0 * APPM__PI * APPM__PI, 1e-3);
-    if (render(s, 4, &w, &img)) {
+    if (render_lights(s, 4, &w, &img)) {
         /* the central 2x2 pixels reach s = 0.1 off the axis: E falls by < 0.4 % there */
-        double centre = box_mean(&img, 15, 17, 15, 17), corner = box_mean(&img, 0, 2, 0, 2);
+        double centre = rect_mean(&img, 15, 17, 15, 17), corner = rect_mean(&img, 0, 2, 0, 2);
         CHECK_NEAR(centre, 0.5, 0.006);
         CHECK(corner == 0.0); /* no environment any more */
         free(img.rgb);
@@ -147,8 +147,8 @@ static void test_point_light(void)
         appm_scene_get_info(s, &in);
         CHECK(in.lights_point == 2);
         CHECK_NEAR(in.power_point[0], 32.0 * APPM__PI * APPM__PI, 1e-3);
-        if (render(s, 256, &w, &img)) { /* each shadow ray picks one light: 1 or 0, 1024 samples */
-            CHECK_NEAR(box_mean(&img, 15, 17, 15, 17), 0.5, 0.05);
+        if (render_lights(s, 256, &w, &img)) { /* each shadow ray picks one light: 1 or 0, 1024 samples */
+            CHECK_NEAR(rect_mean(&img, 15, 17, 15, 17), 0.5, 0.05);
             free(img.rgb);
         }
     }
@@ -176,9 +176,9 @@ static void test_set_environment(void)
     appm_scene_get_info(s, &in);
     CHECK(in.lights_environment == 1);
     CHECK_NEAR(in.power_environment[0], want, want * 1e-6);
-    if (render(s, check_quick() ? 16 : 64, &w, &img)) {
-        CHECK_NEAR(box_mean(&img, 12, 20, 12, 20), 1.0, check_quick() ? 0.08 : 0.04);
-        CHECK_NEAR(box_mean(&img, 0, 2, 0, 2), 2.0, 1e-6);
+    if (render_lights(s, check_quick() ? 16 : 64, &w, &img)) {
+        CHECK_NEAR(rect_mean(&img, 12, 20, 12, 20), 1.0, check_quick() ? 0.08 : 0.04);
+        CHECK_NEAR(rect_mean(&img, 0, 2, 0, 2), 2.0, 1e-6);
         free(img.rgb);
     }
     CHECK(w.n == 0); /* a chosen environment is no stand-in */
@@ -262,10 +262,10 @@ static void test_studio(void)
         appm__v3 key = appm__env_radiance(s, appm__normalize(appm__v(-0.55f, 0.72f, 0.42f)));
         CHECK(up.y > 3.0f * down.y && key.y > 10.0f * up.y);
     }
-    if (render(s, check_quick() ? 8 : 32, &w, &img)) {
-        double centre = box_mean(&img, 12, 20, 12, 20);
-        double corners = (box_mean(&img, 0, 3, 0, 3) + box_mean(&img, 29, 32, 0, 3) + box_mean(&img, 0, 3, 29, 32) +
-                          box_mean(&img, 29, 32, 29, 32)) / 4.0;
+    if (render_lights(s, check_quick() ? 8 : 32, &w, &img)) {
+        double centre = rect_mean(&img, 12, 20, 12, 20);
+        double corners = (rect_mean(&img, 0, 3, 0, 3) + rect_mean(&img, 29, 32, 0, 3) + rect_mean(&img, 0, 3, 29, 32) +
+                          rect_mean(&img, 29, 32, 29, 32)) / 4.0;
         CHECK_MSG(fabs(centre - corners) > 0.3 * corners, "centre %g, corners %g", centre, corners);
         free(img.rgb);
     }
@@ -286,7 +286,7 @@ int main(void)
 {
     test_studio();
     test_white_environment();
-    test_point_light();
+    test_point_light_falloff();
     test_set_environment();
     test_allocation_failure();
     return check_finish();

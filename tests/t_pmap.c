@@ -32,7 +32,7 @@
 
 static appm__rng g_rng;
 
-static float uf(void) { return appm__rng_float(&g_rng); }
+static float pmap_uf(void) { return appm__rng_float(&g_rng); }
 
 typedef struct visit_log {
     const appm__photon *base;
@@ -175,7 +175,7 @@ static void test_random(appm__mem *mem)
     for (s = 0; s < sets; ++s) {
         size_t n = (size_t)(1 + appm__rng_u32(&g_rng) % 3000), i;
         float spread = s % 3 == 0 ? 1.0f : (s % 3 == 1 ? 100.0f : 1e-3f);
-        float cell = spread * (0.01f + 0.3f * uf());
+        float cell = spread * (0.01f + 0.3f * pmap_uf());
         appm__photon *src = (appm__photon *)malloc(n * sizeof *src), *ph;
         size_t *a = (size_t *)malloc((n + 1) * sizeof *a), *b = (size_t *)malloc((n + 1) * sizeof *b);
         appm__pmap m;
@@ -187,7 +187,7 @@ static void test_random(appm__mem *mem)
             return;
         }
         for (i = 0; i < n; ++i) /* a flat cluster (a wall) mixed with a volume */
-            src[i] = make_photon(spread * uf(), i % 2 ? spread * uf() : 0.25f * spread, spread * uf(), (float)i);
+            src[i] = make_photon(spread * pmap_uf(), i % 2 ? spread * pmap_uf() : 0.25f * spread, spread * pmap_uf(), (float)i);
         ph = build(&m, mem, src, n, cell, NULL, 0);
         if (!ph) break;
         check_build(&m, n, "random cloud");
@@ -199,8 +199,8 @@ static void test_random(appm__mem *mem)
                 const appm__photon *p = &m.ph[appm__rng_u32(&g_rng) % n];
                 x = appm__v(p->x, p->y, p->z);
             } else {
-                x = appm__v(spread * (1.2f * uf() - 0.1f), spread * (1.2f * uf() - 0.1f),
-                            spread * (1.2f * uf() - 0.1f));
+                x = appm__v(spread * (1.2f * pmap_uf() - 0.1f), spread * (1.2f * pmap_uf() - 0.1f),
+                            spread * (1.2f * pmap_uf() - 0.1f));
             }
             if (kind == 3) { /* on a cell boundary, in every coordinate */
                 x.x = m.lo.x + cell * (float)(appm__rng_u32(&g_rng) % 8);
@@ -208,8 +208,8 @@ static void test_random(appm__mem *mem)
                 x.z = m.lo.z + cell * (float)(appm__rng_u32(&g_rng) % 8);
             }
             R = kind == 1 ? 0.0f
-                          : (kind == 2 ? spread * 3.0f * uf() /* often larger than the whole grid */
-                                       : cell * (0.05f + 3.0f * uf()));
+                          : (kind == 2 ? spread * 3.0f * pmap_uf() /* often larger than the whole grid */
+                                       : cell * (0.05f + 3.0f * pmap_uf()));
             if (kind == 4) R = cell * (float)(1 + appm__rng_u32(&g_rng) % 3); /* to exactly a cell boundary */
             total++;
             bad += !same_as_scan(&m, x, R, a, b, "random cloud");
@@ -256,7 +256,7 @@ static void test_lattice(appm__mem *mem)
 }
 
 /* The empty map, one cell holding everything, duplicates, a tiny table. */
-static void test_degenerate(appm__mem *mem)
+static void test_degenerate_maps(appm__mem *mem)
 {
     enum { N = 2000 };
     static appm__photon src[N];
@@ -273,12 +273,12 @@ static void test_degenerate(appm__mem *mem)
         free(ph);
     }
     /* all in one cell of size 1, a query from a neighbouring cell */
-    for (i = 0; i < N; ++i) src[i] = make_photon(0.5f + 0.4f * uf(), 0.5f + 0.4f * uf(), 0.5f + 0.4f * uf(), (float)i);
+    for (i = 0; i < N; ++i) src[i] = make_photon(0.5f + 0.4f * pmap_uf(), 0.5f + 0.4f * pmap_uf(), 0.5f + 0.4f * pmap_uf(), (float)i);
     ph = build(&m, mem, src, N, 1.0f, NULL, 0);
     if (ph) {
         check_build(&m, N, "one cell");
         for (i = 0; i < 200; ++i)
-            bad += !same_as_scan(&m, appm__v(2.0f * uf() - 0.5f, 2.0f * uf() - 0.5f, 1.5f * uf()), 0.6f * uf(), a, b,
+            bad += !same_as_scan(&m, appm__v(2.0f * pmap_uf() - 0.5f, 2.0f * pmap_uf() - 0.5f, 1.5f * pmap_uf()), 0.6f * pmap_uf(), a, b,
                                  "one cell");
         free(ph);
     }
@@ -325,7 +325,7 @@ static void test_runs(appm__mem *mem)
     size_t i, nb;
     int ok = 1, mixed = 0;
     memset(&m, 0, sizeof m);
-    for (i = 0; i < N; ++i) src[i] = make_photon(uf(), uf(), 0.0f, (float)i);
+    for (i = 0; i < N; ++i) src[i] = make_photon(pmap_uf(), pmap_uf(), 0.0f, (float)i);
     runs[0].start = N / 2;
     runs[0].count = N - N / 2;
     runs[1].start = 0;
@@ -367,7 +367,7 @@ static void test_octahedral(void)
     appm__photon store[4];
     uint32_t used = 0;
     for (i = 0; i < 20000; ++i) {
-        double z = 1.0 - 2.0 * uf(), s = sqrt(fmax(0.0, 1.0 - z * z)), ph = 2.0 * APPM__PI * uf(), e;
+        double z = 1.0 - 2.0 * pmap_uf(), s = sqrt(fmax(0.0, 1.0 - z * z)), ph = 2.0 * APPM__PI * pmap_uf(), e;
         appm__v3 v = appm__v((float)(s * cos(ph)), (float)(s * sin(ph)), (float)z);
         appm__photon p;
         float a, b;
@@ -424,7 +424,7 @@ int main(void)
     appm__rng_seed(&g_rng, 12345, 0, APPM__DOMAIN_TEST, 0);
     test_random(&mem);
     test_lattice(&mem);
-    test_degenerate(&mem);
+    test_degenerate_maps(&mem);
     test_runs(&mem);
     test_octahedral();
     CHECK_MSG(mem.live == 0, "%lld bytes of map tables not freed", (long long)mem.live);

@@ -141,7 +141,7 @@ static uint32_t ref_crc(const unsigned char *p, size_t n) /* bitwise CRC-32 (IEE
     return c ^ 0xFFFFFFFFu;
 }
 
-static void test_png(void)
+static void test_png_bytes(void)
 {
     static const unsigned char sig[8] = {137, 80, 78, 71, 13, 10, 26, 10};
     /* 2x2: black, white (clamped), 0.5 grey (sRGB 188), a colour */
@@ -306,7 +306,7 @@ static void test_numbers(void)
  * machine: otherwise a checkpoint would not resume there.  (Values computed on
  * x86-64; they change only with what the hash covers, and then the checkpoint
  * format version changes too.) */
-static void test_scene_hash(void)
+static void test_scene_hash_values(void)
 {
     static const uint64_t want[2][APPM__SH_PARTS] = {
         {0xf5af553141b6f6ebull, 0x93b0885205f9a440ull, 0xe7f8a0594b5ba4e1ull, 0x3bdccbfde664aebcull,
@@ -345,7 +345,7 @@ static void test_scene_hash(void)
 /* ---- A tiny render ---------------------------------------------------------- */
 
 /* The cube [-1,1]^3, every face counter-clockwise seen from inside. */
-static int write_box(void)
+static int write_cube(void)
 {
     static const int axes[6][4] = {{0, 1, 2, 1},  {0, 1, 2, -1}, {1, 2, 0, 1},
                                    {1, 2, 0, -1}, {2, 0, 1, 1},  {2, 0, 1, -1}};
@@ -371,14 +371,6 @@ static int write_box(void)
            check_write_file(check_path("portable", "box.scene"),
                             "mesh portable-box.obj\n"
                             "camera eye 0.1 0.2 0.5 target 0 0 -1 up 0 1 0 fov 70\nimage 16 12\n");
-}
-
-static double image_mean(const appm_image *img)
-{
-    size_t i, n = (size_t)img->width * img->height * 3;
-    double s = 0;
-    for (i = 0; i < n; ++i) s += img->rgb[i];
-    return s / (double)n;
 }
 
 static void render_box(const appm_scene *scene, appm_method method, unsigned threads, float **out,
@@ -414,7 +406,7 @@ static void test_render(void)
     int k;
     double mean[2] = {0, 0}, ref_mean[2];
     const char *ref;
-    CHECK(write_box());
+    CHECK(write_cube());
     CHECK_MSG(appm_scene_load(check_path("portable", "box.scene"), NULL, &scene, &d) == APPM_OK,
               "%s:%u: %s", d.file, d.line, d.message);
     if (!scene) return;
@@ -448,7 +440,7 @@ static void test_render(void)
         /* furnace: L = Le / (1 - rho) = 1 everywhere.  The path tracer is unbiased
          * (about 0.99 after three passes); a photon kernel may lose photons past the
          * box's edges, so the photon methods are allowed to read somewhat low. */
-        mean[k] = image_mean(&img);
+        mean[k] = check_image_mean(&img);
         if (methods[k] == APPM_METHOD_PT)
             CHECK_NEAR(mean[k], 1.0, 0.05);
         else
@@ -475,11 +467,11 @@ int main(void)
            APPM_THREADS);
     test_pfm_write();
     test_pfm_parse();
-    test_png();
+    test_png_bytes();
     test_file_bytes();
     test_rng();
     test_numbers();
-    test_scene_hash();
+    test_scene_hash_values();
     test_render();
     return check_finish();
 }

@@ -49,14 +49,6 @@ static double se_of(const double *v, int n)
 }
 
 /* Mean over all pixels and channels. */
-static double image_mean(const appm_image *img)
-{
-    size_t i, n = (size_t)img->width * img->height * 3;
-    double s = 0.0;
-    for (i = 0; i < n; ++i) s += img->rgb[i];
-    return s / (double)n;
-}
-
 static double rmse_of(const float *a, const float *b, size_t n)
 {
     double s = 0.0;
@@ -67,12 +59,6 @@ static double rmse_of(const float *a, const float *b, size_t n)
 
 
 
-
-static const char *method_name(appm_method m)
-{
-    static const char *const names[4] = {"appm", "ppm", "sppm", "pt"};
-    return names[m];
-}
 
 /* ---- 1. Furnace (testing.md A3) ---------------------------------------------
  *
@@ -168,7 +154,7 @@ static double furnace_render(const appm_scene *s, appm_method m, appm_direct dir
     if (!r) return v;
     if (check_passes(r, passes)) {
         appm_renderer_image(r, &img);
-        v = image_mean(&img);
+        v = check_image_mean(&img);
     }
     appm_renderer_destroy(r);
     return v;
@@ -193,12 +179,12 @@ static void furnace_case(const appm_scene *s, int mirror, appm_method m, appm_di
     tol = 5.0 * se + 1e-6 * (expect > 0.0 ? expect : 1.0);
     CHECK_MSG(fabs(mean - expect) <= tol,
               "furnace%s %s%s D=%u: mean %.6f, expected %.6f within 5 SE = %.2g (SE %.2g)", view,
-              method_name(m), dir == APPM_DIRECT_PHOTONS ? "+photons" : "", dcap, mean, expect, tol, se);
+              check_method_name(m), dir == APPM_DIRECT_PHOTONS ? "+photons" : "", dcap, mean, expect, tol, se);
     CHECK_MSG(fabs(mean - expect) <= 0.02 * expect + 1e-6,
-              "furnace%s %s%s D=%u: mean %.6f is not within 2%% of %.6f", view, method_name(m),
+              "furnace%s %s%s D=%u: mean %.6f is not within 2%% of %.6f", view, check_method_name(m),
               dir == APPM_DIRECT_PHOTONS ? "+photons" : "", dcap, mean, expect);
     if (getenv("APPM_TEST_VERBOSE"))
-        printf("furnace%s %-5s%-8s D=%2u  mean %.6f  expected %.6f  SE %.2g\n", view, method_name(m),
+        printf("furnace%s %-5s%-8s D=%2u  mean %.6f  expected %.6f  SE %.2g\n", view, check_method_name(m),
                dir == APPM_DIRECT_PHOTONS ? "+photons" : "", dcap, mean, expect, se);
 }
 
@@ -304,11 +290,11 @@ static void gf_case(const appm_scene *s, double ns, appm_method m, appm_direct d
     if (ref) se = sqrt(se * se + ref_se * ref_se);
     tol = 5.0 * se + 1e-6 * target;
     CHECK_MSG(fabs(mean - target) <= tol && fabs(mean - target) <= 0.02 * target,
-              "glossy furnace Ns %g %s%s D=%u: mean %.6f, %s %.6f, 5 SE = %.2g", ns, method_name(m),
+              "glossy furnace Ns %g %s%s D=%u: mean %.6f, %s %.6f, 5 SE = %.2g", ns, check_method_name(m),
               dir == APPM_DIRECT_PHOTONS ? "+photons" : "", depth ? depth : 32, mean, ref ? "pt" : "expected",
               target, tol);
     if (getenv("APPM_TEST_VERBOSE"))
-        printf("glossy furnace Ns %-5g %-5s%-8s D=%2u  mean %.6f  %s %.6f  SE %.2g\n", ns, method_name(m),
+        printf("glossy furnace Ns %-5g %-5s%-8s D=%2u  mean %.6f  %s %.6f  SE %.2g\n", ns, check_method_name(m),
                dir == APPM_DIRECT_PHOTONS ? "+photons" : "", depth ? depth : 32, mean, ref ? "pt" : "exact",
                target, se);
 }
@@ -385,12 +371,12 @@ static void test_glossy_furnace(void)
 #define PL_R1 0.3
 #define PL_CONE 18.0
 
-static const char PLANE_OBJ[] = "# a diffuse square far larger than anything the camera sees\n"
+static const char BIG_PLANE_OBJ[] = "# a diffuse square far larger than anything the camera sees\n"
                                 "mtllib render-plane.mtl\n"
                                 "usemtl half\n"
                                 "v -50 0 -50\nv -50 0 50\nv 50 0 50\nv 50 0 -50\n"
                                 "f 1 2 3 4\n";
-static const char PLANE_MTL[] = "newmtl half\nKd 0.5 0.5 0.5\n";
+static const char BIG_PLANE_MTL[] = "newmtl half\nKd 0.5 0.5 0.5\n";
 /* the camera at 2 h looks straight down through the light at the point below
  * it; a 0.2 degree field of view sees a patch 0.007 wide (r = 0.3) */
 static const char PLANE_POINT_SCENE[] = "mesh render-plane.obj\n"
@@ -458,13 +444,13 @@ static void pl_render(const appm_scene *s, double alpha, uint64_t M, uint64_t se
         if (!check_passes(r, 1)) break;
         if (j == at[k]) {
             appm_renderer_image(r, &img);
-            out[k++] = image_mean(&img);
+            out[k++] = check_image_mean(&img);
         }
     }
     appm_renderer_destroy(r);
 }
 
-static void test_point_light(void)
+static void test_point_light_plane(void)
 {
     const double L_true = PL_RHO / APPM__PI * PL_I / (PL_H * PL_H);
     const double bias1 = 1.0 - pl_blurred(PL_R1) * PL_H * PL_H / PL_I; /* 0.062806 */
@@ -473,8 +459,8 @@ static void test_point_light(void)
     const double slack = 1e-4;
     appm_scene *point, *spot;
     int spot_i;
-    CHECK(check_write_file(check_path(GROUP, "plane.obj"), PLANE_OBJ));
-    CHECK(check_write_file(check_path(GROUP, "plane.mtl"), PLANE_MTL));
+    CHECK(check_write_file(check_path(GROUP, "plane.obj"), BIG_PLANE_OBJ));
+    CHECK(check_write_file(check_path(GROUP, "plane.mtl"), BIG_PLANE_MTL));
     CHECK(check_write_file(check_path(GROUP, "plane-point.scene"), PLANE_POINT_SCENE));
     CHECK(check_write_file(check_path(GROUP, "plane-spot.scene"), PLANE_SPOT_SCENE));
     point = check_load_scene(check_path(GROUP, "plane-point.scene"));
@@ -685,7 +671,7 @@ static int xrender_run(const appm_scene *s, appm_method m, uint32_t w, int passe
         double mj;
         if (!check_passes(r, 1)) goto done;
         appm_renderer_image(r, &img);
-        mj = image_mean(&img);
+        mj = check_image_mean(&img);
         out->pm[j - 1] = j * mj - (j - 1) * prev;
         prev = mj;
         xc_block_means(img.rgb, w, bcur);
@@ -696,7 +682,7 @@ static int xrender_run(const appm_scene *s, appm_method m, uint32_t w, int passe
         if (m != APPM_METHOD_PT) {
             const float *rad = appm_renderer_aux(r, APPM_AUX_RADIUS);
             if (!rad) {
-                CHECK_MSG(rad != NULL, "%s: no radius map", method_name(m));
+                CHECK_MSG(rad != NULL, "%s: no radius map", check_method_name(m));
                 goto done;
             }
             for (i = 0; i < npix; ++i) rsum[i] += rad[i];
@@ -738,14 +724,14 @@ static void crosscheck_scene(const char *path)
                 CHECK_MSG(diff >= -x.bound - 4.0 * se && diff <= 4.0 * se,
                           "%s, %s: image mean %+.2f%% off pt's %.5f; allowed -%.2f%% (edges) - %.2f%% (4 SE) "
                           ".. +%.2f%%",
-                          path, method_name(methods[mi]), 100.0 * diff / mean_pt, mean_pt,
+                          path, check_method_name(methods[mi]), 100.0 * diff / mean_pt, mean_pt,
                           100.0 * x.bound / mean_pt, 400.0 * se / mean_pt, 400.0 * se / mean_pt);
                 CHECK_MSG(rmse < x.rmse8, "%s, %s: RMSE %.4f after %d passes, not below %.4f after 8", path,
-                          method_name(methods[mi]), rmse, passes, x.rmse8);
+                          check_method_name(methods[mi]), rmse, passes, x.rmse8);
                 if (getenv("APPM_TEST_VERBOSE"))
                     printf("%s %s: mean pt %.5f diff %+.2f%% edge bound %.2f%% SE %.2f%% rmse8 %.4f rmse%d "
                            "%.4f\n",
-                           path, method_name(methods[mi]), mean_pt, 100.0 * diff / mean_pt,
+                           path, check_method_name(methods[mi]), mean_pt, 100.0 * diff / mean_pt,
                            100.0 * x.bound / mean_pt, 100.0 * se / mean_pt, x.rmse8, passes, rmse);
             }
             xrender_free(&x);
@@ -805,11 +791,11 @@ static void crosscheck_glossy(void)
             xc_paired(x.pm, pair.pm, passes, 1, 0, &diff, &se);
             CHECK_MSG(diff >= -x.bound - 4.0 * se && diff <= 4.0 * se,
                       "%s, %s: image mean %+.2f%% off pt's %.5f; allowed -%.2f%% (edges) - %.2f%% .. +%.2f%% (4 SE)",
-                      path, method_name(methods[mi]), 100.0 * diff / mean_pt, mean_pt, 100.0 * x.bound / mean_pt,
+                      path, check_method_name(methods[mi]), 100.0 * diff / mean_pt, mean_pt, 100.0 * x.bound / mean_pt,
                       400.0 * se / mean_pt, 400.0 * se / mean_pt);
             if (!g_quick)
                 CHECK_MSG(fabs(diff) <= 0.01 * mean_pt, "%s, %s: image mean %+.2f%% off pt's, not within 1%%", path,
-                          method_name(methods[mi]), 100.0 * diff / mean_pt);
+                          check_method_name(methods[mi]), 100.0 * diff / mean_pt);
             for (b = 0; b < x.nb; ++b) {
                 double db, sb, mb = 0.0, z;
                 int j;
@@ -821,14 +807,14 @@ static void crosscheck_glossy(void)
                 if (fabs(z) > 4.5) {
                     bad++;
                     CHECK_MSG(0, "%s, %s: block %d mean %+.2f%% off pt's %.5f: %.1f SE beyond the edge bound %.2f%%",
-                              path, method_name(methods[mi]), b, 100.0 * db / mb, mb, z, 100.0 * x.bbound[b] / mb);
+                              path, check_method_name(methods[mi]), b, 100.0 * db / mb, mb, z, 100.0 * x.bbound[b] / mb);
                 }
             }
             CHECK(bad == 0);
             if (getenv("APPM_TEST_VERBOSE"))
                 printf("%s %dx%d %d passes %s: mean pt %.5f diff %+.3f%% edge bound %.2f%% SE %.3f%%; blocks: worst "
                        "%.2f SE beyond the bound, largest |diff| %.2f%%\n",
-                       path, (int)w, (int)w, passes, method_name(methods[mi]), mean_pt, 100.0 * diff / mean_pt,
+                       path, (int)w, (int)w, passes, check_method_name(methods[mi]), mean_pt, 100.0 * diff / mean_pt,
                        100.0 * x.bound / mean_pt, 100.0 * se / mean_pt, worst_z, 100.0 * worst_rel);
             xrender_free(&x);
         }
@@ -900,33 +886,33 @@ static void test_determinism(void)
         int ok = 1;
         for (t = 0; t < 3; ++t) {
             char file_name[32];
-            snprintf(file_name, sizeof file_name, "det-%s-%d.pfm", method_name(methods[mi]), t + 1);
+            snprintf(file_name, sizeof file_name, "det-%s-%d.pfm", check_method_name(methods[mi]), t + 1);
             snprintf(name[t], sizeof name[t], "%s", check_path(GROUP, file_name));
             ok &= det_render(s, methods[mi], (unsigned)t + 1, 5, img[t], name[t]);
         }
         ok &= det_render(s, methods[mi], 2, 6, img[3], NULL);
         if (!ok) continue;
         for (i = 0; i < n; ++i) sum += img[0][i];
-        CHECK_MSG(sum > 0.0 && sum < HUGE_VAL, "%s: image sum %g", method_name(methods[mi]), sum);
+        CHECK_MSG(sum > 0.0 && sum < HUGE_VAL, "%s: image sum %g", check_method_name(methods[mi]), sum);
         CHECK_MSG(memcmp(img[0], img[1], n * sizeof(float)) == 0, "%s: 1 and 2 threads differ",
-                  method_name(methods[mi]));
+                  check_method_name(methods[mi]));
         CHECK_MSG(memcmp(img[0], img[2], n * sizeof(float)) == 0, "%s: 1 and 3 threads differ",
-                  method_name(methods[mi]));
+                  check_method_name(methods[mi]));
         CHECK_MSG(memcmp(img[0], img[3], n * sizeof(float)) != 0, "%s: seeds 5 and 6 give the same image",
-                  method_name(methods[mi]));
+                  check_method_name(methods[mi]));
         /* the scalar box test of the wide BVH finds the same hits as the SIMD one */
         s->bvh_path = APPM__BVH_SCALAR;
         ok = det_render(s, methods[mi], 2, 5, img[3], NULL);
         s->bvh_path = APPM__BVH_SIMD;
         CHECK_MSG(ok && memcmp(img[0], img[3], n * sizeof(float)) == 0,
-                  "%s: the SIMD (%s) and the scalar box test give different images", method_name(methods[mi]),
+                  "%s: the SIMD (%s) and the scalar box test give different images", check_method_name(methods[mi]),
                   APPM__SIMD_NAME);
         for (t = 0; t < 3; ++t) file[t] = check_read_file(name[t], &len[t]);
-        CHECK_MSG(file[0] && len[0] > n * sizeof(float), "%s: %s missing or short", method_name(methods[mi]),
+        CHECK_MSG(file[0] && len[0] > n * sizeof(float), "%s: %s missing or short", check_method_name(methods[mi]),
                   name[0]);
         for (t = 1; t < 3; ++t)
             CHECK_MSG(file[0] && file[t] && len[t] == len[0] && memcmp(file[0], file[t], len[0]) == 0,
-                      "%s: %s and %s differ", method_name(methods[mi]), name[0], name[t]);
+                      "%s: %s and %s differ", check_method_name(methods[mi]), name[0], name[t]);
         for (t = 0; t < 3; ++t) free(file[t]);
     }
     for (k = 0; k < 4; ++k) free(img[k]);
@@ -976,17 +962,17 @@ static void memory_case(const appm_scene *s, appm_method m, uint64_t photons, in
         if (j == 5) mem5 = st.memory_bytes;
         if (strict && j == 1) /* the first guess held: the first pass was not traced again */
             CHECK_MSG(r->store_slots == slots0, "%s, %u photons per pass, %u threads: the store grew "
-                      "from %lu to %lu photons in the first pass", method_name(m), (unsigned)photons, threads,
+                      "from %lu to %lu photons in the first pass", check_method_name(m), (unsigned)photons, threads,
                       (unsigned long)slots0, (unsigned long)r->store_slots);
     }
     CHECK_MSG(unexplained == 0,
               "%s, %u photons per pass: memory changed after %d passes that stored no more photons than "
               "an earlier pass (first: pass %d)",
-              method_name(m), (unsigned)photons, unexplained, first_bad);
+              check_method_name(m), (unsigned)photons, unexplained, first_bad);
     if (strict) {
         CHECK_MSG(prev_mem == mem5 && changes == 0,
                   "%s, %u photons per pass: %llu bytes after pass 5, %llu after pass 50 (%d changes)",
-                  method_name(m), (unsigned)photons, (unsigned long long)mem5, (unsigned long long)prev_mem,
+                  check_method_name(m), (unsigned)photons, (unsigned long long)mem5, (unsigned long long)prev_mem,
                   changes);
         CHECK(mem5 > 0);
     }
@@ -1017,7 +1003,7 @@ int main(void)
     g_quick = check_quick();
     if (group_on('f')) test_furnace();
     if (group_on('g')) test_glossy_furnace();
-    if (group_on('l')) test_point_light();
+    if (group_on('l')) test_point_light_plane();
     if (group_on('x')) test_crosscheck();
     if (group_on('d')) test_determinism();
     if (group_on('m')) test_memory();

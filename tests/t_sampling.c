@@ -37,14 +37,14 @@
 
 static appm__rng g_rng;
 
-/* The source of uf(): the PCG stream, or (g_qmc) coordinates 0, 1 of successive
+/* The source of sample_uf(): the PCG stream, or (g_qmc) coordinates 0, 1 of successive
  * points of one sequence of the sampler (group 3: a vertex's BSDF numbers), two
  * calls a point - every sampler tested with it takes two numbers. */
 static int g_qmc;
 static uint64_t g_qmc_calls;
 static appm__sobol_tab g_tab;
 
-static float uf(void)
+static float sample_uf(void)
 {
     float u[4];
     uint64_t c = g_qmc_calls++;
@@ -160,7 +160,7 @@ static void test_cosine(appm__v3 n, long N, const char *name)
     frame(nd, t, b);
     memset(obs, 0, sizeof obs);
     for (i = 0; i < N; ++i) {
-        appm__v3 w = appm__cosine_dir(n, uf(), uf());
+        appm__v3 w = appm__cosine_dir(n, sample_uf(), sample_uf());
         double x = w.x * t[0] + w.y * t[1] + w.z * t[2], y = w.x * b[0] + w.y * b[1] + w.z * b[2];
         double z = w.x * nd[0] + w.y * nd[1] + w.z * nd[2], phi = atan2(y, x);
         if (fabs(x * x + y * y + z * z - 1.0) > 1e-5) badlen++;
@@ -188,7 +188,7 @@ static void test_sphere(long N)
     int k;
     memset(obs, 0, sizeof obs);
     for (i = 0; i < N; ++i) {
-        appm__v3 w = appm__uniform_sphere(uf(), uf());
+        appm__v3 w = appm__uniform_sphere(sample_uf(), sample_uf());
         double phi = atan2((double)w.y, (double)w.x);
         if (fabs((double)w.x * w.x + (double)w.y * w.y + (double)w.z * w.z - 1.0) > 1e-5) badlen++;
         obs[bin_of(w.z, -1, 1, NT) * NP + bin_of(phi, -APPM__PI, APPM__PI, NP)] += 1;
@@ -215,7 +215,7 @@ static void test_triangle(long N)
     memset(obs, 0, sizeof obs);
     for (i = 0; i < N; ++i) {
         float b1, b2;
-        appm__v3 p = appm__tri_point(&t, uf(), uf(), &b1, &b2);
+        appm__v3 p = appm__tri_point(&t, sample_uf(), sample_uf(), &b1, &b2);
         /* the point is the one the barycentrics name: p0 + b1 e1 + b2 e2 */
         double q[3], e = 0;
         int k;
@@ -314,7 +314,7 @@ static void dielectric_case(double theta, int outside, long n)
     m.kind = APPM__MAT_DIELECTRIC;
     m.ior = 1.5f;
     for (i = 0; i < n; ++i) {
-        float u1 = uf(), u2 = uf(), u3 = uf();
+        float u1 = sample_uf(), u2 = sample_uf(), u3 = sample_uf();
         appm__bsdf_sample bs, bi;
         int ok = appm__bsdf_sample_dir(&m, &sf, wo, u1, u2, u3, APPM__RADIANCE, &bs);
         int ok2 = appm__bsdf_sample_dir(&m, &sf, wo, u1, u2, u3, APPM__IMPORTANCE, &bi);
@@ -407,9 +407,9 @@ static void test_weights(void)
     gla.ior = 1.5f;
     for (i = 0; i < N; ++i) {
         /* wo uniform over the sphere: both sides of the two-sided materials */
-        appm__v3 wo = appm__uniform_sphere(uf(), uf());
+        appm__v3 wo = appm__uniform_sphere(sample_uf(), sample_uf());
         appm__bsdf_sample bs;
-        float u1 = uf(), u2 = uf(), u3 = uf();
+        float u1 = sample_uf(), u2 = sample_uf(), u3 = sample_uf();
         int mode = (int)(i & 1);
         if (appm__bsdf_sample_dir(&dif, &sf, wo, u1, u2, u3, mode, &bs)) {
             float c = fabsf(bs.wi.z);
@@ -479,8 +479,8 @@ static const char *LIGHT_OBJ = "mtllib sampling-lamp.mtl\n"
                                "v -2 0 -2\nv 2 0 -2\nv 2 0 2\nv -2 0 2\n"
                                "usemtl lamp\nf 1 2 3\nf 1 3 4\n"
                                "usemtl floor\nf 5 8 7 6\n";
-static const char *LIGHT_MTL = "newmtl lamp\nKe 4 3 2\nKd 0 0 0\nnewmtl floor\nKd 0.5 0.5 0.5\n";
-static const char *LIGHT_SCENE = "mesh sampling-lamp.obj\n"
+static const char *LAMP_MTL = "newmtl lamp\nKe 4 3 2\nKd 0 0 0\nnewmtl floor\nKd 0.5 0.5 0.5\n";
+static const char *LAMP_SCENE = "mesh sampling-lamp.obj\n"
                                  "light point position 0 1 0 intensity 1 2 3\n"
                                  "light point position 1 1 0 intensity 0 0 0\n"
                                  "light spot position 0 1.5 0 target 0 0 0 intensity 10 10 10 cone 30 falloff 10\n"
@@ -502,8 +502,8 @@ static void test_lights(void)
     uint32_t k;
     int c;
     CHECK(check_write_file(check_path(GROUP, "lamp.obj"), LIGHT_OBJ));
-    CHECK(check_write_file(check_path(GROUP, "lamp.mtl"), LIGHT_MTL));
-    CHECK(check_write_file(check_path(GROUP, "lights.scene"), LIGHT_SCENE));
+    CHECK(check_write_file(check_path(GROUP, "lamp.mtl"), LAMP_MTL));
+    CHECK(check_write_file(check_path(GROUP, "lights.scene"), LAMP_SCENE));
     CHECK_MSG(appm_scene_load(check_path(GROUP, "lights.scene"), NULL, &s, &d) == APPM_OK, "%s:%u: %s", d.file,
               d.line, d.message);
     if (!s) return;
@@ -547,7 +547,7 @@ static void test_lights(void)
     /* Frequencies of appm__pick_light against pick (chi-square; the two
      * zero-power lights must never come up). */
     memset(obs, 0, sizeof obs);
-    for (i = 0; i < N; ++i) obs[appm__pick_light(s, uf())] += 1;
+    for (i = 0; i < N; ++i) obs[appm__pick_light(s, sample_uf())] += 1;
     for (k = 0; k < NL; ++k) ex[k] = (double)N * s->light[k].pick;
     CHECK(obs[3] == 0 && obs[7] == 0);
     {
@@ -601,7 +601,7 @@ static void test_lights(void)
         float ue[5];
         uint32_t li;
         double g[3];
-        for (c = 0; c < 5; ++c) ue[c] = uf();
+        for (c = 0; c < 5; ++c) ue[c] = sample_uf();
         li = appm__pick_light(s, ue[0]); /* the light appm__emit will choose */
         if (!appm__emit(s, ue, &ps)) {
             emit_fail++;
@@ -730,7 +730,7 @@ static void test_lobe_chi2(double ns, long N)
     frame(axis, t, b);
     memset(obs, 0, sizeof obs);
     for (i = 0; i < N; ++i) {
-        appm__v3 w = appm__phong_dir(ax, (float)ns, uf(), uf());
+        appm__v3 w = appm__phong_dir(ax, (float)ns, sample_uf(), sample_uf());
         double x = w.x * t[0] + w.y * t[1] + w.z * t[2], y = w.x * b[0] + w.y * b[1] + w.z * b[2];
         double z = w.x * axis[0] + w.y * axis[1] + w.z * axis[2];
         double a = atan2(sqrt(x * x + y * y), z), v = exp((ns + 1.0) * log(cos(a)));
@@ -764,7 +764,7 @@ static void test_glossy_chi2(double kd, double ks, double ns, double theta, long
     memset(obs, 0, sizeof obs);
     for (i = 0; i < N; ++i) {
         appm__bsdf_sample bs;
-        if (!appm__bsdf_sample_dir(&m, &sf, wo, uf(), uf(), uf(), APPM__RADIANCE, &bs)) {
+        if (!appm__bsdf_sample_dir(&m, &sf, wo, sample_uf(), sample_uf(), sample_uf(), APPM__RADIANCE, &bs)) {
             obs[NT * NP] += 1;
             continue;
         }
@@ -808,7 +808,7 @@ static void test_glossy_albedo(void)
             for (i = 0; i < N; ++i) {
                 appm__bsdf_sample bs;
                 double w;
-                if (!appm__bsdf_sample_dir(&m, &sf, wo, uf(), uf(), uf(), (int)(i & 1), &bs)) continue;
+                if (!appm__bsdf_sample_dir(&m, &sf, wo, sample_uf(), sample_uf(), sample_uf(), (int)(i & 1), &bs)) continue;
                 w = bs.weight.y;
                 sum += w, sum2 += w * w;
                 /* the sample's pdf and weight agree with the library's pdf and f */
@@ -850,8 +850,8 @@ static void test_glossy_energy(void)
         CHECK_MSG(mono, "Ns %g: the albedo does not fall monotonically towards grazing", nss[a]);
     }
     for (i = 0; i < 200000; ++i) {
-        appm__material m = glossy_mat(0.2 + 0.3 * uf(), 0.4 * uf() + 0.01, nss[i % 5] * (1.0 + uf()));
-        appm__v3 x = appm__uniform_sphere(uf(), uf()), y = appm__uniform_sphere(uf(), uf()), n = appm__v(0, 0, 1);
+        appm__material m = glossy_mat(0.2 + 0.3 * sample_uf(), 0.4 * sample_uf() + 0.01, nss[i % 5] * (1.0 + sample_uf()));
+        appm__v3 x = appm__uniform_sphere(sample_uf(), sample_uf()), y = appm__uniform_sphere(sample_uf(), sample_uf()), n = appm__v(0, 0, 1);
         appm__v3 f1, f2;
         double xd[3], yd[3], r[3], c, fr, pr;
         x.z = fabsf(x.z), y.z = fabsf(y.z);
@@ -893,7 +893,7 @@ static void test_glossy_mirror_limit(void)
     for (i = 0; i < N; ++i) {
         appm__bsdf_sample bs;
         double a;
-        if (!appm__bsdf_sample_dir(&m, &sf, wo, uf(), uf(), uf(), APPM__RADIANCE, &bs)) {
+        if (!appm__bsdf_sample_dir(&m, &sf, wo, sample_uf(), sample_uf(), sample_uf(), APPM__RADIANCE, &bs)) {
             rejected++;
             continue;
         }

@@ -70,7 +70,7 @@ static appm_scene *load_plane(const char *name, const char *mtl_text)
     return s;
 }
 
-static void render(const appm_scene *s, appm_method method, unsigned passes, appm_image *out)
+static void render_texture(const appm_scene *s, appm_method method, unsigned passes, appm_image *out)
 {
     appm_config cfg;
     appm_renderer *r = NULL;
@@ -169,7 +169,7 @@ static void test_textured_plane(void)
     CHECK(write_pfm(tex, 4, 4, rgb));
     if (!(s = load_plane("plane", "newmtl m\nKd 0.5 1 1\nmap_Kd texture-kd.pfm\n"))) return;
     CHECK(s->ntex == 1 && s->uv != NULL);
-    render(s, APPM_METHOD_PT, 16, &img);
+    render_texture(s, APPM_METHOD_PT, 16, &img);
     if (img.rgb) {
         for (k = 0; k < 16; ++k) { /* a pixel near the centre of texel k: 8 x 8 pixels a texel */
             uint32_t x = (uint32_t)(k % 4) * 8 + 4, y = (uint32_t)(k / 4) * 8 + 4, c;
@@ -208,7 +208,7 @@ static void test_cutout(void)
     CHECK(write_pfm(mask, 2, 1, rgb));
     if (!(s = load_plane("cut", "newmtl m\nKd 0.5 0.5 0.5\nmap_d texture-mask.pfm\n"))) return;
     CHECK(s->cutouts);
-    render(s, APPM_METHOD_PT, 2, &img);
+    render_texture(s, APPM_METHOD_PT, 2, &img);
     if (img.rgb) {
         /* the mask is bilinear between texel centres u = 1/4 (0) and 3/4 (1): the edge at u = 1/2 */
         CHECK_NEAR(px(&img, 4, 16)[0], 1.0, 1e-6);  /* u = 0.14: hole, the environment behind */
@@ -547,7 +547,7 @@ static void test_env_furnace(void)
     }
     for (mi = 0; mi < 3; ++mi) {
         appm_image img;
-        render(s, methods[mi], check_quick() ? 16 : 64, &img);
+        render_texture(s, methods[mi], check_quick() ? 16 : 64, &img);
         if (img.rgb) {
             double sum = 0.0;
             size_t k, cnt = (size_t)img.width * img.height * 3;
@@ -563,15 +563,15 @@ static void test_env_furnace(void)
 /* Loading: vt forms, a texture named twice is loaded once, a missing map is
  * an error naming it and the MTL line, or with warn one warning per file; a
  * face without vt on a textured material is untextured. */
-typedef struct logbuf {
+typedef struct texlog {
     int n;
     char last[512];
     unsigned line;
-} logbuf;
+} texlog;
 
-static void on_log(void *user, const char *file, unsigned line, const char *msg)
+static void on_texlog(void *user, const char *file, unsigned line, const char *msg)
 {
-    logbuf *b = (logbuf *)user;
+    texlog *b = (texlog *)user;
     (void)file;
     b->n++;
     b->line = line;
@@ -585,7 +585,7 @@ static void test_loading(void)
     appm_scene *s = NULL;
     appm_diag d;
     appm_config cfg;
-    logbuf lb;
+    texlog lb;
     tpath(tex, "grey.pfm");
     tpath(mtl, "two.mtl");
     tpath(obj, "two.obj");
@@ -601,7 +601,7 @@ static void test_loading(void)
     appm_config_init(&cfg);
     memset(&lb, 0, sizeof lb);
     cfg.missing_textures = APPM_MISSING_TEXTURES_WARN;
-    cfg.log = on_log;
+    cfg.log = on_texlog;
     cfg.log_user = &lb;
     CHECK(appm_scene_load(obj, &cfg, &s, &d) == APPM_OK);
     CHECK_MSG(lb.n == 1 && strstr(lb.last, "texture-none.png") != NULL && lb.line == 8, "%d warnings, last '%s'",

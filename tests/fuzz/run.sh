@@ -1,5 +1,5 @@
 #!/bin/sh
-# tests/fuzz/run.sh - builds the libFuzzer targets of appm's readers and runs each
+# tests/fuzz/run.sh - builds the libFuzzer program of appm's readers and runs each target
 # for a bounded time on a copy of its seed corpus (make fuzz).
 #
 #   sh tests/fuzz/run.sh [obj mtl scene pfm checkpoint image]     (default: all six)
@@ -69,24 +69,32 @@ if ! $CC $FLAGS "$OUT/probe.c" -o "$OUT/probe" >"$OUT/probe.log" 2>&1; then
     unavailable "$CC cannot link a libFuzzer program (-fsanitize=fuzzer)"
 fi
 
-# one TARGET: builds and runs it; its summary line goes to $OUT/result-TARGET, and
-# its executions, crashes and whether it failed to $OUT/count-TARGET
+# The one program of every target (tests/fuzz/fuzz.c), built once; fuzz_TARGET links
+# to it and fuzzes the reader it is named after.
+echo "fuzz: building tests/fuzz/fuzz.c"
+built=1
+$CC $FLAGS -std=c99 tests/fuzz/fuzz.c -o "$OUT/fuzz" -lm -pthread || built=0
+
+# one TARGET: runs it; its summary line goes to $OUT/result-TARGET, and its
+# executions, crashes and whether it failed to $OUT/count-TARGET
 one() {
     t=$1
-    src=tests/fuzz/fuzz_$t.c
     rm -f "$OUT/result-$t" "$OUT/count-$t"
-    if [ ! -f "$src" ]; then
-        echo "fuzz: no target $t ($src)" | tee "$OUT/result-$t"
+    case " obj mtl scene pfm checkpoint image " in
+    *" $t "*) ;;
+    *)
+        echo "fuzz: no target $t (the targets: obj mtl scene pfm checkpoint image)" | tee "$OUT/result-$t"
         echo "0 0 1" >"$OUT/count-$t"
         return
-    fi
-    echo "fuzz: building $t"
-    if ! $CC $FLAGS -std=c99 "$src" -o "$OUT/fuzz_$t" -lm -pthread; then
+        ;;
+    esac
+    if [ "$built" = 0 ]; then
         echo "FAIL fuzz_$t: build failed"
         echo "fuzz_$t: BUILD FAILED" >"$OUT/result-$t"
         echo "0 0 1" >"$OUT/count-$t"
         return
     fi
+    ln -sf fuzz "$OUT/fuzz_$t"
     corpus="$OUT/corpus-$t"
     rm -rf "$OUT/artifacts/$t"
     mkdir -p "$OUT/artifacts/$t"

@@ -1,5 +1,5 @@
 /* tests/fuzz/targets.h - the six fuzz entry points of appm's readers, shared by
- * the libFuzzer programs (tests/fuzz/fuzz_*.c) and the regression replayer
+ * the libFuzzer program (tests/fuzz/fuzz.c) and the regression replayer
  * (tests/t_fuzz_regress.c).  Include it after appm.c.
  *
  *   fuzz_obj_one    input split at the first NUL into OBJ and MTL text, loaded by
