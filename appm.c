@@ -11941,7 +11941,8 @@ static void appm__gather_finish(const appm__gather *g, int c, double invM, doubl
  *   pass_end    once, after the gather (global schedules)
  * and on request:
  *   photon_term the photon part of the pixel value after j passes (0: none)
- *   bias        the estimated bias of the pixel (luminance), for the error
+ *   bias        the estimated bias of the pixel (luminance), for the error,
+ *               and the variance of that estimate's own noise (0: not known)
  *   aux_value   the RADIUS and LAPLACIAN maps (and the per-component radii) */
 enum {
     APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
@@ -11972,7 +11973,7 @@ typedef struct appm__estimator {
                    unsigned worker);
     void (*pass_end)(appm_renderer *r);
     int (*photon_term)(const appm_renderer *r, const void *state, double j, double *out);
-    double (*bias)(const void *state, double j);
+    double (*bias)(const void *state, double j, double *noise);
     double (*aux_value)(const appm_renderer *r, const void *state, appm_aux which);
 } appm__estimator;
 
@@ -12317,10 +12318,12 @@ static void appm__paper_pass_end(appm_renderer *r)
     r->stats.clamped = n ? (double)at / (double)n : 0.0;
 }
 
-/* 4.2: the bias (mu2 / 2) dI r^2, with r^2 the mean over the passes. */
-static double appm__paper_bias(const void *state, double j)
+/* 4.2: the bias (mu2 / 2) dI r^2, with r^2 the mean over the passes.  The
+ * paper keeps no spread of dI: its noise is not known. */
+static double appm__paper_bias(const void *state, double j, double *noise)
 {
     const appm__paper_state *p = (const appm__paper_state *)state;
+    *noise = 0.0;
     return 0.5 * APPM__MU2 * p->dI * (p->R2sum / j);
 }
 
@@ -12665,13 +12668,24 @@ static int appm__adaptive_term(const appm_renderer *r, const void *state, double
     return 1;
 }
 
-/* The bias terms of the components add (before any squaring: step 1). */
-static double appm__adaptive_bias(const void *state, double j)
+/* The bias terms of the components add (before any squaring: step 1).  Each
+ * rests on a mean of noisy per-pass Laplacians; *noise gets the variance of the
+ * sum from theirs (step 3: the spread over the Laplacian passes), taken as
+ * independent between the components, so that b^2 - noise estimates the
+ * squared bias without the Laplacian's noise in it. */
+static double appm__adaptive_bias(const void *state, double j, double *noise)
 {
     const appm__adaptive_px *a = (const appm__adaptive_px *)state;
+    uint64_t n = appm__lap_count((uint64_t)j);
     double b = 0.0;
     int c;
-    for (c = 0; c < APPM__NCOMP; ++c) b += 0.5 * APPM__MU2 * a->comp[c].dI * (a->comp[c].R2sum / j);
+    *noise = 0.0;
+    for (c = 0; c < APPM__NCOMP; ++c) {
+        const appm__adaptive_stats *p = &a->comp[c];
+        double beta = 0.5 * APPM__MU2 * (p->R2sum / j);
+        b += beta * p->dI;
+        *noise += beta * beta * (p->dI * p->dI - appm__di2_unbiased(p, n));
+    }
     return b;
 }
 
@@ -13600,25 +13614,29 @@ static double appm__var_scale(const appm_renderer *r)
  * (a stencil off a surface curving away at a grazing angle) held 42 % of the
  * image's squared model bias, 6x the true squared bias in all; without it,
  * 1.05x at 256 passes.  A band two pixels wide or more, as a shadow's edge
- * leaves, keeps its bias (docs/algorithm.md 7.3). */
+ * leaves, keeps its bias (docs/algorithm.md 7.3).  Each pixel's bias^2 is taken
+ * less the noise of its own estimate (the method's bias hook), scaled as the
+ * variance is by the halves (var_scale, set before this is called); the mean
+ * is floored at 0. */
 static double appm__bias2(const appm_renderer *r, size_t i, double j)
 {
     int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
-    double sum = 0.0, top = 0.0;
+    double sum = 0.0, top = -HUGE_VAL, b2;
     int n = 0;
     if (!r->est->bias) return 0.0;
     for (dy = -1; dy <= 1; ++dy)
         for (dx = -1; dx <= 1; ++dx) {
             int64_t x = x0 + dx, y = y0 + dy;
-            double b;
+            double b, noise;
             if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
-            b = r->est->bias(appm__state(r, (size_t)(y * (int64_t)r->w + x)), j);
-            b *= b;
+            b = r->est->bias(appm__state(r, (size_t)(y * (int64_t)r->w + x)), j, &noise);
+            b = b * b - r->var_scale * noise;
             sum += b;
             if (b > top) top = b;
             n++;
         }
-    return n > 1 ? (sum - top) / (double)(n - 1) : sum;
+    b2 = n > 1 ? (sum - top) / (double)(n - 1) : sum;
+    return b2 > 0.0 ? b2 : 0.0;
 }
 
 /* The estimated relative error of the image (appm_stats.est_relerr):

@@ -73,7 +73,7 @@ static appm_scene *load_text(const char *obj, const char *mtl, const char *name)
     return st == APPM_OK ? on_path(s) : NULL;
 }
 
-/* A growing tbuf buffer for generated OBJ files. */
+/* A growing text buffer for generated OBJ files. */
 typedef struct tbuf {
     char *p;
     size_t n, cap;

@@ -18,7 +18,8 @@
  *   6. The error estimate's bias (appm__bias2): a pixel's model bias that
  *      stands alone is left out, a band two pixels wide keeps 7/8 of its
  *      squared bias, numbers against the 3 x 3 rule worked by hand (a corner
- *      has 4 pixels), and the ERROR map and est_relerr read the same value.
+ *      has 4 pixels), and the ERROR map and est_relerr read the same value;
+ *      appm's less the noise of its Laplacian (set by hand), never below 0.
  */
 #include "../appm.c"
 #include "check.h"
@@ -245,7 +246,11 @@ static void test_bias2(appm_scene *s)
     if (!r) return;
     /* a lone spike: gone, at itself and at its neighbours */
     set_bias(r, j, 0, b);
-    CHECK_NEAR(r->est->bias(appm__state(r, 5 * r->w + 5), j), b, 1e-12);
+    {
+        double noise = -1.0;
+        CHECK_NEAR(r->est->bias(appm__state(r, 5 * r->w + 5), j, &noise), b, 1e-12);
+        CHECK(noise == 0.0); /* the paper's selector keeps no spread of dI */
+    }
     CHECK(appm__bias2(r, 5 * r->w + 5, j) == 0.0 && appm__bias2(r, 4 * r->w + 6, j) == 0.0);
     /* columns 5 and 6: 5/8 b^2 on them, 2/8 b^2 beside, 7/8 of the row's 2 b^2 kept */
     set_bias(r, j, 1, b);
@@ -267,6 +272,52 @@ static void test_bias2(appm_scene *s)
     appm_renderer_destroy(r);
 }
 
+/* appm: the square of the bias less the noise of its Laplacian.  Every pixel
+ * gets dI = d from Laplacian passes of spread m2 (weights summing to 1) in the
+ * diffuse component, none in the caustic one: b = (mu2 / 2) d, and the noise
+ * of b is (mu2 / 2)^2 m2 / (n - 1), n the Laplacian passes so far, scaled by
+ * the halves' factor of the variance (var_scale) as the sequence's passes are
+ * not independent.  A uniform field keeps b^2 - that; more noise than b^2
+ * gives 0, never a negative square. */
+static void set_noisy_bias(appm_renderer *r, double j, double d, double m2)
+{
+    size_t i, n = (size_t)r->w * r->h;
+    for (i = 0; i < n; ++i) {
+        appm__adaptive_px *a = (appm__adaptive_px *)appm__state(r, i);
+        memset(&a->comp[APPM__COMP_CAUSTIC], 0, sizeof a->comp[APPM__COMP_CAUSTIC]);
+        a->comp[APPM__COMP_DIFFUSE].dI = d;
+        a->comp[APPM__COMP_DIFFUSE].dI_w = 1.0;
+        a->comp[APPM__COMP_DIFFUSE].dI_m2 = m2;
+        a->comp[APPM__COMP_DIFFUSE].R2sum = j;
+    }
+}
+
+static void test_bias2_noise(appm_scene *s)
+{
+    appm_renderer *r = render(s, APPM_METHOD_APPM, 3);
+    const double j = 3.0, d = 2.0, b = 0.5 * APPM__MU2 * d;
+    double c, noise, unit;
+    uint64_t n = appm__lap_count(3);
+    if (!r) return;
+    c = r->var_scale;
+    CHECK_MSG(c > 0.0 && c <= 1.0 && n == 3, "var_scale %g, %u Laplacian passes", c, (unsigned)n);
+    unit = 0.25 * APPM__MU2 * APPM__MU2 / (double)(n - 1); /* noise of b per unit of m2 */
+    set_noisy_bias(r, j, d, 0.0);
+    CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
+    CHECK_NEAR(noise, 0.0, 1e-15);
+    CHECK_NEAR(appm__bias2(r, 3 * r->w + 3, j), b * b, 1e-12);
+    /* half of b^2 is noise once scaled by c */
+    set_noisy_bias(r, j, d, 0.5 * b * b / (c * unit));
+    CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
+    CHECK_NEAR(noise, 0.5 * b * b / c, 1e-9 * b * b / c);
+    CHECK_NEAR(appm__bias2(r, 3 * r->w + 3, j), 0.5 * b * b, 1e-12);
+    CHECK_NEAR(appm__bias2(r, 0, j), 0.5 * b * b, 1e-12); /* a corner's 4 pixels: the same */
+    /* all noise and more: no bias, not a negative one */
+    set_noisy_bias(r, j, d, 2.0 * b * b / (c * unit));
+    CHECK(appm__bias2(r, 3 * r->w + 3, j) == 0.0);
+    appm_renderer_destroy(r);
+}
+
 int main(void)
 {
     appm_scene *s;
@@ -279,6 +330,7 @@ int main(void)
         test_seam(s);
         test_paper_render(s);
         test_bias2(s);
+        test_bias2_noise(s);
     }
     appm_scene_destroy(s);
     return check_finish();

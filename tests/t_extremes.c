@@ -178,7 +178,7 @@ static int write_box(const char *name, double s, double tx, unsigned size)
  *
  * Good behaviour (testing.md section 2): a radius of 1e-9 scene units (far
  * below the pixel footprint, so hardly a photon falls inside) and one of 1e9
- * (every photon falls inside every gather) both render_sum to completion with
+ * (every photon falls inside every gather) both render to completion with
  * every pixel finite and non-negative, for ppm, sppm and appm.
  *
  * With r = 1e9 and alpha = 1 the estimate is the fully blurred one.  With
@@ -410,10 +410,10 @@ static void use_budget(appm_config *cfg, budget *b, long long limit)
     cfg->allocator.user = b;
 }
 
-/* Runs the first pass of a ppm render_sum of `s` with `margin` bytes allowed
+/* Runs the first pass of a ppm render of `s` with `margin` bytes allowed
  * beyond what appm_renderer_create took; that pass must fail with
  * APPM_ERR_NOMEM.  Then, with memory to spare, two passes must give the bytes
- * of a clean two-pass render_sum.  `what` says which allocation is expected to
+ * of a clean two-pass render.  `what` says which allocation is expected to
  * fail (for the messages). */
 static void failed_pass(const appm_scene *s, long long margin, const char *what)
 {
@@ -685,7 +685,7 @@ static void test_accumulators(void)
  *           5 sqrt(2) sigma (sigma from 8 seeds: |t_7| > 5 has probability
  *           1.6e-3), and never more than 3%, "a few percent".  Here sigma is
  *           4% of the mean, so the 3% is the binding one of these two.
- *   coupling  every render_sum below uses the seed of the unit render_sum it is
+ *   coupling  every render below uses the seed of the unit render it is
  *           compared with, so both are the same random experiment on
  *           geometry that differs only by float rounding: 2^-24 relative
  *           for a pure scale, 2^-4 / 1e3 = 6e-5 of the box for the box of
@@ -802,8 +802,8 @@ static void test_scale(void)
  * moved the bounding box).
  *
  * Duplicated triangles (the floor three times over, once with reversed
- * winding) are legal: they load, and render_sum without NaN or dropped samples.
- * With the same seed the render_sum is the same random experiment as the single
+ * winding) are legal: they load, and render without NaN or dropped samples.
+ * With the same seed the render is the same random experiment as the single
  * floor's: whichever copy a ray hits, it finds the same plane, the same
  * two-sided material and the same point up to float rounding (the copies
  * interpolate it from their vertices in another order).  So the means may
@@ -996,7 +996,7 @@ static void test_area_lights(void)
  *
  * Good behaviour: with nothing absorbing, photon paths never lose weight, so
  * Russian roulette (continue with probability max(gamma') / max(gamma) = 1)
- * never ends them: only the depth cap does.  The render_sum must still end - each
+ * never ends them: only the depth cap does.  The render must still end - each
  * photon path is cut at max_depth (32) segments, the path tracer's roulette
  * is capped at 0.95 - and every pixel is finite.  Photons are stored at
  * segments 2 .. 31 (two segments at least with shadow rays for the direct
