@@ -5,7 +5,8 @@
 #   gcc, clang      -std=c99 -pedantic -Wall -Wextra -Wshadow -Wvla -Werror, appm.c + main.c;
 #                   tests/t_portable.c built by gcc and run: its furnace means are the
 #                   reference (APPM_PORTABLE_REF) for every other run of it below
-#   tcc             -Wall -Werror, appm.c + main.c, and tests/t_portable.c built and run;
+#   tcc             (in a lane of its own, beside the native steps) -Wall -Werror,
+#                   appm.c + main.c, and tests/t_portable.c built and run;
 #                   every test built, and every one but t_appm run (quick)
 #   no threads      -DAPPM_THREADS=0: no pthread symbol in the object (nm), t_portable runs
 #                   (the wasm32 tests below are built without threads too)
@@ -251,36 +252,59 @@ if have gcc "gcc: tests/t_portable.c runs (the reference)"; then
 fi
 export APPM_PORTABLE_REF
 
-# The emulated builds start here, once the native t_portable has set the
-# reference: the lane takes longest, and it runs one process at a time beside
-# the steps below.
-qemu_pid=
-if [ "${QEMU:-0}" = 1 ]; then
-    rm -f "$OUT/qemu.count"
+# ---- lanes: steps that run beside the others --------------------------------------
+# lane NAME FUNCTION: runs FUNCTION in the background with its own log and counts
+# (its lines go to $OUT/NAME.out, printed when it is joined); sets lane_pid.
+lane() {
+    rm -f "$OUT/$1.count"
     (
-        log="$OUT/step-qemu.log" pass=0 fail=0 lap_t=$(date +%s)
-        RUN_LIMIT=1800 # a hang limit for emulated tests: t_appm takes 8-11 minutes under qemu
-        APPM_TEST_OUT=qemu # the tests' scratch files: tests/out-qemu, apart from the other lane's
+        log="$OUT/step-$1.log" pass=0 fail=0 lap_t=$(date +%s)
+        APPM_TEST_OUT=$1 # the tests' scratch files: tests/out-NAME, apart from the others'
         export APPM_TEST_OUT
-        qemu_lane
-        echo "$pass $fail" >"$OUT/qemu.count"
-    ) >"$OUT/qemu.out" 2>&1 &
-    qemu_pid=$!
-fi
+        "$2"
+        echo "$pass $fail" >"$OUT/$1.count"
+    ) >"$OUT/$1.out" 2>&1 &
+    lane_pid=$!
+}
 
-if have tcc "tcc -Wall -Werror"; then
+# join NAME PID: waits for a lane and adds its lines and counts to these.
+join() {
+    wait "$2"
+    cat "$OUT/$1.out"
+    read -r lpass lfail <"$OUT/$1.count" || { lpass=0 lfail=1; echo "FAIL the $1 lane gave no count"; }
+    pass=$((pass + lpass))
+    fail=$((fail + lfail))
+}
+
+# tcc: unoptimised code, so the tests' loops at a fifth (the suite took 280 s at
+# QUICK=1 on 2 cores); t_appm only built (its statistical tests of real scenes,
+# which no QUICK shortens, took 200 s of the 360 under tcc; make test runs it twice)
+tcc_lane() {
     step "tcc -Wall -Werror: appm.c main.c" \
         tcc -Wall -Werror appm.c main.c -o "$OUT/appm-tcc" -lm -lpthread
     if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
         >"$log" 2>&1; then
         run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
-        # unoptimised code: the loops at a fifth (the suite took 280 s at QUICK=1 on 2
-        # cores); t_appm only built (its statistical tests of real scenes, which no
-        # QUICK shortens, took 200 s of the 360 under tcc; make test runs it twice)
         suite tcc "tcc -Wall" "-lm -lpthread" 2 t_appm
     else
         bad "tcc -Wall -Werror: tests/t_portable.c"
     fi
+}
+
+# The emulated builds (the longest lane, one process at a time) and the tcc suite
+# start here, once the native t_portable has set the reference, and run beside
+# the native steps below.
+qemu_pid=
+if [ "${QEMU:-0}" = 1 ]; then
+    RUN_LIMIT=1800 # a hang limit for emulated tests: t_appm takes 8-11 minutes under qemu
+    lane qemu qemu_lane
+    qemu_pid=$lane_pid
+    RUN_LIMIT=600
+fi
+tcc_pid=
+if have tcc "tcc -Wall -Werror"; then
+    lane tcc tcc_lane
+    tcc_pid=$lane_pid
 fi
 
 # ---- no threads -------------------------------------------------------------------
@@ -481,12 +505,9 @@ else
     echo "skip wine: set WINE=1 to run a mingw-w64 build under wine $took"
 fi
 
+[ -n "$tcc_pid" ] && join tcc "$tcc_pid"
 if [ -n "$qemu_pid" ]; then
-    wait "$qemu_pid"
-    cat "$OUT/qemu.out"
-    read -r qpass qfail <"$OUT/qemu.count" || { qpass=0 qfail=1; echo "FAIL the qemu lane gave no count"; }
-    pass=$((pass + qpass))
-    fail=$((fail + qfail))
+    join qemu "$qemu_pid"
 else
     lap
     echo "skip qemu: set QEMU=1 to run 32-bit i386 and armhf, aarch64 and big-endian s390x builds under qemu-user $took"
