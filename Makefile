@@ -29,7 +29,7 @@ SAN      = -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all -fno-om
 TESTSRC  = $(wildcard tests/t_*.c)
 TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
-DEPS     = appm.c appm.h tests/check.h tests/fuzz/targets.h
+DEPS     = appm.c appm.h tests/check.h tests/inflate.h tests/fuzz/targets.h
 
 .PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-errbar bench-studio fuzz fuzz-long web \
         test-web clean
