@@ -12457,13 +12457,18 @@ static void appm__adaptive_update(appm__adaptive_stats *p, uint64_t pass, const 
     p->R2sum += p->R * p->R;
 }
 
-/* -- Step 3: dI^2 without its noise, pooled.  dI^2 - Var(dI): an unbiased
- * estimate of the square of the true Laplacian (may be negative). */
+/* -- Step 3: dI^2 without its noise, pooled.  Var(dI), the variance of the
+ * weighted mean of n Laplacian passes from their weighted Welford sum (0 before
+ * two); dI^2 - Var(dI), an unbiased estimate of the square of the true
+ * Laplacian (may be negative). */
+static double appm__di_var(const appm__adaptive_stats *p, uint64_t n)
+{
+    return n >= 2 && p->dI_w > 0.0 ? p->dI_m2 / ((double)(n - 1) * p->dI_w) : 0.0;
+}
+
 static double appm__di2_unbiased(const appm__adaptive_stats *p, uint64_t n)
 {
-    double c = p->dI * p->dI;
-    if (n >= 2 && p->dI_w > 0.0) c -= p->dI_m2 / ((double)(n - 1) * p->dI_w);
-    return c;
+    return p->dI * p->dI - appm__di_var(p, n);
 }
 
 /* dI^2 for the radius formula.  The square of a noisy mean overestimates the
@@ -12684,7 +12689,7 @@ static double appm__adaptive_bias(const void *state, double j, double *noise)
         const appm__adaptive_stats *p = &a->comp[c];
         double beta = 0.5 * APPM__MU2 * (p->R2sum / j);
         b += beta * p->dI;
-        *noise += beta * beta * (p->dI * p->dI - appm__di2_unbiased(p, n));
+        *noise += beta * beta * appm__di_var(p, n);
     }
     return b;
 }
