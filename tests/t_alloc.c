@@ -224,7 +224,7 @@ static void render_cfg(appm_config *cfg, appm_method method)
     memset(cfg, 0, sizeof *cfg);
     cfg->width = 32;
     cfg->height = 32;
-    cfg->photons = 20000;
+    cfg->photons = (uint64_t)check_count(20000, 4000); /* every allocation path, fewer photons quick */
     cfg->threads = 2;
     cfg->method = method;
 }
@@ -325,7 +325,7 @@ static void test_pass_growth(void)
     /* how many allocations does a clean first pass make? */
     render_cfg(&cfg, APPM_METHOD_APPM);
     cfg.width = cfg.height = 8;
-    cfg.photons = 16000;
+    cfg.photons = (uint64_t)check_count(16000, 16000);
     cfg.direct = APPM_DIRECT_PHOTONS;
     check_use_alloc(&cfg, &a, 0);
     CHECK(appm_renderer_create(scene, &cfg, &r, &d) == APPM_OK);
