@@ -223,6 +223,15 @@ static void test_paper_render(appm_scene *s)
     appm_renderer_destroy(r);
 }
 
+/* appm__bias2 of pixel i from the state as the test left it: the renderer keeps
+ * each pixel's bias^2 of its last error estimate (err_b2), so it is made again. */
+static double bias2_now(appm_renderer *r, size_t i)
+{
+    r->err_pass = 0;
+    appm__err_b2_fill(r);
+    return appm__bias2(r, i);
+}
+
 /* Every pixel's model bias set by hand (appm-paper: b = (mu2 / 2) dI R2sum / j). */
 static void set_bias(appm_renderer *r, double j, int what, double b)
 {
@@ -251,16 +260,16 @@ static void test_bias2(appm_scene *s)
         CHECK_NEAR(r->est->bias(appm__state(r, 5 * r->w + 5), j, &noise), b, 1e-12);
         CHECK(noise == 0.0); /* the paper's selector keeps no spread of dI */
     }
-    CHECK(appm__bias2(r, 5 * r->w + 5, j) == 0.0 && appm__bias2(r, 4 * r->w + 6, j) == 0.0);
+    CHECK(bias2_now(r, 5 * r->w + 5) == 0.0 && bias2_now(r, 4 * r->w + 6) == 0.0);
     /* columns 5 and 6: 5/8 b^2 on them, 2/8 b^2 beside, 7/8 of the row's 2 b^2 kept */
     set_bias(r, j, 1, b);
-    CHECK_NEAR(appm__bias2(r, 3 * r->w + 5, j), 5.0 / 8.0 * b2, 1e-12);
-    CHECK_NEAR(appm__bias2(r, 3 * r->w + 4, j), 2.0 / 8.0 * b2, 1e-12);
-    CHECK_NEAR(appm__bias2(r, 3 * r->w + 3, j), 0.0, 1e-12);
-    for (x = 0; x < r->w; ++x) row += appm__bias2(r, 3 * r->w + x, j);
+    CHECK_NEAR(bias2_now(r, 3 * r->w + 5), 5.0 / 8.0 * b2, 1e-12);
+    CHECK_NEAR(bias2_now(r, 3 * r->w + 4), 2.0 / 8.0 * b2, 1e-12);
+    CHECK_NEAR(bias2_now(r, 3 * r->w + 3), 0.0, 1e-12);
+    for (x = 0; x < r->w; ++x) row += bias2_now(r, 3 * r->w + x);
     CHECK_NEAR(row, 14.0 / 8.0 * b2, 1e-12);
     /* the top row: a 2 x 3 window, 4 band values of 6, the largest left out */
-    CHECK_NEAR(appm__bias2(r, 5, j), 3.0 / 5.0 * b2, 1e-12);
+    CHECK_NEAR(bias2_now(r, 5), 3.0 / 5.0 * b2, 1e-12);
     /* the ERROR map: |bias| + 1.645 sigma with that bias */
     err = appm_renderer_aux(r, APPM_AUX_ERROR);
     CHECK(err && fabs(err[3 * r->w + 5] - (1.645 * sqrt(r->var_scale * appm__mean_var(&r->pix[3 * r->w + 5], NULL,
@@ -268,7 +277,7 @@ static void test_bias2(appm_scene *s)
                                            sqrt(5.0 / 8.0 * b2))) < 1e-6);
     /* a corner: 4 pixels, one of them biased and left out */
     set_bias(r, j, 2, b);
-    CHECK(appm__bias2(r, 0, j) == 0.0);
+    CHECK(bias2_now(r, 0) == 0.0);
     appm_renderer_destroy(r);
 }
 
@@ -305,17 +314,85 @@ static void test_bias2_noise(appm_scene *s)
     set_noisy_bias(r, j, d, 0.0);
     CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
     CHECK_NEAR(noise, 0.0, 1e-15);
-    CHECK_NEAR(appm__bias2(r, 3 * r->w + 3, j), b * b, 1e-12);
+    CHECK_NEAR(bias2_now(r, 3 * r->w + 3), b * b, 1e-12);
     /* half of b^2 is noise once scaled by c */
     set_noisy_bias(r, j, d, 0.5 * b * b / (c * unit));
     CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
     CHECK_NEAR(noise, 0.5 * b * b / c, 1e-9 * b * b / c);
-    CHECK_NEAR(appm__bias2(r, 3 * r->w + 3, j), 0.5 * b * b, 1e-12);
-    CHECK_NEAR(appm__bias2(r, 0, j), 0.5 * b * b, 1e-12); /* a corner's 4 pixels: the same */
+    CHECK_NEAR(bias2_now(r, 3 * r->w + 3), 0.5 * b * b, 1e-12);
+    CHECK_NEAR(bias2_now(r, 0), 0.5 * b * b, 1e-12); /* a corner's 4 pixels: the same */
     /* all noise and more: no bias, not a negative one */
     set_noisy_bias(r, j, d, 2.0 * b * b / (c * unit));
-    CHECK(appm__bias2(r, 3 * r->w + 3, j) == 0.0);
+    CHECK(bias2_now(r, 3 * r->w + 3) == 0.0);
     appm_renderer_destroy(r);
+}
+
+/* 6c. est_relerr from the parts the renderer keeps per pixel (err_w, err_b2,
+ * filled over the threads) against the whole formula taken here from the
+ * state, pixel by pixel, in one loop: sqrt(mean of (bias2 + Var) w), bias2 the
+ * 3 x 3 mean of b^2 - var_scale noise without its largest, Var the spread
+ * times var_scale, w = 1 / (I^2 + 0.01); for every method that reports it,
+ * after 9 passes (the Laplacian's; halves of 8), with 1 and 3 threads. */
+static double relerr_by_hand(const appm_renderer *r)
+{
+    size_t i, n = (size_t)r->w * r->h;
+    double j = (double)r->pass, sum = 0.0;
+    for (i = 0; i < n; ++i) {
+        const appm__pixel *p = &r->pix[i];
+        double t[3], I = appm__lumd(p->ld) / j, b2 = 0.0, top = -HUGE_VAL, var;
+        int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy, k = 0;
+        if (r->est->photon_term && r->est->photon_term(r, appm__state(r, i), j, t)) I += appm__lumd(t);
+        for (dy = -1; dy <= 1 && r->est->bias; ++dy)
+            for (dx = -1; dx <= 1; ++dx) {
+                int64_t x = x0 + dx, y = y0 + dy;
+                double noise, b;
+                if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
+                b = r->est->bias(appm__state(r, (size_t)(y * (int64_t)r->w + x)), j, &noise);
+                b = b * b - r->var_scale * noise;
+                b2 += b;
+                if (b > top) top = b;
+                k++;
+            }
+        b2 = k > 1 ? (b2 - top) / (double)(k - 1) : b2;
+        var = r->var_scale * appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass);
+        sum += ((b2 > 0.0 ? b2 : 0.0) + var) / (I * I + 0.01);
+    }
+    return sqrt(sum / (double)n);
+}
+
+static void test_error_parts(appm_scene *s)
+{
+    int m, k;
+    double first = 0.0;
+    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m)
+        for (k = 0; k < 2; ++k) {
+            appm_config cfg;
+            appm_renderer *r;
+            appm_stats st;
+            appm_config_init(&cfg);
+            cfg.method = (appm_method)m;
+            cfg.width = 24;
+            cfg.height = 16;
+            cfg.photons = 4000;
+            cfg.threads = k ? 3 : 1;
+            cfg.seed = 11;
+            r = check_renderer(s, &cfg);
+            if (!r) continue;
+            if (check_passes(r, 9)) {
+                appm_renderer_stats(r, &st);
+                if (!(r->est->caps & APPM__CAP_ERROR)) {
+                    CHECK(st.est_relerr < 0.0);
+                } else {
+                    double want = relerr_by_hand(r);
+                    CHECK_MSG(st.est_relerr > 0.0 && fabs(st.est_relerr - want) <= 1e-12 * want,
+                              "%s, %u threads: est_relerr %.15g, by hand %.15g", appm_method_name(cfg.method),
+                              cfg.threads, st.est_relerr, want);
+                    if (k == 0) first = st.est_relerr;
+                    else CHECK(st.est_relerr == first); /* any thread count: the same bits */
+                }
+            }
+            appm_renderer_destroy(r);
+        }
 }
 
 int main(void)
@@ -331,6 +408,7 @@ int main(void)
         test_paper_render(s);
         test_bias2(s);
         test_bias2_noise(s);
+        test_error_parts(s);
     }
     appm_scene_destroy(s);
     return check_finish();

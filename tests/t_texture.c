@@ -414,6 +414,40 @@ static void test_env_small_maps(void)
     CHECK(m.live == 0);
 }
 
+/* appm__cdf_invert (which the map's rows and columns are drawn by) against a
+ * scan: the cell is the last i < n with c[i] <= u, also where cells have zero
+ * probability (equal neighbours, which a scan skips to the last of) and where
+ * u is exactly a cell's start; the point is (i + t) / n within it. */
+static void test_cdf_invert(void)
+{
+    static double c[130];
+    unsigned seed = 7, bad = 0, cases = 0;
+    int n, trial, k;
+    for (n = 1; n <= 129; n += (n < 9 ? 1 : 15))
+        for (trial = 0; trial < 20; ++trial) {
+            c[0] = 0.0;
+            for (k = 1; k <= n; ++k) {
+                seed = seed * 1103515245u + 12345u;
+                c[k] = c[k - 1] + ((seed >> 16) % 4 == 0 ? 0.0 : (double)((seed >> 8) % 1000 + 1)); /* some empty */
+            }
+            if (!(c[n] > 0.0)) c[n] = 1.0;
+            for (k = 1; k <= n; ++k) c[k] /= c[n];
+            for (k = 0; k < 64; ++k) {
+                float u, x;
+                int cell, want = 0, i;
+                seed = seed * 1103515245u + 12345u;
+                u = k < n ? (float)c[k] : (float)((seed >> 8) & 0xFFFF) / 65536.0f; /* starts, then anywhere */
+                if (!(u < 1.0f)) continue;
+                for (i = 0; i < n; ++i)
+                    if (c[i] <= (double)u) want = i;
+                x = appm__cdf_invert(c, n, u, &cell);
+                cases++;
+                if (cell != want || !(x >= (double)want / n - 1e-6 && x <= (double)(want + 1) / n + 1e-6)) bad++;
+            }
+        }
+    CHECK_MSG(bad == 0 && cases > 5000, "%u of %u inversions off the scan's cell", bad, cases);
+}
+
 /* The sampler draws directions with the density appm__env_pdf says (chi-square
  * over the texels), the density it returns is that density, and the density
  * integrates to 1 over the sphere. */
@@ -693,6 +727,7 @@ int main(void)
     test_cutout();
     test_cut_emitter();
     test_env_small_maps();
+    test_cdf_invert();
     test_env_sampler();
     test_env_orientation();
     test_env_furnace();
