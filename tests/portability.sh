@@ -7,7 +7,7 @@
 #                   reference (APPM_PORTABLE_REF) for every other run of it below
 #   tcc             (in a lane of its own, beside the native steps) -Wall -Werror,
 #                   appm.c + main.c, and tests/t_portable.c built and run;
-#                   every test built, and every one but t_appm run (quick)
+#                   every test built, and every one but t_appm, t_render and t_checkpoint run (quick)
 #   no threads      -DAPPM_THREADS=0: no pthread symbol in the object (nm), t_portable runs
 #                   (the wasm32 tests below are built without threads too)
 #   mingw-w64       Win32 threads (the default) and -DAPPM_THREADS=1 (winpthreads)
@@ -279,15 +279,16 @@ join() {
 }
 
 # tcc: unoptimised code, so the tests' loops at a fifth (the suite took 280 s at
-# QUICK=1 on 2 cores); t_appm only built (its statistical tests of real scenes,
-# which no QUICK shortens, took 200 s of the 360 under tcc; make test runs it twice)
+# QUICK=1 on 2 cores); t_appm, t_render and t_checkpoint only built: their renders
+# of real scenes, which no QUICK shortens, took 200 s of 360 (t_appm) and then 62 s
+# and 48 s of the remaining 170 under tcc, and make test runs them twice
 tcc_lane() {
     step "tcc -Wall -Werror: appm.c main.c" \
         tcc -Wall -Werror appm.c main.c -o "$OUT/appm-tcc" -lm -lpthread
     if tcc -Wall -Werror tests/t_portable.c -o "$OUT/t_portable-tcc" -lm -lpthread \
         >"$log" 2>&1; then
         run_test "tcc: tests/t_portable.c runs" "./$OUT/t_portable-tcc"
-        suite tcc "tcc -Wall" "-lm -lpthread" 2 t_appm
+        suite tcc "tcc -Wall" "-lm -lpthread" 2 "t_appm t_render t_checkpoint"
     else
         bad "tcc -Wall -Werror: tests/t_portable.c"
     fi
