@@ -9597,13 +9597,15 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
         float c;
         if (s->envmap.rgb) { /* the map's density and the cosine's, half and half */
             float pm;
-            double eu, ev; /* the direction's place in the map, found once */
+            double eu = 0.0, ev = 0.0; /* the direction's place in the map, found once */
+            int have_uv = 0;
             if (APPM_ENV_UNIFORM) {
                 ls->wi = appm__cosine_dir(n, u1, u2);
                 pm = 0.0f;
             } else if (u1 < 0.5f) {
                 ls->wi = appm__cosine_dir(n, 2.0f * u1, u2);
                 appm__env_uv(&s->envmap, ls->wi, &eu, &ev);
+                have_uv = 1;
                 pm = appm__env_pdf_uv(&s->envmap, eu, ev);
             } else {
                 pm = appm__env_sample(&s->envmap, 2.0f * u1 - 1.0f, u2, &ls->wi);
@@ -9612,7 +9614,7 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
             if (!(c > 0.0f)) return 0;
             ls->pdf = (float)(l->pick * appm__env_mix_pdf(pm, c));
             if (!(ls->pdf > 0.0f)) return 0;
-            if (APPM_ENV_UNIFORM || !(u1 < 0.5f)) appm__env_uv(&s->envmap, ls->wi, &eu, &ev);
+            if (!have_uv) appm__env_uv(&s->envmap, ls->wi, &eu, &ev);
             ls->li = appm__scale(appm__env_lookup_uv(&s->envmap, eu, ev), 1.0f / ls->pdf);
         } else { /* a constant: by the cosine, the product's best */
             ls->wi = appm__cosine_dir(n, u1, u2);
