@@ -7183,6 +7183,8 @@ struct appm_scene {
     uint32_t width, height;
     appm__v3 bmin, bmax, center;
     float radius;          /* bounding-sphere radius of the geometry */
+    appm__v3 focus;        /* the studio's model: the centre of its bounding sphere (9.2) */
+    float focus_r;         /* and its radius; 0: no focus (every scene but the studio) */
     uint64_t dropped;
     char name[256];
 };
@@ -9503,6 +9505,102 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
     power[2] = f * l->value.z;
 }
 
+/* The studio's focus.  A bare OBJ's studio (appm__stand_in) puts a small
+ * model on a wide plate under a sky, and the photons that light the model
+ * are few: the sky's photons land all over the plate (direct light there,
+ * which the shadow rays count) and bounce back into the sky, and 1.5-2 % of
+ * the paths are stored.  Most of the picture's photon noise is on the model
+ * and on the plate around it.  So the studio's photons are aimed at the
+ * model's bounding sphere (appm_scene.focus, focus_r) twice:
+ *   emission   the environment's point on the disk facing its direction is
+ *              drawn from a mixture: the whole disk (radius R, a share
+ *              APPM__FOCUS_DISK) and the focus sphere's shadow on it (a disk
+ *              of radius focus_r around the focus's projection);
+ *   bounces    a diffuse bounce off the focus sphere draws its direction from
+ *              a mixture: the cosine lobe (a share APPM__FOCUS_COS) and the
+ *              cone the focus sphere fills, seen from the bounce.
+ * A one-sample mixture is importance sampling with the mixture's density
+ * (Veach's balance heuristic), so the photon's weight divided by that density
+ * keeps every estimate unbiased, and the defensive shares keep every path
+ * that was possible possible, with at most 1/share the weight.  Russian
+ * roulette decides on the weight the cosine lobe would have given, so that
+ * aimed photons are not killed for their small weights.  Every other scene has
+ * no focus and takes the lights' and materials' own distributions. */
+#define APPM__FOCUS_DISK 0.5f /* emission: the whole disk's share of the mixture */
+#define APPM__FOCUS_COS 0.25f /* bounces: the cosine lobe's share of the mixture */
+
+/* The point on the emission disk (radius R, frame t, b around the scene's
+ * centre, facing direction d) for (u3, u4), and 1 / its area density. */
+static float appm__focus_disk(const appm_scene *s, appm__v3 t, appm__v3 b, float R, float u3, float u4, float *px,
+                              float *py)
+{
+    const float a = APPM__FOCUS_DISK, rf = s->focus_r;
+    appm__v3 rel = appm__sub(s->focus, s->center);
+    float fx = appm__dot(rel, t), fy = appm__dot(rel, b), phi = 2.0f * APPM__PIF * u4, rr, dx, dy;
+    double p = 0.0;
+    if (u3 < a) {
+        rr = R * sqrtf(u3 / a);
+        *px = rr * cosf(phi);
+        *py = rr * sinf(phi);
+    } else {
+        rr = rf * sqrtf((u3 - a) / (1.0f - a));
+        *px = fx + rr * cosf(phi);
+        *py = fy + rr * sinf(phi);
+    }
+    dx = *px - fx;
+    dy = *py - fy;
+    if (*px * *px + *py * *py <= R * R) p += a / (APPM__PI * (double)R * R);
+    if (dx * dx + dy * dy <= rf * rf) p += (1.0 - a) / (APPM__PI * (double)rf * rf);
+    return p > 0.0 ? (float)(1.0 / p) : 0.0f; /* 0: rounding put it outside both */
+}
+
+/* Whether a photon's bounce off material m at sf is aimed (the studio's focus,
+ * a diffuse surface outside the focus sphere that has the sphere's centre
+ * above it, seen from direction wo). */
+static int appm__focus_aims(const appm_scene *s, const appm__material *m, const appm__surf *sf, appm__v3 wo)
+{
+    appm__v3 dx;
+    float side;
+    if (!(s->focus_r > 0.0f) || m->kind != APPM__MAT_DIFFUSE) return 0;
+    dx = appm__sub(s->focus, sf->p);
+    side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f;
+    return appm__dot(dx, dx) > s->focus_r * s->focus_r && side * appm__dot(dx, sf->ns) > 0.0f;
+}
+
+/* An aimed diffuse bounce (appm__focus_aims): the direction from u1 (the
+ * mixture's choice and the first coordinate) and u2, in bs as
+ * appm__bsdf_sample_dir gives it (weight: the albedo, the cosine lobe's), and
+ * in *steer the factor the weight takes for the mixture, (cos / pi) / p. */
+static int appm__focus_bounce(const appm_scene *s, const appm__material *m, const appm__surf *sf, appm__v3 wo,
+                              float u1, float u2, appm__bsdf_sample *bs, float *steer)
+{
+    const float h = APPM__FOCUS_COS;
+    float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f, c;
+    appm__v3 ng = appm__scale(sf->ng, side), ns = appm__scale(sf->ns, side), dx = appm__sub(s->focus, sf->p);
+    double d2 = appm__dot(dx, dx), f2 = (double)s->focus_r * s->focus_r;
+    double gap = f2 / d2 / (1.0 + sqrt(1.0 - f2 / d2)); /* 1 - cos(theta_max), without cancellation */
+    double cmax = 1.0 - gap, pc = 1.0 / (2.0 * APPM__PI * gap), p;
+    appm__v3 axis = appm__scale(dx, (float)(1.0 / sqrt(d2)));
+    if (u1 < h) {
+        bs->wi = appm__cosine_dir(ns, u1 / h, u2);
+    } else { /* uniform in the cone */
+        float ct = (float)(1.0 - (double)((u1 - h) / (1.0f - h)) * gap), st = sqrtf(fmaxf(0.0f, 1.0f - ct * ct));
+        float phi = 2.0f * APPM__PIF * u2;
+        appm__v3 t, b;
+        appm__basis(axis, &t, &b);
+        bs->wi = appm__add(appm__add(appm__scale(t, st * cosf(phi)), appm__scale(b, st * sinf(phi))),
+                           appm__scale(axis, ct));
+    }
+    c = appm__dot(bs->wi, ns);
+    if (!(appm__dot(bs->wi, ng) > 0.0f) || !(c > 0.0f)) return 0;
+    p = h * c * APPM__INV_PI + (appm__dot(bs->wi, axis) >= (float)cmax ? (1.0 - h) * pc : 0.0);
+    bs->pdf = (float)p;
+    bs->weight = m->color;
+    bs->specular = 0;
+    *steer = (float)(c * APPM__INV_PI / p);
+    return appm__finite3(bs->wi) && *steer > 0.0f && *steer <= FLT_MAX;
+}
+
 /* Samples the start of a photon path from light li and u[1..4] (appm__smp_emit):
  * position and direction (u[1], u[2] the first 2-D sample of each light kind,
  * the one a stratified sampler serves best; u[3], u[4] the second), with the
@@ -9544,7 +9642,8 @@ static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, ap
         ps->gamma = appm__scale(l->value, w);
     } else { /* environment: a direction, then a point on the disk facing it */
         appm__v3 t, b;
-        float r = s->radius, rr = sqrtf(u3), phi = 2.0f * APPM__PIF * u4;
+        float r = s->radius, rr = sqrtf(u3), phi = 2.0f * APPM__PIF * u4, px, py;
+        double area = APPM__PI * (double)r * r; /* 1 / the point's density on the disk */
         if (!(r > 0.0f)) return 0;
         if (s->envmap.rgb) { /* the direction light arrives from by the map's density; the photon travels against it */
             appm__v3 wl;
@@ -9552,16 +9651,29 @@ static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, ap
             if (APPM_ENV_UNIFORM) wl = appm__uniform_sphere(u1, u2);
             if (!(pdf > 0.0f)) return 0;
             d = appm__neg(wl);
+            appm__basis(d, &t, &b);
+            if (s->focus_r > 0.0f) area = appm__focus_disk(s, t, b, r, u3, u4, &px, &py);
             /* gamma = L(wl) / (pick * p(wl) * (1/(pi R^2))) */
-            ps->gamma = appm__scale(appm__env_lookup(&s->envmap, wl), (float)(APPM__PI * (double)r * r / (l->pick * pdf)));
+            ps->gamma = appm__scale(appm__env_lookup(&s->envmap, wl), (float)(area / (l->pick * pdf)));
         } else {
             d = appm__uniform_sphere(u1, u2);
+            appm__basis(d, &t, &b);
             /* gamma = L / (pick * (1/4pi) * (1/(pi R^2))) */
-            ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI * APPM__PI * (double)r * r / l->pick));
+            if (s->focus_r > 0.0f) {
+                area = appm__focus_disk(s, t, b, r, u3, u4, &px, &py);
+                ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI * area / l->pick));
+            } else {
+                ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI * APPM__PI * (double)r * r / l->pick));
+            }
         }
-        appm__basis(d, &t, &b);
+        if (!(s->focus_r > 0.0f)) {
+            px = r * rr * cosf(phi);
+            py = r * rr * sinf(phi);
+        } else if (!(area > 0.0)) {
+            return 0;
+        }
         o = appm__add(appm__sub(s->center, appm__scale(d, 1.001f * r)),
-                      appm__add(appm__scale(t, r * rr * cosf(phi)), appm__scale(b, r * rr * sinf(phi))));
+                      appm__add(appm__scale(t, px), appm__scale(b, py)));
     }
     appm__ray_init(&ps->ray, o, d, FLT_MAX);
     return appm__finite3(ps->gamma);
@@ -10013,6 +10125,10 @@ static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char
     s->bmax = bb.hi;
     s->center = appm__scale(appm__add(bb.lo, bb.hi), 0.5f);
     s->radius = 0.5f * appm__length(appm__sub(bb.hi, bb.lo));
+    if (L->stand_in && !L->white) { /* the studio's photons are aimed at its model (9.2) */
+        s->focus = appm__scale(appm__add(model.lo, model.hi), 0.5f);
+        s->focus_r = 0.5f * appm__length(appm__sub(model.hi, model.lo));
+    }
     if ((st = appm__bvh_build(s, L->diag)) != APPM_OK) return st;
     if ((st = appm__open_edges(s)) != APPM_OK) return st;
     if ((st = appm__scene_lights(s, L, name)) != APPM_OK) return st;
@@ -11644,7 +11760,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         appm__material tex;
         appm__v3 wi, g2;
         appm__bsdf_sample bs;
-        float u3[4];
+        float u3[4], steer = 1.0f; /* an aimed bounce's factor (appm__focus_bounce) */
         unsigned dims;
         float q;
         if (!appm__intersect(s, &ray, skip, &h)) break;
@@ -11661,15 +11777,18 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         if (segs + 2 > r->max_depth) break; /* no deposit could count any more */
         dims = appm__bsdf_dims(m) | appm__photon_rr_dim(m);
         appm__smp_bsdf(&smp, segs - 1, dims, u3);
-        if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs))
+        if (appm__focus_aims(s, m, &sf, wi)) { /* the studio's model (6.3) */
+            if (!appm__focus_bounce(s, m, &sf, wi, u3[0], u3[1], &bs, &steer)) break;
+        } else if (!appm__bsdf_sample_dir(m, &sf, wi, u3[0], u3[1], u3[2], APPM__IMPORTANCE, &bs)) {
             break;
+        }
         g2 = appm__mul(gamma, bs.weight);
         q = appm__maxc(gamma) > 0.0f ? appm__maxc(g2) / appm__maxc(gamma) : 0.0f;
         if (q < 1.0f) {
             if (!(appm__smp_rr(&smp, segs - 1, dims, u3) < q)) break;
             g2 = appm__scale(g2, 1.0f / q);
         }
-        gamma = g2;
+        gamma = steer != 1.0f ? appm__scale(g2, steer) : g2;
         comp = bs.specular ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE;
         appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
         skip = sf.tri;
