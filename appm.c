@@ -7183,7 +7183,7 @@ struct appm_scene {
     uint32_t width, height;
     appm__v3 bmin, bmax, center;
     float radius;          /* bounding-sphere radius of the geometry */
-    appm__v3 focus;        /* the studio's model: the centre of its bounding sphere (9.2) */
+    appm__v3 focus;        /* the studio's model: the centre of its bounding sphere (6.3) */
     float focus_r;         /* and its radius; 0: no focus (every scene but the studio) */
     uint64_t dropped;
     char name[256];
@@ -9516,7 +9516,7 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
  *              drawn from a mixture: the whole disk (radius R, a share
  *              APPM__FOCUS_DISK) and the focus sphere's shadow on it (a disk
  *              of radius focus_r around the focus's projection);
- *   bounces    a diffuse bounce off the focus sphere draws its direction from
+ *   bounces    a diffuse bounce outside the focus sphere draws its direction from
  *              a mixture: the cosine lobe (a share APPM__FOCUS_COS) and the
  *              cone the focus sphere fills, seen from the bounce.
  * A one-sample mixture is importance sampling with the mixture's density
@@ -10125,7 +10125,7 @@ static appm_status appm__scene_finish(appm_scene *s, appm__loader *L, const char
     s->bmax = bb.hi;
     s->center = appm__scale(appm__add(bb.lo, bb.hi), 0.5f);
     s->radius = 0.5f * appm__length(appm__sub(bb.hi, bb.lo));
-    if (L->stand_in && !L->white) { /* the studio's photons are aimed at its model (9.2) */
+    if (L->stand_in && !L->white) { /* the studio's photons are aimed at its model (6.3) */
         s->focus = appm__scale(appm__add(model.lo, model.hi), 0.5f);
         s->focus_r = 0.5f * appm__length(appm__sub(model.hi, model.lo));
     }

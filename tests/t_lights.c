@@ -1,6 +1,7 @@
 /* tests/t_lights.c - lights for any scene: the white environment a bare OBJ
  * without light gets with appm_config.stand_in = APPM_STAND_IN_WHITE (the
- * studio, the default, is tested at the end), and the lights added to a loaded scene
+ * studio, the default, is tested at the end, with the photons it aims at its
+ * model: appm.c 6.3), and the lights added to a loaded scene
  * (appm_scene_add_point_light, appm_scene_set_environment).
  *
  * The scene is one two-sided Lambertian square, albedo rho = 0.5, side 2, in
