@@ -440,8 +440,43 @@ static void test_focus_unbiased(void)
     appm_scene_destroy(s);
 }
 
+/* The studio's aimed photons with 1 and 3 threads: the same bytes (appm,
+ * 6 passes at 24x24; the aim is a function of each path's own numbers). */
+static void test_focus_threads(void)
+{
+    appm_scene *s = studio_sphere();
+    float *img[2] = {NULL, NULL};
+    unsigned k;
+    if (!s) return;
+    for (k = 0; k < 2; ++k) {
+        appm_config cfg;
+        appm_renderer *r = NULL;
+        appm_diag d;
+        appm_image view;
+        int pass;
+        appm_config_init(&cfg);
+        cfg.width = cfg.height = 24;
+        cfg.threads = k ? 3u : 1u;
+        cfg.seed = 7;
+        if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) {
+            CHECK_MSG(0, "renderer: %s", d.message);
+            break;
+        }
+        for (pass = 0; pass < 6; ++pass) CHECK(appm_renderer_pass(r) == APPM_OK);
+        appm_renderer_image(r, &view);
+        img[k] = (float *)malloc(sizeof(float) * 3 * 24 * 24);
+        if (img[k]) memcpy(img[k], view.rgb, sizeof(float) * 3 * 24 * 24);
+        appm_renderer_destroy(r);
+    }
+    CHECK(img[0] && img[1] && memcmp(img[0], img[1], sizeof(float) * 3 * 24 * 24) == 0);
+    free(img[0]);
+    free(img[1]);
+    appm_scene_destroy(s);
+}
+
 int main(void)
 {
+    test_focus_threads();
     test_focus_unbiased();
     test_studio();
     test_focus_bounce();
