@@ -8916,7 +8916,8 @@ done:
  *
  * Lights are chosen by power (mean of R, G, B) for photon emission and for
  * shadow rays alike.  Emission is sampled so that a photon's weight gamma is
- * constant per light (zero-variance emission): gamma = Phi_light / pick.
+ * constant per light (zero-variance emission): gamma = Phi_light / pick -
+ * on average only where the studio aims its sky's photons (6.3).
  */
 enum { APPM__RADIANCE = 0, APPM__IMPORTANCE = 1 };
 
@@ -9568,9 +9569,12 @@ static int appm__focus_aims(const appm_scene *s, const appm__material *m, const 
 }
 
 /* An aimed diffuse bounce (appm__focus_aims): the direction from u1 (the
- * mixture's choice and the first coordinate) and u2, in bs as
- * appm__bsdf_sample_dir gives it (weight: the albedo, the cosine lobe's), and
- * in *steer the factor the weight takes for the mixture, (cos / pi) / p. */
+ * mixture's choice and the first coordinate) and u2, in bs with the weight
+ * appm__bsdf_sample_dir gives (the albedo, the cosine lobe's) and the
+ * mixture's density p, and in *steer the factor the weight takes for the
+ * mixture, (cos / pi) / p.  A direction the cone drew counts as in the cone
+ * even where rounding puts it a hair outside, which would give it the lobe's
+ * density alone, a weight up to 90x too large. */
 static int appm__focus_bounce(const appm_scene *s, const appm__material *m, const appm__surf *sf, appm__v3 wo,
                               float u1, float u2, appm__bsdf_sample *bs, float *steer)
 {
@@ -9593,7 +9597,7 @@ static int appm__focus_bounce(const appm_scene *s, const appm__material *m, cons
     }
     c = appm__dot(bs->wi, ns);
     if (!(appm__dot(bs->wi, ng) > 0.0f) || !(c > 0.0f)) return 0;
-    p = h * c * APPM__INV_PI + (appm__dot(bs->wi, axis) >= (float)cmax ? (1.0 - h) * pc : 0.0);
+    p = h * c * APPM__INV_PI + (u1 >= h || appm__dot(bs->wi, axis) >= (float)cmax ? (1.0 - h) * pc : 0.0);
     bs->pdf = (float)p;
     bs->weight = m->color;
     bs->specular = 0;
@@ -9653,12 +9657,12 @@ static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, ap
             d = appm__neg(wl);
             appm__basis(d, &t, &b);
             if (s->focus_r > 0.0f) area = appm__focus_disk(s, t, b, r, u3, u4, &px, &py);
-            /* gamma = L(wl) / (pick * p(wl) * (1/(pi R^2))) */
+            /* gamma = L(wl) / (pick * p(wl) * (1/area)), area = pi R^2 without a focus */
             ps->gamma = appm__scale(appm__env_lookup(&s->envmap, wl), (float)(area / (l->pick * pdf)));
         } else {
             d = appm__uniform_sphere(u1, u2);
             appm__basis(d, &t, &b);
-            /* gamma = L / (pick * (1/4pi) * (1/(pi R^2))) */
+            /* gamma = L / (pick * (1/4pi) * (1/area)), area = pi R^2 without a focus */
             if (s->focus_r > 0.0f) {
                 area = appm__focus_disk(s, t, b, r, u3, u4, &px, &py);
                 ps->gamma = appm__scale(l->value, (float)(4.0 * APPM__PI * area / l->pick));

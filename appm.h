@@ -296,7 +296,7 @@ typedef enum appm_stand_in {
                                * the model's bounding box, 2 of its bounding radii each
                                * way, and the camera 20 degrees above, framing the model;
                                * its photons are aimed at the model (half the sky's
-                               * emission, three quarters of the bounces off it: 0.83x
+                               * emission, three quarters of the bounces off the plate: 0.83x
                                * the RMSE at equal time), with weights that keep every
                                * estimate unbiased (appm.c 6.3)                          */
     APPM_STAND_IN_WHITE       /* a constant white environment of radiance 1 and the camera

@@ -301,8 +301,8 @@ static void test_studio(void)
  * estimates the cosine lobe's integral, 1, and its mean where the direction
  * falls in the sphere's cone the lobe's share of the cone, sin^2 theta_max =
  * (rf / D)^2 (the cone's axis along the normal): one-sample importance
- * sampling with the mixture's density is unbiased, though two thirds of the
- * directions go into the cone. */
+ * sampling with the mixture's density is unbiased, though more than three
+ * quarters of the directions go into the cone. */
 static void test_focus_bounce(void)
 {
     static appm_scene sc; /* zero: only focus and focus_r are read */
@@ -347,6 +347,54 @@ static void test_focus_bounce(void)
     CHECK(inside > 0.7 * n * n); /* the cone's 3/4, and the lobe's own share of it */
 }
 
+/* The same with a cone partly below the horizon and seen from the surface's
+ * back (the side flip): a surface facing +y seen from below (wo = -y), the
+ * sphere below it and to the side, its axis 11 degrees from the surface and
+ * its half-angle 19 degrees.  The mean of `steer` is still the lobe's integral, 1 (the
+ * cone's directions below the surface are lost, the lobe's weight makes up
+ * for them), and its mean within the cone the cosine lobe's probability of
+ * the cone, counted independently from 1024 x 1024 cosine-lobe directions. */
+static void test_focus_oblique(void)
+{
+    static appm_scene sc;
+    appm__material m;
+    appm__surf sf;
+    const int n = 1024;
+    const appm__v3 down = appm__v(0, -1, 0);
+    appm__v3 axis;
+    double all = 0.0, cone = 0.0, lobe = 0.0, cmax;
+    int i, k, above = 0;
+    memset(&m, 0, sizeof m);
+    memset(&sf, 0, sizeof sf);
+    m.kind = APPM__MAT_DIFFUSE;
+    m.color = appm__v(0.8f, 0.8f, 0.8f);
+    sf.ng = sf.ns = appm__v(0, 1, 0);
+    sc.focus = appm__v(3.0f, -0.6f, 0.0f); /* 11 degrees under the surface, half-angle 19 */
+    sc.focus_r = 1.0f;
+    axis = appm__normalize(sc.focus);
+    cmax = sqrt(1.0 - 1.0 / (double)appm__dot(sc.focus, sc.focus));
+    CHECK(appm__focus_aims(&sc, &m, &sf, appm__neg(down)) == 0); /* seen from above: the sphere is behind */
+    CHECK(appm__focus_aims(&sc, &m, &sf, down));
+    for (i = 0; i < n; ++i)
+        for (k = 0; k < n; ++k) {
+            appm__bsdf_sample bs;
+            float steer = 0.0f, u1 = (i + 0.5f) / n, u2 = (k + 0.5f) / n;
+            appm__v3 w = appm__cosine_dir(down, u1, u2);
+            if (appm__dot(w, axis) >= cmax) lobe += 1.0;
+            if (!appm__focus_bounce(&sc, &m, &sf, down, u1, u2, &bs, &steer)) continue;
+            above += !(bs.wi.y < 0.0f); /* on the side wo is on */
+            all += steer;
+            if (appm__dot(bs.wi, axis) >= cmax) cone += steer;
+        }
+    all /= (double)n * n;
+    cone /= (double)n * n;
+    lobe /= (double)n * n;
+    CHECK(above == 0);
+    CHECK_MSG(lobe > 0.01 && lobe < 0.1, "lobe %g", lobe); /* a cone partly under the surface */
+    CHECK_NEAR(all, 1.0, 2e-3);
+    CHECK_NEAR(cone, lobe, 2e-3);
+}
+
 /* The studio's emission disk (appm__focus_disk): over a 512 x 512 grid of
  * (u3, u4), the mean of 1 / density times the indicator of a region estimates
  * the region's area, whatever the mixture: the whole disk (pi R^2, the power
@@ -380,8 +428,8 @@ static void test_focus_disk(void)
     CHECK_NEAR(half / ((double)n * n), APPM__PI * R * R / 2.0, 5e-3 * APPM__PI * R * R);
 }
 
-/* Renders `passes` passes of appm (photons; one thread, seed `seed`) at
- * 32x32 and returns the image's mean luminance and in *centre the mean over
+/* Renders `passes` passes of ppm at a fixed radius (one thread, seed `seed`)
+ * at 32x32 and returns the image's mean luminance and in *centre the mean over
  * the model's middle, or -1 on failure. */
 static double render_photons(const appm_scene *s, int passes, uint64_t seed, double *centre)
 {
@@ -412,31 +460,46 @@ static double render_photons(const appm_scene *s, int passes, uint64_t seed, dou
     return sum / (32.0 * 32.0);
 }
 
-/* The studio's aimed photons change the noise, not the picture: the sphere in
- * the studio rendered by appm with its focus and without (focus_r = 0: the
- * sky's own emission, cosine bounces), the same eye paths, so the difference
- * is the photon term's alone. */
-static void test_focus_unbiased(void)
+/* The mean over seeds 1-3 of the ratios aimed / not aimed (focus_r = 0: the
+ * sky's own emission, cosine bounces) of the image's mean and of its centre,
+ * less 1, into image[0] and image[1]. */
+static void focus_ratios(appm_scene *s, int passes, double *image)
 {
-    appm_scene *s = studio_sphere();
-    int passes = check_quick() ? 16 : 48;
     uint64_t seed;
-    double image = 0.0, centre = 0.0;
-    if (!s) return;
+    image[0] = image[1] = 0.0;
     for (seed = 1; seed <= 3; ++seed) {
         double c1, c0, m1 = render_photons(s, passes, seed, &c1), m0;
         float keep = s->focus_r;
         s->focus_r = 0.0f;
         m0 = render_photons(s, passes, seed, &c0);
         s->focus_r = keep;
-        image += (m1 / m0 - 1.0) / 3.0;
-        centre += (c1 / c0 - 1.0) / 3.0;
+        image[0] += (m1 / m0 - 1.0) / 3.0;
+        image[1] += (c1 / c0 - 1.0) / 3.0;
     }
-    /* 16 seeds at 48 passes: the image's ratio 1.0005, the centre's 1.0020
-     * (standard error 0.0028); a photon weight without the mixture's factor
-     * would make the aimed photons 2-4x too heavy */
-    CHECK_MSG(fabs(image) < 0.015, "image mean %+.4f with the focus", image);
-    CHECK_MSG(fabs(centre) < 0.04, "centre %+.4f with the focus", centre);
+}
+
+/* The studio's aimed photons change the noise, not the picture: the sphere in
+ * the studio rendered by ppm at a fixed radius with its focus and without, the
+ * same eye paths, so the difference is the photon term's alone; under the
+ * studio's sky and under a constant environment set on the scene (the aim
+ * stays), which takes the other branch of the sky's emission. */
+static void test_focus_unbiased(void)
+{
+    appm_scene *s = studio_sphere();
+    const double white[3] = {1.0, 1.0, 1.0};
+    int passes = check_quick() ? 16 : 48, k;
+    appm_diag d;
+    if (!s) return;
+    for (k = 0; k < 2; ++k) {
+        double r[2];
+        if (k == 1) CHECK(appm_scene_set_environment(s, white, &d) == APPM_OK && s->focus_r > 0.0f);
+        focus_ratios(s, passes, r);
+        /* 16 seeds at 48 passes under the sky: the image's ratio 1.0005, the
+         * centre's 1.0020 (standard error 0.0028); a photon weight without the
+         * mixture's factor makes the aimed photons 2-4x too heavy */
+        CHECK_MSG(fabs(r[0]) < 0.015, "%s: image mean %+.4f with the focus", k ? "constant" : "sky", r[0]);
+        CHECK_MSG(fabs(r[1]) < 0.04, "%s: centre %+.4f with the focus", k ? "constant" : "sky", r[1]);
+    }
     appm_scene_destroy(s);
 }
 
@@ -456,6 +519,7 @@ static void test_focus_threads(void)
         int pass;
         appm_config_init(&cfg);
         cfg.width = cfg.height = 24;
+        cfg.photons = 8192; /* 8 chunks: the threads share the photon pass */
         cfg.threads = k ? 3u : 1u;
         cfg.seed = 7;
         if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) {
@@ -480,6 +544,7 @@ int main(void)
     test_focus_unbiased();
     test_studio();
     test_focus_bounce();
+    test_focus_oblique();
     test_focus_disk();
     test_white_environment();
     test_point_light_falloff();
