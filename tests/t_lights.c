@@ -295,6 +295,17 @@ static void test_studio(void)
     appm_scene_destroy(s);
 }
 
+/* A diffuse material of grey albedo `albedo` and a surface point at the
+ * origin facing +y, for the aimed bounce's tests. */
+static void focus_surface(appm__material *m, appm__surf *sf, float albedo)
+{
+    memset(m, 0, sizeof *m);
+    memset(sf, 0, sizeof *sf);
+    m->kind = APPM__MAT_DIFFUSE;
+    m->color = appm__v(albedo, albedo, albedo);
+    sf->ng = sf->ns = appm__v(0, 1, 0);
+}
+
 /* The studio's aimed diffuse bounce (appm__focus_bounce): a surface facing
  * +y at the origin, the focus sphere (radius rf) at height D above it.  Over
  * a 1024 x 1024 grid of (u1, u2), the mean of the weight factor `steer`
@@ -312,11 +323,7 @@ static void test_focus_bounce(void)
     const float D = 3.0f, rf = 1.0f;
     double all = 0.0, cone = 0.0, inside = 0.0;
     int i, k, fails = 0;
-    memset(&m, 0, sizeof m);
-    memset(&sf, 0, sizeof sf);
-    m.kind = APPM__MAT_DIFFUSE;
-    m.color = appm__v(0.5f, 0.5f, 0.5f);
-    sf.ng = sf.ns = appm__v(0, 1, 0);
+    focus_surface(&m, &sf, 0.5f);
     sc.focus = appm__v(0, D, 0);
     sc.focus_r = rf;
     CHECK(appm__focus_aims(&sc, &m, &sf, appm__v(0, 1, 0)));
@@ -364,11 +371,7 @@ static void test_focus_oblique(void)
     appm__v3 axis;
     double all = 0.0, cone = 0.0, lobe = 0.0, cmax;
     int i, k, above = 0;
-    memset(&m, 0, sizeof m);
-    memset(&sf, 0, sizeof sf);
-    m.kind = APPM__MAT_DIFFUSE;
-    m.color = appm__v(0.8f, 0.8f, 0.8f);
-    sf.ng = sf.ns = appm__v(0, 1, 0);
+    focus_surface(&m, &sf, 0.8f);
     sc.focus = appm__v(3.0f, -0.6f, 0.0f); /* 11 degrees under the surface, half-angle 19 */
     sc.focus_r = 1.0f;
     axis = appm__normalize(sc.focus);
