@@ -11120,6 +11120,7 @@ struct appm_renderer {
     unsigned nee_dims, emit_dims; /* appm__light_dims of the scene */
     unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
     int cut;             /* the kernel renormalised where the surface ends inside it (10.4, step 6) */
+    int edges;           /* the lines of that cut found: to cut, or to measure the mass (appm__gather.mass) */
     double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
     double var_scale;    /* the spread of the passes times this is the variance (appm__var_scale) */
     double *err_w;       /* per pixel, the error estimate's parts (12, appm__estimate_error): the weight
@@ -12000,6 +12001,9 @@ typedef struct appm__gather {
      * the surface of x does not go; u (in t, b) points from x towards line k, d its distance */
     int ncut;
     float cut_u[APPM__CUT_LINES][2], cut_d[APPM__CUT_LINES];
+    double mass;  /* a method that measures and does not cut (APPM__CAP_MASS), on the passes of
+                   * appm__mass_pass: the radiance kernel's mass on the surface, appm__cut_mass of
+                   * the lines found (1: none); < 0: not measured this pass */
     double lw[5]; /* 1 / the mass of the Laplacian's kernels at x + h t, x - h t, x + h b, x - h b
                    * and x (step 6; 1 without lines), set by the query */
     uint64_t *gcount; /* guided emission (9.1): this worker's counts per emission cell; NULL: none */
@@ -12041,6 +12045,25 @@ static double appm__cut_mass_at(const appm__gather *g, double R, double sx, doub
 }
 
 static double appm__cut_mass(const appm__gather *g, double R) { return appm__cut_mass_at(g, R, 0.0, 0.0); }
+
+/* A method that measures the mass without cutting (APPM__CAP_MASS) measures it
+ * on passes 1, 1 + APPM__MASS_EVERY, 1 + 2 APPM__MASS_EVERY, ...: finding the
+ * lines costs 5 % of a pass of appm-paper, and the mass is geometry, which
+ * changes only with the pixel's jittered point and the slowly shrinking r.
+ * The mean of every 4th pass and of every pass gave the same error bar
+ * (docs/algorithm.md 7.3). */
+#define APPM__MASS_EVERY 4
+
+static int appm__mass_pass(uint64_t j)
+{
+    return j % APPM__MASS_EVERY == 1 % APPM__MASS_EVERY;
+}
+
+/* Passes among the first j that measure the mass. */
+static uint64_t appm__mass_count(uint64_t j)
+{
+    return (j + APPM__MASS_EVERY - 1) / APPM__MASS_EVERY;
+}
 
 /* Turns one component's sums (kernel radius R) into this pass's estimates:
  *   e  = (1/M) sum_i k_R(x - y_i) Psi_i          (the photon term of Ihat_j)
@@ -12099,7 +12122,8 @@ enum {
     APPM__CAP_PHOTONS = 1,   /* photon passes (else section 11's path tracer)       */
     APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
     APPM__CAP_CUT = 4,       /* the kernel cut at a corner (10.4, step 6)            */
-    APPM__CAP_ERROR = 8      /* keeps an error estimate (appm_stats.est_relerr)      */
+    APPM__CAP_ERROR = 8,     /* keeps an error estimate (appm_stats.est_relerr)      */
+    APPM__CAP_MASS = 16      /* finds the cut's lines, to measure the mass it loses (gather.mass) */
 };
 
 typedef struct appm__field { /* one field of a method's per-pixel state */
@@ -12375,13 +12399,15 @@ typedef struct appm__paper_state {
     double dI;      /* running mean of the per-vertex Laplacians, DeltaI (4.5) */
     double R;       /* r_j, the radius of the last gather */
     double R2sum;   /* sum of r_j^2, for the bias estimate */
+    double m;       /* running mean of the kernel's mass on the surface m_j (1 off the seams) */
     uint64_t N;     /* photons found so far */
 } appm__paper_state;
 
 static const appm__field appm__paper_fields[] = {
     {"I", offsetof(appm__paper_state, I), 3, 0},   {"S", offsetof(appm__paper_state, S), 1, 0},
     {"dI", offsetof(appm__paper_state, dI), 1, 0}, {"R", offsetof(appm__paper_state, R), 1, 0},
-    {"R2sum", offsetof(appm__paper_state, R2sum), 1, 0}, {"N", offsetof(appm__paper_state, N), 1, 1}};
+    {"R2sum", offsetof(appm__paper_state, R2sum), 1, 0}, {"m", offsetof(appm__paper_state, m), 1, 0},
+    {"N", offsetof(appm__paper_state, N), 1, 1}};
 
 /* 4.3: the closed-form minimiser of MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2
  * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M j mu2^2 dI^2), for Mj = M j.  Takes
@@ -12450,6 +12476,7 @@ static void appm__paper_commit(appm_renderer *r, appm__pixel *px, void *state, c
     p->N += g->sum[APPM__COMP_DIFFUSE].count;
     p->R = vp->R;
     p->R2sum += p->R * p->R;
+    if (g->mass >= 0.0) p->m += (g->mass - p->m) / (double)appm__mass_count(r->pass);
     appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e));
 }
 
@@ -12469,13 +12496,24 @@ static void appm__paper_pass_end(appm_renderer *r)
     r->stats.clamped = n ? (double)at / (double)n : 0.0;
 }
 
-/* 4.2: the bias (mu2 / 2) dI r^2, with r^2 the mean over the passes.  The
- * paper keeps no spread of dI: its noise is not known. */
+/* The bias at a seam, where the surface ends inside the kernel (10.4, step 6,
+ * which appm-paper does not take): pass j's photon estimate is m_j L there,
+ * so the mean I = m L, m the mean of the m_j, and the bias I - L = I (1 - 1/m).
+ * A first-order term that no r^2 model holds: without it the error estimate of
+ * the empty white box read 0.42 of the truth at 64 passes (docs/algorithm.md
+ * 7.3). */
+static double appm__paper_seam(const appm__paper_state *p)
+{
+    return p->m > 0.0 && p->m < 1.0 ? appm__lumd(p->I) * (1.0 - 1.0 / p->m) : 0.0;
+}
+
+/* 4.2: the bias (mu2 / 2) dI r^2, with r^2 the mean over the passes, and the
+ * seam's.  The paper keeps no spread of dI: its noise is not known. */
 static double appm__paper_bias(const void *state, double j, double *noise)
 {
     const appm__paper_state *p = (const appm__paper_state *)state;
     *noise = 0.0;
-    return 0.5 * APPM__MU2 * p->dI * (p->R2sum / j);
+    return 0.5 * APPM__MU2 * p->dI * (p->R2sum / j) + appm__paper_seam(p);
 }
 
 static double appm__paper_aux(const appm_renderer *r, const void *state, appm_aux which)
@@ -13080,7 +13118,8 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
                           appm__sppm_fields, sizeof appm__sppm_fields / sizeof appm__sppm_fields[0],
                           appm__sppm_start, NULL, appm__sppm_radius, NULL, appm__sppm_commit, NULL,
                           appm__sppm_term, NULL, appm__sppm_aux},
-    [APPM_METHOD_APPM_PAPER] = {"appm-paper", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_ERROR,
+    [APPM_METHOD_APPM_PAPER] = {"appm-paper",
+                                APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_ERROR | APPM__CAP_MASS,
                                 APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) |
                                     APPM__AUX_BIT(APPM_AUX_LAPLACIAN) | APPM__AUX_BIT(APPM_AUX_ERROR),
                                 sizeof(appm__paper_state), appm__paper_fields,
@@ -13243,6 +13282,21 @@ static void appm__gather_query(const appm__pmap *m, appm__gather *g)
     appm__pmap_query(m, g->x, Rg, appm__gather_visit, g);
 }
 
+/* The radiance kernel's mass on the surface for a method that does not cut
+ * (APPM__CAP_MASS): the cut's lines sought within R, not 2h (the Laplacian's
+ * kernels are not measured), and g left without lines. */
+static double appm__seam_mass(const appm_renderer *r, size_t i, appm__gather *g)
+{
+    const float h = g->h;
+    double m;
+    g->h = 0.0f;
+    appm__cut_lines(r, i, g);
+    m = appm__cut_mass(g, g->R);
+    g->h = h;
+    g->ncut = 0;
+    return m;
+}
+
 static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
@@ -13255,6 +13309,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
         appm__pixel *p = &r->pix[pi];
         appm__gather g;
         memset(&g, 0, sizeof g);
+        g.mass = r->edges && !r->cut && appm__mass_pass(r->pass) ? 1.0 : -1.0;
         appm__add3(p->ld, vp->ld); /* the pass has succeeded: commit its direct term */
         if (vp->segs > 0 && vp->segs < r->max_depth) {
             g.x = vp->x;
@@ -13271,6 +13326,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.Rc = vp->Rc;
             g.h = (float)r->lap_h;
             if (r->cut) appm__cut_lines(r, pi, &g);
+            else if (g.mass >= 0.0) g.mass = appm__seam_mass(r, pi, &g);
             if (r->guide.nslot && r->guide.ref > 0.0) {
                 g.gpairs = (size_t)r->guide.nslot * APPM__GUIDE_CELLS;
                 g.gcount = r->guide.count + (size_t)worker * (g.gpairs + r->guide.nslot);
@@ -13610,6 +13666,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->scene = scene;
     r->est = &appm__estimators[c.method];
     r->cut = (r->est->caps & APPM__CAP_CUT) != 0;
+    r->edges = r->cut || (r->est->caps & APPM__CAP_MASS) != 0;
     r->direct = c.direct;
     r->w = c.width;
     r->h = c.height;
@@ -13684,7 +13741,7 @@ static void appm__radius_task(void *arg, uint32_t row, unsigned worker)
     appm_renderer *r = (appm_renderer *)arg;
     uint32_t x;
     (void)worker;
-    if (r->cut) appm__edge_row(r, row);
+    if (r->edges) appm__edge_row(r, row);
     for (x = 0; x < r->w; ++x) {
         size_t i = (size_t)row * r->w + x;
         r->vp[i].R = r->est->radius(r, appm__state(r, i));

@@ -1,7 +1,7 @@
 /* bench/errparts.c - the error bar's two parts against the truth, over seeds.
  *
  *   cc -std=c99 -O2 bench/errparts.c -o bench/errparts -lm -pthread
- *   bench/errparts SCENE REFERENCE.pfm PASSES [SEEDS [pt]]
+ *   bench/errparts SCENE REFERENCE.pfm PASSES [SEEDS [METHOD]]
  *
  * Renders SCENE at 64x64 with appm (or the path tracer) for seeds 1..SEEDS
  * (default 12) and splits est_relerr's square (docs/algorithm.md 7.2) into its
@@ -34,7 +34,7 @@ int main(int argc, char **argv)
     size_t i;
     double est_b = 0, est_v = 0, true_v = 0, true_b = 0, halves = 0, quarters = 0;
     if (argc < 4) {
-        fprintf(stderr, "usage: %s SCENE REFERENCE.pfm PASSES [SEEDS [pt]]\n", argv[0]);
+        fprintf(stderr, "usage: %s SCENE REFERENCE.pfm PASSES [SEEDS [METHOD]]\n", argv[0]);
         return 2;
     }
     passes = atoi(argv[3]);
@@ -59,7 +59,11 @@ int main(int argc, char **argv)
         int p;
         cfg.width = cfg.height = EP_W;
         cfg.seed = (uint64_t)k + 1;
-        cfg.method = argc > 5 && strcmp(argv[5], "pt") == 0 ? APPM_METHOD_PT : APPM_METHOD_APPM;
+        cfg.method = APPM_METHOD_APPM;
+        if (argc > 5 && appm_method_parse(argv[5], &cfg.method) != APPM_OK) {
+            fprintf(stderr, "errparts: unknown method %s\n", argv[5]);
+            return 2;
+        }
         if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) {
             fprintf(stderr, "errparts: %s\n", d.message);
             return 1;
@@ -73,7 +77,7 @@ int main(int argc, char **argv)
         for (i = 0; i < EP_N; ++i) {
             L[k][i] = lum(img.rgb + 3 * i);
             W[k][i] = appm__rel_weight(r, i, (double)passes);
-            B2[k][i] = appm__bias2(r, i, (double)passes);
+            B2[k][i] = appm__bias2(r, i);
             V[k][i] = r->var_scale * appm__mean_var(&r->pix[i], NULL, 1, r->pass);
         }
         printf("seed %d: est_relerr %.5f, halves' scale %.3f\n", k + 1, r->stats.est_relerr, r->var_scale);
