@@ -687,6 +687,21 @@ static void render_defaults(render_run *R)
     }
 }
 
+/* The path tracer reaches a point or spot light only by a shadow ray, which no
+ * mirror or glass lets through: light from such a light that reaches a surface
+ * through one (a caustic) is missing from its image, and from its error bar,
+ * which can only measure the light its paths find. */
+static void warn_pt_caustics(const render_opts *o, const appm_scene *scene)
+{
+    appm_scene_info in;
+    if (o->cfg.method != APPM_METHOD_PT || !o->cfg.log) return;
+    appm_scene_get_info(scene, &in);
+    if (in.lights_point + in.lights_spot == 0 || in.materials_mirror + in.materials_dielectric == 0) return;
+    o->cfg.log(o->cfg.log_user, o->scene, 0,
+               "pt does not render the light of point and spot lights that reaches a surface through a mirror "
+               "or glass (caustics): its image and est_relerr leave it out (--method appm renders it)");
+}
+
 /* The scene with the command line's lights, the reference image, the renderer
  * (resumed from --resume), the log; EXIT_OK or the exit code. */
 static int render_setup(render_run *R)
@@ -703,6 +718,7 @@ static int render_setup(render_run *R)
         return cli_agree(rc);
     }
     if ((rc = cli_agree(add_cli_lights(o, R->scene))) != EXIT_OK) return rc;
+    warn_pt_caustics(o, R->scene);
     if ((s = appm_renderer_create(R->scene, &o->cfg, &R->r, &d)) != APPM_OK) rc = lib_error(s, &d, NULL);
     else if (g_cli && (s = appm_renderer_set_cluster(R->r, &g_cli->cluster, &d)) != APPM_OK)
         rc = lib_error(s, &d, NULL);

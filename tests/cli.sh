@@ -396,6 +396,20 @@ for bad in "--light spot 0 0 0 1 1 1" "--light point 0 0 0 1 1" "--light point 0
 done
 check "no image from the refused renders" absent "$T/never.png"
 
+# pt cannot find a point or spot light through glass: it says so, once, and only then
+run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --passes 1 -o "$T/pt-glass.pfm"
+check "pt on a spot light behind glass warns about its caustics (exit $rc)" \
+    [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not render the light of point and spot lights' "$T/err")" -eq 1 ]
+run "$APPM" render scenes/caustic-glass.scene --size 16x20 --passes 1 -o "$T/appm-glass.pfm"
+check "... appm does not" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 0 ]
+run "$APPM" render "$SCENE" --method pt --size 16x16 --passes 1 -o "$T/pt-box.pfm"
+check "... nor pt on a box without glass" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 0 ]
+run "$APPM" render scenes/cornell-sphere.scene --method pt --size 16x16 --passes 1 -o "$T/pt-sphere.pfm"
+check "... nor pt on glass under an area light" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 0 ]
+run "$APPM" render scenes/cornell-sphere.scene --method pt --size 16x16 --passes 1 -o "$T/pt-sphere.pfm" \
+    --light point 0 1.5 0 1 1 1
+check "... but with a point light added" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 1 ]
+
 # ---- --emission ------------------------------------------------------------------
 # light (the default) renders the same bytes as no option; guided reports its share,
 # writes each guided light's density with --aux, and is refused by a light resume.
