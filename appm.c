@@ -12002,8 +12002,9 @@ typedef struct appm__gather {
     int ncut;
     float cut_u[APPM__CUT_LINES][2], cut_d[APPM__CUT_LINES];
     double mass;  /* a method that measures and does not cut (APPM__CAP_MASS), on the passes of
-                   * appm__mass_pass: the radiance kernel's mass on the surface, appm__cut_mass of
-                   * the lines found (1: none); < 0: not measured this pass */
+                   * appm__mass_pass and where the pixel gathers: the radiance kernel's mass on the
+                   * surface, appm__cut_mass of the lines found (1: none, at least APPM__CUT_MMIN);
+                   * 0: not measured */
     double lw[5]; /* 1 / the mass of the Laplacian's kernels at x + h t, x - h t, x + h b, x - h b
                    * and x (step 6; 1 without lines), set by the query */
     uint64_t *gcount; /* guided emission (9.1): this worker's counts per emission cell; NULL: none */
@@ -12057,12 +12058,6 @@ static double appm__cut_mass(const appm__gather *g, double R) { return appm__cut
 static int appm__mass_pass(uint64_t j)
 {
     return j % APPM__MASS_EVERY == 1 % APPM__MASS_EVERY;
-}
-
-/* Passes among the first j that measure the mass. */
-static uint64_t appm__mass_count(uint64_t j)
-{
-    return (j + APPM__MASS_EVERY - 1) / APPM__MASS_EVERY;
 }
 
 /* Turns one component's sums (kernel radius R) into this pass's estimates:
@@ -12392,22 +12387,26 @@ static double appm__sppm_aux(const appm_renderer *r, const void *state, appm_aux
  *                      within 2h the 5-point finite-difference Laplacian dl with
  *                      bandwidth h_j = kappa r1 j^(-1/8), every pass;
  *   update             the running means I, S and dI (weight 1/j each).
- * The image is Ld / j + I; the bias estimate (mu2 / 2) dI mean(r^2). */
+ * The image is Ld / j + I; the bias estimate (mu2 / 2) dI mean(r^2), and for
+ * the error bar alone the seam's, from the mean mass m of the kernel on the
+ * surface (appm__paper_seam). */
 typedef struct appm__paper_state {
     double I[3];    /* running mean I_j of the photon term */
     double S;       /* running mean of the kernel's second moment s_j (4.4) */
     double dI;      /* running mean of the per-vertex Laplacians, DeltaI (4.5) */
     double R;       /* r_j, the radius of the last gather */
     double R2sum;   /* sum of r_j^2, for the bias estimate */
-    double m;       /* running mean of the kernel's mass on the surface m_j (1 off the seams) */
+    double m;       /* mean of the kernel's mass on the surface m_j over the gathers measured (1 off
+                     * the seams; 0 before the first) */
     uint64_t N;     /* photons found so far */
+    uint64_t Nm;    /* gathers whose mass was measured */
 } appm__paper_state;
 
 static const appm__field appm__paper_fields[] = {
     {"I", offsetof(appm__paper_state, I), 3, 0},   {"S", offsetof(appm__paper_state, S), 1, 0},
     {"dI", offsetof(appm__paper_state, dI), 1, 0}, {"R", offsetof(appm__paper_state, R), 1, 0},
     {"R2sum", offsetof(appm__paper_state, R2sum), 1, 0}, {"m", offsetof(appm__paper_state, m), 1, 0},
-    {"N", offsetof(appm__paper_state, N), 1, 1}};
+    {"N", offsetof(appm__paper_state, N), 1, 1}, {"Nm", offsetof(appm__paper_state, Nm), 1, 1}};
 
 /* 4.3: the closed-form minimiser of MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2
  * (set dMSE/dr = 0):  r^6 = c_f R(K) S / (M j mu2^2 dI^2), for Mj = M j.  Takes
@@ -12476,7 +12475,10 @@ static void appm__paper_commit(appm_renderer *r, appm__pixel *px, void *state, c
     p->N += g->sum[APPM__COMP_DIFFUSE].count;
     p->R = vp->R;
     p->R2sum += p->R * p->R;
-    if (g->mass >= 0.0) p->m += (g->mass - p->m) / (double)appm__mass_count(r->pass);
+    if (g->mass > 0.0) {
+        p->Nm++;
+        p->m += (g->mass - p->m) / (double)p->Nm;
+    }
     appm__pass_value(r, px, (double)appm__lum(vp->ld) + appm__lumd(e));
 }
 
@@ -12498,10 +12500,11 @@ static void appm__paper_pass_end(appm_renderer *r)
 
 /* The bias at a seam, where the surface ends inside the kernel (10.4, step 6,
  * which appm-paper does not take): pass j's photon estimate is m_j L there,
- * so the mean I = m L, m the mean of the m_j, and the bias I - L = I (1 - 1/m).
- * A first-order term that no r^2 model holds: without it the error estimate of
- * the empty white box read 0.42 of the truth at 64 passes (docs/algorithm.md
- * 7.3). */
+ * so the mean I = m L, m the mean of the m_j over the passes that gather (a
+ * pass whose point sees no surface adds 0 to I, rightly, and no m_j), and the
+ * bias I - L = I (1 - 1/m).  A first-order term that no r^2 model holds:
+ * without it the error estimate of the empty white box read 0.42 of the truth
+ * at 64 passes (bench/errparts, 12 seeds; docs/algorithm.md 7.3). */
 static double appm__paper_seam(const appm__paper_state *p)
 {
     return p->m > 0.0 && p->m < 1.0 ? appm__lumd(p->I) * (1.0 - 1.0 / p->m) : 0.0;
@@ -12941,7 +12944,8 @@ static double appm__adaptive_aux(const appm_renderer *r, const void *state, appm
  * the first-order remainder R grad L . c (c the centroid of the kept part),
  * and a surface that ends where no pixel sees its neighbour (the image's
  * border, a hidden side).  Only appm cuts (APPM__CAP_CUT): ppm, sppm and
- * appm-paper keep their papers' estimators. */
+ * appm-paper keep their papers' estimators; appm-paper finds the lines only to
+ * measure the mass its kernel loses, for its error bar (APPM__CAP_MASS). */
 /* Whether a 4-neighbour of pixel i sees a surface whose normal is 60
  * degrees or more from i's (APPM__NORMAL_COS): a corner or an edge passes
  * between them.  Any line between two pixels also separates two 4-neighbours. */
@@ -13309,7 +13313,6 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
         appm__pixel *p = &r->pix[pi];
         appm__gather g;
         memset(&g, 0, sizeof g);
-        g.mass = r->edges && !r->cut && appm__mass_pass(r->pass) ? 1.0 : -1.0;
         appm__add3(p->ld, vp->ld); /* the pass has succeeded: commit its direct term */
         if (vp->segs > 0 && vp->segs < r->max_depth) {
             g.x = vp->x;
@@ -13326,7 +13329,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.Rc = vp->Rc;
             g.h = (float)r->lap_h;
             if (r->cut) appm__cut_lines(r, pi, &g);
-            else if (g.mass >= 0.0) g.mass = appm__seam_mass(r, pi, &g);
+            else if (r->edges && appm__mass_pass(r->pass)) g.mass = appm__seam_mass(r, pi, &g);
             if (r->guide.nslot && r->guide.ref > 0.0) {
                 g.gpairs = (size_t)r->guide.nslot * APPM__GUIDE_CELLS;
                 g.gcount = r->guide.count + (size_t)worker * (g.gpairs + r->guide.nslot);

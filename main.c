@@ -690,7 +690,8 @@ static void render_defaults(render_run *R)
 /* The path tracer reaches a point or spot light only by a shadow ray, which no
  * mirror or glass lets through: light from such a light that reaches a surface
  * through one (a caustic) is missing from its image, and from its error bar,
- * which can only measure the light its paths find. */
+ * which can only measure the light its paths find.  The scene's counts include
+ * materials its MTL defines and no face uses: such a mirror warns too. */
 static void warn_pt_caustics(const render_opts *o, const appm_scene *scene)
 {
     appm_scene_info in;

@@ -3,7 +3,7 @@
  *   cc -std=c99 -O2 bench/errparts.c -o bench/errparts -lm -pthread
  *   bench/errparts SCENE REFERENCE.pfm PASSES [SEEDS [METHOD]]
  *
- * Renders SCENE at 64x64 with appm (or the path tracer) for seeds 1..SEEDS
+ * Renders SCENE at 64x64 with METHOD (default appm) for seeds 1..SEEDS
  * (default 12) and splits est_relerr's square (docs/algorithm.md 7.2) into its
  * variance part (the halves' scale times the passes' spread) and its squared-bias
  * part (appm__bias2), each a weighted mean over the pixels with the weights of

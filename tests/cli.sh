@@ -54,6 +54,16 @@ run() {
 }
 
 last_line() { tail -n 1 "$T/out"; }
+# warned PATTERN N: the last run exited 0 with PATTERN on N lines of its stderr
+warned() { [ "$rc" -eq 0 ] && [ "$(grep -c "$1" "$T/err")" -eq "$2" ]; }
+# silent_ok: the last run exited 0 and wrote nothing to stderr
+silent_ok() { [ "$rc" -eq 0 ] && [ ! -s "$T/err" ]; }
+# refused_with WORD: the last run exited non-zero with WORD in its stderr
+refused_with() { [ "$rc" -ne 0 ] && contains "$T/err" "$1"; }
+# nonempty FILE...: every FILE exists and is not empty
+nonempty() {
+    for f in "$@"; do [ -s "$f" ] || return 1; done
+}
 # contains FILE WORD...: FILE holds every WORD
 contains() {
     f=$1
@@ -384,7 +394,7 @@ check "... without the warning" [ ! -s "$T/err" ]
 run "$APPM" info "$BUNNY"
 check "info of the bare OBJ: one environment" contains "$T/out" '0 area, 0 point, 0 spot, 1 environment'
 run "$APPM" render "$BUNNY" --size 32x32 --passes 2 -o "$T/bunny-e.pfm" --environment 0.5 0.4 0.3
-check "--environment exits 0, without the warning" [ "$rc" -eq 0 ] && [ ! -s "$T/err" ]
+check "--environment exits 0, without the warning" silent_ok
 run "$APPM" render "$SCENE" --size 32x32 --passes 2 -q -o "$T/cornell-el.pfm" --environment 0.1 0.1 0.1 \
     --light point 0 1.5 0 1 1 1
 check "--environment and --light add to a scene that has lights" [ "$rc" -eq 0 ]
@@ -399,16 +409,16 @@ check "no image from the refused renders" absent "$T/never.png"
 # pt cannot find a point or spot light through glass: it says so, once, and only then
 run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --passes 1 -o "$T/pt-glass.pfm"
 check "pt on a spot light behind glass warns about its caustics (exit $rc)" \
-    [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not render the light of point and spot lights' "$T/err")" -eq 1 ]
+    warned 'pt does not render the light of point and spot lights' 1
 run "$APPM" render scenes/caustic-glass.scene --size 16x20 --passes 1 -o "$T/appm-glass.pfm"
-check "... appm does not" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 0 ]
+check "... appm does not" warned 'pt does not' 0
 run "$APPM" render "$SCENE" --method pt --size 16x16 --passes 1 -o "$T/pt-box.pfm"
-check "... nor pt on a box without glass" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 0 ]
+check "... nor pt on a box without glass" warned 'pt does not' 0
 run "$APPM" render scenes/cornell-sphere.scene --method pt --size 16x16 --passes 1 -o "$T/pt-sphere.pfm"
-check "... nor pt on glass under an area light" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 0 ]
+check "... nor pt on glass under an area light" warned 'pt does not' 0
 run "$APPM" render scenes/cornell-sphere.scene --method pt --size 16x16 --passes 1 -o "$T/pt-sphere.pfm" \
     --light point 0 1.5 0 1 1 1
-check "... but with a point light added" [ "$rc" -eq 0 ] && [ "$(grep -c 'pt does not' "$T/err")" -eq 1 ]
+check "... but with a point light added" warned 'pt does not' 1
 
 # ---- --emission ------------------------------------------------------------------
 # light (the default) renders the same bytes as no option; guided reports its share,
@@ -422,9 +432,9 @@ run "$APPM" render "$GLASS" --size 24x34 --passes 6 -q --emission guided --aux "
     --checkpoint "$T/glass.ckpt"
 check "--emission guided exits 0" [ "$rc" -eq 0 ]
 check "--emission guided: the summary gives the guided share" contains "$T/out" "emission=guided guided="
-check "--emission guided --aux writes light 0's density" [ -s "$T/gl-emission-0.pfm" ] && [ -s "$T/gl-emission-0.png" ]
+check "--emission guided --aux writes light 0's density" nonempty "$T/gl-emission-0.pfm" "$T/gl-emission-0.png"
 run "$APPM" render "$GLASS" --size 24x34 --passes 8 -q --emission light --resume "$T/glass.ckpt" -o "$T/never.pfm"
-check "a guided checkpoint is refused by --emission light (exit $rc)" [ "$rc" -ne 0 ] && contains "$T/err" "emission"
+check "a guided checkpoint is refused by --emission light (exit $rc)" refused_with emission
 run "$APPM" render "$GLASS" --size 8x8 --passes 1 -q --emission both -o "$T/never.png"
 check "--emission both is a usage error" [ "$rc" -eq 1 ]
 
