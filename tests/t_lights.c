@@ -510,34 +510,29 @@ static void test_focus_unbiased(void)
  * 6 passes at 24x24; the aim is a function of each path's own numbers). */
 static void test_focus_threads(void)
 {
+    static float img[2][3 * 24 * 24];
     appm_scene *s = studio_sphere();
-    float *img[2] = {NULL, NULL};
     unsigned k;
+    int ok = 1;
     if (!s) return;
-    for (k = 0; k < 2; ++k) {
+    for (k = 0; k < 2 && ok; ++k) {
         appm_config cfg;
-        appm_renderer *r = NULL;
-        appm_diag d;
+        appm_renderer *r;
         appm_image view;
-        int pass;
         appm_config_init(&cfg);
         cfg.width = cfg.height = 24;
         cfg.photons = 8192; /* 8 chunks: the threads share the photon pass */
         cfg.threads = k ? 3u : 1u;
         cfg.seed = 7;
-        if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) {
-            CHECK_MSG(0, "renderer: %s", d.message);
-            break;
+        r = check_renderer(s, &cfg);
+        ok = r && check_passes(r, 6);
+        if (ok) {
+            appm_renderer_image(r, &view);
+            memcpy(img[k], view.rgb, sizeof img[k]);
         }
-        for (pass = 0; pass < 6; ++pass) CHECK(appm_renderer_pass(r) == APPM_OK);
-        appm_renderer_image(r, &view);
-        img[k] = (float *)malloc(sizeof(float) * 3 * 24 * 24);
-        if (img[k]) memcpy(img[k], view.rgb, sizeof(float) * 3 * 24 * 24);
         appm_renderer_destroy(r);
     }
-    CHECK(img[0] && img[1] && memcmp(img[0], img[1], sizeof(float) * 3 * 24 * 24) == 0);
-    free(img[0]);
-    free(img[1]);
+    CHECK(ok && memcmp(img[0], img[1], sizeof img[0]) == 0);
     appm_scene_destroy(s);
 }
 
