@@ -11058,11 +11058,13 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 96 
     uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
     uint8_t edge_dist;    /* how many pixels along the row to the nearest pixel with a neighbour
                            * on another surface (0: this one; 255: none near; 10.4, step 6) */
-    uint8_t pad[2];
+    uint8_t lit;          /* 1: the eye path met a light or the environment through specular
+                           * vertices only (the pixel shows a light; appm__pixel.lit) */
+    uint8_t pad;
     uint32_t tri;         /* the triangle of x: its open edges (5.5) cut the kernel */
 } appm__vp;
 
-/* Per-pixel state every method keeps across passes (56 bytes).  What a method
+/* Per-pixel state every method keeps across passes (64 bytes).  What a method
  * keeps beyond this (PPM's I, SPPM's tau, N, R, APPM's S, dI, ...) is its own
  * struct in section 10, in a separate array sized by its estimator entry. */
 typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pixel_fields (section 13) */
@@ -11070,6 +11072,8 @@ typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pix
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
     double lh[2];      /* the luminance summed over the first P/2 and the first P passes, P the
                         * last power of two passed: the halves of appm__var_scale */
+    uint64_t lit;      /* passes whose eye path met a light or the environment through specular
+                        * vertices only: a pixel that shows a light (appm__err_weight) */
 } appm__pixel;
 
 struct appm__estimator; /* a method's entry in the table of section 10 */
@@ -11127,6 +11131,7 @@ struct appm_renderer {
                           * w of its relative error, then its term w (bias^2 + Var) */
     double *err_b2;      /* per pixel, the method's bias^2 less its noise (appm__bias2's input) */
     uint64_t err_pass;   /* the pass err_b2 holds (0: none) */
+    float *err_lum;      /* per pixel, its luminance I after the last pass (appm__err_weight's input) */
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
     appm__pixel *pix;
@@ -11334,6 +11339,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
     appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
     appm__camera_ray(r, &smp, px, py, &ray);
     vp->segs = 0;
+    vp->lit = 0;
     for (;;) {
         appm__hit h;
         appm__surf sf;
@@ -11345,14 +11351,20 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         unsigned dims;
         if (++segs > r->max_depth) break;
         if (!appm__intersect(s, &ray, skip, &h)) {
-            if (s->env >= 0) ld = appm__add(ld, appm__mul(W, appm__env_radiance(s, ray.d)));
+            if (s->env >= 0) {
+                ld = appm__add(ld, appm__mul(W, appm__env_radiance(s, ray.d)));
+                vp->lit = 1;
+            }
             break;
         }
         appm__surface(s, &h, &sf);
         m = appm__material_at(s, &sf, &tex);
         wo = appm__neg(ray.d);
         travelled += h.t;
-        if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) ld = appm__add(ld, appm__mul(W, m->ke));
+        if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) {
+            ld = appm__add(ld, appm__mul(W, m->ke));
+            vp->lit = 1;
+        }
         if (m->kind == APPM__MAT_DIFFUSE || m->kind == APPM__MAT_GLOSSY) {
             if ((mg = appm__eye_split(m, &tmp, &smp, segs - 1, &W)) != NULL) {
                 appm__eye_vertex(r, vp, &sf, mg, wo, W, segs, travelled, &ld, &smp, worker);
@@ -13314,6 +13326,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
         appm__gather g;
         memset(&g, 0, sizeof g);
         appm__add3(p->ld, vp->ld); /* the pass has succeeded: commit its direct term */
+        p->lit += vp->lit;
         if (vp->segs > 0 && vp->segs < r->max_depth) {
             g.x = vp->x;
             g.n = vp->n;
@@ -13382,6 +13395,27 @@ static appm__v3 appm__pt_direct(const appm_scene *s, const appm__surf *sf, const
     return appm__scale(appm__mul(appm__mul(W, m->color), ls.li), c * (float)APPM__INV_PI * w);
 }
 
+/* The environment's radiance *Le that a path tracer's ray in direction d meets,
+ * and its MIS weight against the light sample of the vertex before (1 after a
+ * specular bounce or from the camera, where no light sample was taken). */
+static float appm__pt_env(const appm_scene *s, appm__v3 d, int prev_specular, float prev_pdf, appm__v3 prev_ns,
+                          appm__v3 *Le)
+{
+    float w = 1.0f;
+    double eu = 0.0, ev = 0.0; /* the map's place of d, for its density and its radiance */
+    if (s->envmap.rgb) appm__env_uv(&s->envmap, d, &eu, &ev);
+    if (!prev_specular) {
+        float c = appm__dot(d, prev_ns);
+        if (s->envmap.rgb)
+            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick *
+                                            appm__env_mix_pdf(appm__env_pdf_uv(&s->envmap, eu, ev), c)));
+        else
+            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
+    }
+    *Le = s->envmap.rgb ? appm__env_lookup_uv(&s->envmap, eu, ev) : s->light[s->env].value;
+    return w;
+}
+
 static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
 {
     const appm_scene *s = r->scene;
@@ -13390,7 +13424,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
     appm__ray ray;
     appm__v3 W = appm__v(1, 1, 1), L = appm__v(0, 0, 0), prev_ns = appm__v(0, 0, 1);
     float prev_pdf = 0.0f;
-    int prev_specular = 1;
+    int prev_specular = 1, lit = 0, chain = 1; /* chain: every vertex so far specular */
     uint32_t skip = UINT32_MAX;
     unsigned segs = 0;
     appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
@@ -13407,20 +13441,10 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         if (++segs > r->max_depth) break;
         if (!appm__intersect(s, &ray, skip, &h)) {
             if (s->env >= 0) {
-                float w = 1.0f;
-                double eu = 0.0, ev = 0.0; /* the map's place of ray.d, for its density and its radiance */
-                if (s->envmap.rgb) appm__env_uv(&s->envmap, ray.d, &eu, &ev);
-                if (!prev_specular) {
-                    float c = appm__dot(ray.d, prev_ns);
-                    if (s->envmap.rgb)
-                        w = appm__mis(prev_pdf, (float)(s->light[s->env].pick *
-                                                        appm__env_mix_pdf(appm__env_pdf_uv(&s->envmap, eu, ev), c)));
-                    else
-                        w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
-                }
-                L = appm__add(L, appm__scale(appm__mul(W, s->envmap.rgb ? appm__env_lookup_uv(&s->envmap, eu, ev)
-                                                                        : s->light[s->env].value),
-                                             w));
+                appm__v3 Le;
+                float w = appm__pt_env(s, ray.d, prev_specular, prev_pdf, prev_ns, &Le);
+                L = appm__add(L, appm__scale(appm__mul(W, Le), w));
+                lit |= chain;
             }
             break;
         }
@@ -13429,6 +13453,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         wo = appm__neg(ray.d);
         if (m->emissive && appm__dot(wo, sf.ng) > 0.0f) {
             float w = prev_specular ? 1.0f : appm__mis(prev_pdf, appm__area_light_pdf(s, sf.tri, ray.d, h.t));
+            lit |= chain;
             L = appm__add(L, appm__scale(appm__mul(W, m->ke), w));
         }
         if ((m->kind == APPM__MAT_DIFFUSE || m->kind == APPM__MAT_GLOSSY) && segs + 1 <= r->max_depth) {
@@ -13444,6 +13469,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         W = appm__mul(W, bs.weight);
         prev_pdf = bs.pdf;
         prev_specular = bs.specular;
+        chain &= bs.specular != 0;
         if (segs >= 3) {
             float q = appm__maxc(W);
             q = q > 0.95f ? 0.95f : q;
@@ -13458,6 +13484,7 @@ static void appm__pt_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned 
         L = appm__v(0, 0, 0);
     }
     appm__add3(r->pix[pi].ld, L);
+    r->pix[pi].lit += (uint64_t)lit;
     appm__pass_value(r, &r->pix[pi], (double)appm__lum(L));
 }
 
@@ -13534,6 +13561,7 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__free(&r->mem, r->chain_sum);
     appm__free(&r->mem, r->err_w);
     appm__free(&r->mem, r->err_b2);
+    appm__free(&r->mem, r->err_lum);
     appm__cluster_free(r);
 }
 
@@ -13638,9 +13666,12 @@ static int appm__sampler_alloc(appm_renderer *r, const appm_config *c)
 static int appm__error_alloc(appm_renderer *r)
 {
     const size_t npix = (size_t)r->w * r->h;
-    if (r->est->caps & APPM__CAP_ERROR) r->err_w = (double *)appm__alloc(&r->mem, npix, sizeof(double));
+    if (r->est->caps & APPM__CAP_ERROR) {
+        r->err_w = (double *)appm__alloc(&r->mem, npix, sizeof(double));
+        r->err_lum = (float *)appm__alloc(&r->mem, npix, sizeof(float));
+    }
     if (r->est->bias) r->err_b2 = (double *)appm__alloc(&r->mem, npix, sizeof(double));
-    return (!(r->est->caps & APPM__CAP_ERROR) || r->err_w) && (!r->est->bias || r->err_b2);
+    return (!(r->est->caps & APPM__CAP_ERROR) || (r->err_w && r->err_lum)) && (!r->est->bias || r->err_b2);
 }
 
 APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
@@ -13795,12 +13826,59 @@ static int appm__photon_term(const appm_renderer *r, size_t i, double j, double 
     return r->est->photon_term && r->est->photon_term(r, appm__state(r, i), j, out);
 }
 
-/* Pixel i's luminance after j passes, and the weight 1 / (I^2 + 0.01) of its
- * squared error in the relative error (appm_image_compare's relmse). */
-static double appm__rel_weight(const appm_renderer *r, size_t i, double j)
+/* Pixel i's luminance I after j passes. */
+static double appm__pixel_lum(const appm_renderer *r, size_t i, double j)
 {
     double I = appm__lumd(r->pix[i].ld) / j, t[3];
     if (appm__photon_term(r, i, j, t)) I += appm__lumd(t);
+    return I;
+}
+
+/* The weight of pixel i's squared error in the relative error, 1 / (I~^2 + 0.01),
+ * as appm_image_compare's relmse weighs it with the reference's value there.
+ * I~ is the pixel's own I (r->err_lum, filled for this pass), except where one
+ * pass holds the pixel: a path tracer's firefly, a rare bright photon.  There
+ * the reference is dark, I is the one sample's share, and 1 / (I^2 + 0.01)
+ * shrank the weight of the very pixel whose spread is large, so that the error
+ * bar missed what a render that met the rare path showed (the path tracer on
+ * the sphere box read 0.30 of the true error at 64 passes, appm-paper on the
+ * textured scene 0.62; docs/algorithm.md 7.3).  Such a pixel takes the median
+ * of the I of its 3 x 3 neighbourhood when that is lower: one sample cannot
+ * move it.  "One pass holds it": j mu^2 / (mu^2 + s^2) < 2, mu and s^2 the mean
+ * and spread of the per-pass luminance, the number of passes that would give
+ * that spread if each pass were 0 or one value X (X with probability q: mu = qX,
+ * s^2 = q (1 - q) X^2, so j mu^2 / (mu^2 + s^2) = j q).  A pixel that shows a
+ * light through specular vertices only (appm__pixel.lit) keeps its I: a light
+ * smaller than the pixel is met as rarely as a firefly, and there the reference
+ * is as bright as the render (a 5 x 4 mm light on water-caustic read 1744x the
+ * true error without this). */
+static double appm__err_weight(const appm_renderer *r, size_t i)
+{
+    const appm__pixel *p = &r->pix[i];
+    double I = r->err_lum[i], j = (double)r->pass;
+    if (p->lit == 0 && j >= 2.0) {
+        double mu = p->wmean, s2 = p->wm2 / (j - 1.0);
+        if (j * mu * mu < 2.0 * (mu * mu + s2)) {
+            int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
+            float v[9];
+            int n = 0, a, b;
+            double m;
+            for (dy = -1; dy <= 1; ++dy)
+                for (dx = -1; dx <= 1; ++dx) {
+                    int64_t x = x0 + dx, y = y0 + dy;
+                    if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
+                    v[n++] = r->err_lum[(size_t)(y * (int64_t)r->w + x)];
+                }
+            for (a = 1; a < n; ++a) /* insertion sort of at most 9 */
+                for (b = a; b > 0 && v[b - 1] > v[b]; --b) {
+                    float t = v[b];
+                    v[b] = v[b - 1];
+                    v[b - 1] = t;
+                }
+            m = (n & 1) ? (double)v[n / 2] : 0.5 * ((double)v[n / 2 - 1] + (double)v[n / 2]);
+            if (m < I) I = m;
+        }
+    }
     return 1.0 / (I * I + 0.01);
 }
 
@@ -13830,7 +13908,7 @@ static double appm__var_scale(const appm_renderer *r)
     while (P & (P - 1)) P &= P - 1; /* the largest power of two <= j */
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double w = r->err_w[i], h = 0.5 * (double)P; /* appm__rel_weight, filled by appm__err_w_task */
+        double w = r->err_w[i], h = 0.5 * (double)P; /* appm__err_weight, filled by appm__err_w_task */
         double d = p->lh[0] / h - (p->lh[1] - p->lh[0]) / h;
         a += w * 0.25 * d * d * ((double)P / j);
         b += w * appm__mean_var(p, NULL, 1, r->pass);
@@ -13877,12 +13955,20 @@ static double appm__bias2(const appm_renderer *r, size_t i)
  * is taken afterwards in pixel order.  Each pixel's bias^2 was computed nine
  * times in the 3 x 3 rule, and its weight twice, on one thread after every
  * pass: 8 % of a one-thread render of the bare bunny. */
+static void appm__err_lum_task(void *arg, uint32_t row, unsigned worker)
+{
+    appm_renderer *r = (appm_renderer *)arg;
+    size_t i = (size_t)row * r->w, end = i + r->w;
+    (void)worker;
+    for (; i < end; ++i) r->err_lum[i] = (float)appm__pixel_lum(r, i, (double)r->pass);
+}
+
 static void appm__err_w_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
     size_t i = (size_t)row * r->w, end = i + r->w;
     (void)worker;
-    for (; i < end; ++i) r->err_w[i] = appm__rel_weight(r, i, (double)r->pass);
+    for (; i < end; ++i) r->err_w[i] = appm__err_weight(r, i);
 }
 
 /* Each pixel's bias^2 less the noise of its own estimate, scaled as the
@@ -13932,6 +14018,7 @@ static void appm__estimate_error(appm_renderer *r)
         r->stats.est_relerr = -1.0;
         return;
     }
+    appm__parallel_for(r->threads, r->h, appm__err_lum_task, r);
     appm__parallel_for(r->threads, r->h, appm__err_w_task, r);
     r->var_scale = appm__var_scale(r);
     r->err_pass = 0;
@@ -14455,7 +14542,8 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
 static const appm__field appm__pixel_fields[] = {{"ld", offsetof(appm__pixel, ld), 3, 0},
                                                  {"wmean", offsetof(appm__pixel, wmean), 1, 0},
                                                  {"wm2", offsetof(appm__pixel, wm2), 1, 0},
-                                                 {"lh", offsetof(appm__pixel, lh), 2, 0}};
+                                                 {"lh", offsetof(appm__pixel, lh), 2, 0},
+                                                 {"lit", offsetof(appm__pixel, lit), 1, 1}};
 
 /* The field lists one checkpoint is written with, per pixel: the shared
  * pixel's, the method's state's, and the chains' sums (section 2.3; a list of

@@ -76,7 +76,7 @@ int main(int argc, char **argv)
         appm_renderer_image(r, &img);
         for (i = 0; i < EP_N; ++i) {
             L[k][i] = lum(img.rgb + 3 * i);
-            W[k][i] = appm__rel_weight(r, i, (double)passes);
+            W[k][i] = appm__err_weight(r, i);
             B2[k][i] = appm__bias2(r, i);
             V[k][i] = r->var_scale * appm__mean_var(&r->pix[i], NULL, 1, r->pass);
         }

@@ -286,8 +286,8 @@ static void test_fields_matter(const appm_scene *s)
     size_t covered = 0;
     unsigned f, t;
     for (f = 0; f < sizeof appm__pixel_fields / sizeof appm__pixel_fields[0]; ++f) {
-        CHECK(appm__pixel_fields[f].offset == covered && !appm__pixel_fields[f].is_u64);
-        covered += appm__pixel_fields[f].count * sizeof(double);
+        CHECK(appm__pixel_fields[f].offset == covered);
+        covered += appm__pixel_fields[f].count * (appm__pixel_fields[f].is_u64 ? sizeof(uint64_t) : sizeof(double));
     }
     CHECK_MSG(covered == sizeof(appm__pixel), "appm__pixel_fields cover %lu of %lu bytes", (unsigned long)covered,
               (unsigned long)sizeof(appm__pixel));
@@ -312,6 +312,9 @@ static void test_fields_matter(const appm_scene *s)
                 int halves = t == 0 && strcmp(L.f[t][f].name, "lh") == 0, same;
                 int unused = (m == APPM_METHOD_SPPM && t == 0 && f > 0) || halves;
                 if (halves && m != APPM_METHOD_PPM && m != APPM_METHOD_SPPM) continue;
+                /* lit only weighs a pixel in the error estimate, where one pass holds it:
+                 * test_lit_carried and tests/t_estimator.c */
+                if (t == 0 && strcmp(L.f[t][f].name, "lit") == 0) continue;
                 same = resumes_same_without(s, (appm_method)m, t, f, whole, SPARSE);
                 /* appm's caustic radius is read only once a pixel has seen enough
                  * caustic photons, which the sparse render never reaches */
@@ -322,6 +325,52 @@ static void test_fields_matter(const appm_scene *s)
         appm_renderer_destroy(whole);
         appm_renderer_destroy(dense);
     }
+}
+
+/* appm__pixel.lit is state: the path tracer on the teapot under its sky,
+ * 12 x 10, 6 passes, saved without it, loads with every pixel's count 0, and
+ * with it, with the counts saved (the sky's pixels: 6). */
+static void test_lit_carried(void)
+{
+    appm_scene *s = check_load_scene("scenes/teapot.scene");
+    appm_config c;
+    appm_renderer *a = NULL, *b = NULL, *b2 = NULL;
+    appm__ck_layout L;
+    appm__field less[APPM__CK_MAXFIELDS];
+    unsigned char *buf = NULL, *full = NULL;
+    size_t n = 0, k, j = 0, npix, lit = 0, zero = 0, same = 0;
+    if (!s) return;
+    c = config(APPM_METHOD_PT, 1);
+    a = make(s, &c, 6);
+    b = make(s, &c, 0);
+    b2 = make(s, &c, 0);
+    if (!a || !b || !b2) goto done;
+    npix = (size_t)a->w * a->h;
+    appm__ck_layout_of(a, &L);
+    for (k = 0; k < L.n[0]; ++k)
+        if (strcmp(L.f[0][k].name, "lit") != 0) less[j++] = L.f[0][k];
+    CHECK(j + 1 == L.n[0]);
+    L.f[0] = less;
+    L.n[0] = (unsigned)j;
+    if (appm__ck_save_mem(a, &L, NULL, 0, &n, NULL) != APPM_OK || !(buf = (unsigned char *)malloc(n))) goto done;
+    if (appm__ck_save_mem(a, &L, buf, n, &n, NULL) != APPM_OK) goto done;
+    if (appm__ck_load_mem(b, &L, buf, n, NULL) != APPM_OK) goto done;
+    if (!(full = save(a, &n)) || appm_renderer_load(b2, full, n, NULL) != APPM_OK) goto done;
+    for (k = 0; k < npix; ++k) {
+        lit += a->pix[k].lit == 6;
+        zero += b->pix[k].lit == 0;
+        same += b2->pix[k].lit == a->pix[k].lit;
+    }
+    CHECK_MSG(lit > 0 && lit < npix && zero == npix && same == npix,
+              "%lu of %lu pixels show the sky; without the field %lu read 0, with it %lu the same",
+              (unsigned long)lit, (unsigned long)npix, (unsigned long)zero, (unsigned long)same);
+done:
+    free(buf);
+    free(full);
+    appm_renderer_destroy(a);
+    appm_renderer_destroy(b);
+    appm_renderer_destroy(b2);
+    appm_scene_destroy(s);
 }
 
 /* The halves of appm__var_scale are state: the path tracer on the bunny, 24 x 24,
@@ -565,8 +614,8 @@ static void test_byte_order(const appm_scene *s)
     u = get_le(buf + OFF_R1, 8);
     memcpy(&r1, &u, sizeof r1);
     CHECK(r1 == a->r1 && r1 > 0.0);
-    /* ppm: 7 pixel values + I[3]; then per guided light 2 counts and 2 x RES^2 doubles */
-    pix0 = n - 8 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (7 + 3);
+    /* ppm: 7 pixel values and lit + I[3]; then per guided light 2 counts and 2 x RES^2 doubles */
+    pix0 = n - 8 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (8 + 3);
     u = get_le(buf + pix0, 8);
     memcpy(&ld0, &u, sizeof ld0);
     CHECK(ld0 == a->pix[0].ld[0]);
@@ -805,6 +854,7 @@ int main(void)
     }
     test_point_light();
     test_halves_matter();
+    test_lit_carried();
     test_edits();
     test_config_tripwire();
     appm_scene_destroy(s);

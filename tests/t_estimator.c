@@ -25,6 +25,11 @@
  *      pixels (measured 8.3-9.5 %), and within a quarter of that once its
  *      estimated seam bias is taken off (measured 0.6-1.5 % bright); its mean mass
  *      where the geometry fixes it, and from its commit fed by hand.
+ *   8. The error's weight (appm__err_weight): a pixel that one pass holds takes
+ *      its neighbourhood's median luminance, worked by hand for a middle and a
+ *      corner pixel; not when it shows a light, nor when several passes hold
+ *      it; which pixels show a light (appm__pixel.lit) in renders of a box
+ *      whose light the camera sees, with photons and with the path tracer.
  */
 #include "../appm.c"
 #include "check.h"
@@ -422,21 +427,52 @@ static void test_bias2_noise(appm_scene *s)
     appm_renderer_destroy(r);
 }
 
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
 /* 6c. est_relerr from the parts the renderer keeps per pixel (err_w, err_b2,
  * filled over the threads) against the whole formula taken here from the
  * state, pixel by pixel, in one loop: sqrt(mean of (bias2 + Var) w), bias2 the
  * 3 x 3 mean of b^2 - var_scale noise without its largest, Var the spread
- * times var_scale, w = 1 / (I^2 + 0.01); for every method that reports it,
- * after 9 passes (the Laplacian's; halves of 8), with 1 and 3 threads. */
-static double relerr_by_hand(const appm_renderer *r)
+ * times var_scale, w = 1 / (I~^2 + 0.01), I~ the pixel's luminance (a float)
+ * or, where one pass holds the pixel (j mu^2 / (mu^2 + s^2) < 2) and it shows
+ * no light, the median of its 3 x 3 neighbourhood's if lower (qsort here); for
+ * every method that reports it, after 9 passes (the Laplacian's; halves of 8),
+ * with 1 and 3 threads.  Returns -1 when out of memory. */
+static double relerr_by_hand(const appm_renderer *r, int *lowered)
 {
     size_t i, n = (size_t)r->w * r->h;
     double j = (double)r->pass, sum = 0.0;
+    float *lum = (float *)malloc(n * sizeof *lum);
+    if (!lum) return -1.0;
+    for (i = 0; i < n; ++i) {
+        double t[3], I = appm__lumd(r->pix[i].ld) / j;
+        if (r->est->photon_term && r->est->photon_term(r, appm__state(r, i), j, t)) I += appm__lumd(t);
+        lum[i] = (float)I;
+    }
+    *lowered = 0;
     for (i = 0; i < n; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double t[3], I = appm__lumd(p->ld) / j, b2 = 0.0, top = -HUGE_VAL, var;
+        double I = lum[i], b2 = 0.0, top = -HUGE_VAL, var, mu = p->wmean, s2 = p->wm2 / (j - 1.0);
         int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy, k = 0;
-        if (r->est->photon_term && r->est->photon_term(r, appm__state(r, i), j, t)) I += appm__lumd(t);
+        if (p->lit == 0 && j * mu * mu / (mu * mu + s2) < 2.0) {
+            float v[9];
+            int m = 0;
+            double med;
+            for (dy = -1; dy <= 1; ++dy)
+                for (dx = -1; dx <= 1; ++dx)
+                    if (x0 + dx >= 0 && y0 + dy >= 0 && x0 + dx < (int64_t)r->w && y0 + dy < (int64_t)r->h)
+                        v[m++] = lum[(size_t)((y0 + dy) * (int64_t)r->w + x0 + dx)];
+            qsort(v, (size_t)m, sizeof v[0], cmp_float);
+            med = m % 2 ? v[m / 2] : 0.5 * ((double)v[m / 2 - 1] + v[m / 2]);
+            if (med < I) {
+                I = med;
+                ++*lowered;
+            }
+        }
         for (dy = -1; dy <= 1 && r->est->bias; ++dy)
             for (dx = -1; dx <= 1; ++dx) {
                 int64_t x = x0 + dx, y = y0 + dy;
@@ -452,12 +488,13 @@ static double relerr_by_hand(const appm_renderer *r)
         var = r->var_scale * appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass);
         sum += ((b2 > 0.0 ? b2 : 0.0) + var) / (I * I + 0.01);
     }
+    free(lum);
     return sqrt(sum / (double)n);
 }
 
 static void test_error_parts(appm_scene *s)
 {
-    int m, k;
+    int m, k, lowered_all = 0;
     double first = 0.0;
     for (m = 0; m < (int)APPM_METHOD_COUNT; ++m)
         for (k = 0; k < 2; ++k) {
@@ -478,7 +515,9 @@ static void test_error_parts(appm_scene *s)
                 if (!(r->est->caps & APPM__CAP_ERROR)) {
                     CHECK(st.est_relerr < 0.0);
                 } else {
-                    double want = relerr_by_hand(r);
+                    int lowered = 0;
+                    double want = relerr_by_hand(r, &lowered);
+                    lowered_all += lowered;
                     CHECK_MSG(st.est_relerr > 0.0 && fabs(st.est_relerr - want) <= 1e-12 * want,
                               "%s, %u threads: est_relerr %.15g, by hand %.15g", appm_method_name(cfg.method),
                               cfg.threads, st.est_relerr, want);
@@ -488,6 +527,93 @@ static void test_error_parts(appm_scene *s)
             }
             appm_renderer_destroy(r);
         }
+    CHECK_MSG(lowered_all > 0, "no pixel took its neighbourhood's luminance (%d)", lowered_all);
+}
+
+/* 8. appm__err_weight worked by hand.  A 4 x 4 render (its state then set by
+ * hand) after 4 passes: the middle pixel (1, 1) and the corner (0, 0).  One
+ * pass holding the pixel: per-pass luminances 0, 0, 0, X give mu = X / 4 and
+ * s^2 = X^2 / 4, so j mu^2 / (mu^2 + s^2) = 0.8. */
+static void test_err_weight(appm_scene *s)
+{
+    appm_config cfg;
+    appm_renderer *r;
+    size_t i;
+    const double X = 20.0;
+    appm_config_init(&cfg);
+    cfg.width = cfg.height = 4;
+    cfg.photons = 500;
+    cfg.method = APPM_METHOD_PT;
+    r = check_renderer(s, &cfg);
+    if (!r) return;
+    if (check_passes(r, 4)) {
+        for (i = 0; i < 16; ++i) { /* smooth, spread over the passes, no light */
+            r->err_lum[i] = 0.1f + 0.01f * (float)i;
+            r->pix[i].wmean = r->err_lum[i];
+            r->pix[i].wm2 = 0.001;
+            r->pix[i].lit = 0;
+        }
+        r->err_lum[5] = (float)(X / 4.0);
+        r->pix[5].wmean = X / 4.0;
+        r->pix[5].wm2 = 3.0 * X * X / 4.0;
+        /* (1, 1)'s neighbourhood: 0.10 0.11 0.12 / 0.14 [5] 0.16 / 0.18 0.19 0.20: median 0.16 */
+        CHECK_NEAR(appm__err_weight(r, 5), 1.0 / (0.16 * 0.16 + 0.01), 1e-4);
+        r->pix[5].lit = 1; /* it shows a light: its own I */
+        CHECK_NEAR(appm__err_weight(r, 5), 1.0 / (X * X / 16.0 + 0.01), 1e-9);
+        r->pix[5].lit = 0;
+        r->pix[5].wm2 = 3.0 * 0.01 * X * X / 16.0; /* spread over the passes: j mu^2 / (mu^2 + s^2) = 3.96 */
+        CHECK_NEAR(appm__err_weight(r, 5), 1.0 / (X * X / 16.0 + 0.01), 1e-9);
+        r->pix[5].wm2 = 3.0 * X * X / 4.0;
+        /* the corner: itself, (1, 0), (0, 1), (1, 1) = 0.11, 0.14 and 5: median (0.14 + 5) / 2 < 5 */
+        r->err_lum[0] = 8.0f;
+        r->pix[0].wmean = 8.0;
+        r->pix[0].wm2 = 768.0; /* 0, 0, 0, 32: s^2 = 256 */
+        CHECK_NEAR(appm__err_weight(r, 0), 1.0 / (2.57 * 2.57 + 0.01), 1e-4);
+        r->err_lum[0] = 0.05f; /* below its neighbourhood's median: kept */
+        r->pix[0].wmean = 0.05;
+        r->pix[0].wm2 = 3.0 * 0.2 * 0.2 / 4.0; /* 0, 0, 0, 0.2 */
+        CHECK_NEAR(appm__err_weight(r, 0), 1.0 / (0.05 * 0.05 + 0.01), 1e-6);
+    }
+    appm_renderer_destroy(r);
+}
+
+/* 8b. appm__pixel.lit, with photons and with the path tracer, 6 passes at
+ * 24 x 16: CornellBox-Original's ceiling light is a sliver in the top rows (on
+ * 1-4 of the passes, by the jittered rays), nothing below them shows it; the
+ * teapot under its sky shows the sky in the corner on every pass, and not
+ * where the teapot stands, in the middle. */
+static void test_lit(appm_scene *box)
+{
+    appm_scene *pot = check_load_scene("scenes/teapot.scene");
+    int m, k;
+    for (k = 0; k < 2; ++k)
+        for (m = 0; m < 2; ++m) {
+            appm_config cfg;
+            appm_renderer *r;
+            appm_config_init(&cfg);
+            cfg.width = 24;
+            cfg.height = 16;
+            cfg.photons = 2000;
+            cfg.method = m ? APPM_METHOD_PT : APPM_METHOD_APPM;
+            if (k && !pot) continue;
+            r = check_renderer(k ? pot : box, &cfg);
+            if (!r) continue;
+            if (check_passes(r, 6)) {
+                size_t i, top = 0, below = 0;
+                if (k == 0) {
+                    for (i = 0; i < (size_t)24 * 4; ++i) top += r->pix[i].lit > 0 && r->pix[i].lit <= 6;
+                    for (i = (size_t)24 * 4; i < (size_t)24 * 16; ++i) below += r->pix[i].lit != 0;
+                    CHECK_MSG(top > 0 && below == 0, "%s: %lu pixels of the top rows lit, %lu below them",
+                              appm_method_name(cfg.method), (unsigned long)top, (unsigned long)below);
+                } else {
+                    CHECK_MSG(r->pix[0].lit == 6 && r->pix[8 * 24 + 12].lit == 0, "%s: the teapot's sky %lu, middle %lu",
+                              appm_method_name(cfg.method), (unsigned long)r->pix[0].lit,
+                              (unsigned long)r->pix[8 * 24 + 12].lit);
+                }
+            }
+            appm_renderer_destroy(r);
+        }
+    appm_scene_destroy(pot);
 }
 
 int main(void)
@@ -506,6 +632,8 @@ int main(void)
         test_seam_bias(s);
         test_paper_mass_mean(s);
         test_error_parts(s);
+        test_err_weight(s);
+        test_lit(s);
     }
     appm_scene_destroy(s);
     return check_finish();

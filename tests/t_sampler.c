@@ -585,7 +585,8 @@ static void test_mean_var(void)
 }
 
 /* The halves of one sequence (appm__var_scale): r's var_scale recomputed from
- * its pixels' fields, independently of the library's loop. */
+ * its pixels' fields, independently of the library's loop, with the library's
+ * weights (appm__err_weight, tested in tests/t_estimator.c). */
 static double halves_scale(const appm_renderer *r)
 {
     size_t i, n = (size_t)r->w * r->h;
@@ -594,7 +595,7 @@ static double halves_scale(const appm_renderer *r)
     while (2 * P <= r->pass) P *= 2;
     for (i = 0; i < n; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double I = appm__lumd(p->ld) / j, w = 1.0 / (I * I + 0.01);
+        double w = appm__err_weight(r, i);
         double h1 = p->lh[0] / (P / 2.0), h2 = (p->lh[1] - p->lh[0]) / (P / 2.0);
         a += w * (h1 - h2) * (h1 - h2) / 4 * (double)P / j;
         b += w * p->wm2 / ((j - 1) * j);

@@ -184,7 +184,8 @@ WEB_EXPORT(web_pass) int web_pass(void)
 /* The estimated relative error of the image: the library's own estimate for
  * appm and pt; for ppm, whose estimator keeps a variance but no bias
  * estimate, the noise part alone, sqrt(mean(Var / (I^2 + 0.01))), the same
- * normalisation as the library's; -1 where there is none (sppm, first pass). */
+ * weight as the library gives a pixel that several passes hold; -1 where
+ * there is none (sppm, first pass). */
 static double web_ppm_noise(void)
 {
     const float *var = appm_renderer_aux(W.r, APPM_AUX_VARIANCE);
