@@ -530,7 +530,9 @@ typedef struct appm_stats {
                                     /* shows no light, I is its 3x3 median if lower);    */
                                     /* var from the spread between the                   */
                                     /* chains (chains >= 2) or the passes (one chain:    */
-                                    /* scaled by the sequence's halves); < 0: none       */
+                                    /* scaled by the sequence's halves); < 0: none (ppm, */
+                                    /* sppm; pt on a scene with a point or spot light    */
+                                    /* and a mirror or glass, whose caustics it misses)  */
     double clamped;                 /* appm: fraction of gathering pixels at a radius bound
                                        after the last pass (< 0: none)                     */
     unsigned threads;

@@ -157,7 +157,7 @@ static const char *const RENDER_HELP =
     "  --time SECONDS        stop after this wall time (the pass in flight finishes)\n"
     "  --passes N            stop after N passes (with neither: 60 s)\n"
     "  --until-error E       stop when the estimated relative error falls below E (appm,\n"
-    "                        appm-paper, pt)\n"
+    "                        appm-paper, pt; not pt with a point or spot light and a mirror or glass)\n"
     "  --photons N           photon paths emitted per pass [width * height]\n"
     "  --radius R            initial radius in scene units [2 pixel widths at the visible points]\n"
     "  --alpha A             radius shrinkage for ppm/sppm, 0 < A <= 1 (1: fixed radius) [2/3]\n"
@@ -689,18 +689,50 @@ static void render_defaults(render_run *R)
 
 /* The path tracer reaches a point or spot light only by a shadow ray, which no
  * mirror or glass lets through: light from such a light that reaches a surface
- * through one (a caustic) is missing from its image, and from its error bar,
- * which can only measure the light its paths find.  The scene's counts include
- * materials its MTL defines and no face uses: such a mirror warns too. */
-static void warn_pt_caustics(const render_opts *o, const appm_scene *scene)
+ * through one (a caustic) is missing from its image, and the library reports no
+ * error estimate for it there (est_relerr -1): the spread of its passes cannot
+ * measure light its paths never find.  The scene's counts include materials its
+ * MTL defines and no face uses: such a mirror counts too. */
+static int pt_blind(const render_opts *o, const appm_scene *scene)
 {
     appm_scene_info in;
-    if (o->cfg.method != APPM_METHOD_PT || !o->cfg.log) return;
+    if (o->cfg.method != APPM_METHOD_PT) return 0;
     appm_scene_get_info(scene, &in);
-    if (in.lights_point + in.lights_spot == 0 || in.materials_mirror + in.materials_dielectric == 0) return;
+    return in.lights_point + in.lights_spot > 0 && in.materials_mirror + in.materials_dielectric > 0;
+}
+
+static void warn_pt_caustics(const render_opts *o, const appm_scene *scene)
+{
+    if (!o->cfg.log || !pt_blind(o, scene)) return;
     o->cfg.log(o->cfg.log_user, o->scene, 0,
                "pt does not render the light of point and spot lights that reaches a surface through a mirror "
-               "or glass (caustics): its image and est_relerr leave it out (--method appm renders it)");
+               "or glass (caustics): its image leaves it out, and it reports no error estimate "
+               "(--method appm renders it)");
+}
+
+/* --until-error needs an error estimate: ppm and sppm keep none, nor does the
+ * path tracer where it cannot see some of the light (pt_blind).  Alone it would
+ * never stop the render, so it is refused; beside --time or --passes it is only
+ * said to have no effect. */
+static int check_until_error(const render_opts *o, const appm_scene *scene)
+{
+    const char *why = NULL;
+    if (!o->have_until) return EXIT_OK;
+    if (o->cfg.method == APPM_METHOD_PPM || o->cfg.method == APPM_METHOD_SPPM)
+        why = "keeps no error estimate";
+    else if (pt_blind(o, scene))
+        why = "reports no error estimate on a scene with a point or spot light and a mirror or glass";
+    if (!why) return EXIT_OK;
+    if (!o->have_time && !o->have_passes)
+        return usage_error("--until-error: %s %s, so the render would never stop (--method appm keeps one; "
+                           "or add --time or --passes)",
+                           appm_method_name(o->cfg.method), why);
+    if (o->cfg.log) {
+        char msg[256];
+        snprintf(msg, sizeof msg, "--until-error has no effect: %s %s", appm_method_name(o->cfg.method), why);
+        o->cfg.log(o->cfg.log_user, o->scene, 0, msg);
+    }
+    return EXIT_OK;
 }
 
 /* The scene with the command line's lights, the reference image, the renderer
@@ -720,6 +752,7 @@ static int render_setup(render_run *R)
     }
     if ((rc = cli_agree(add_cli_lights(o, R->scene))) != EXIT_OK) return rc;
     warn_pt_caustics(o, R->scene);
+    if ((rc = cli_agree(check_until_error(o, R->scene))) != EXIT_OK) return rc;
     if ((s = appm_renderer_create(R->scene, &o->cfg, &R->r, &d)) != APPM_OK) rc = lib_error(s, &d, NULL);
     else if (g_cli && (s = appm_renderer_set_cluster(R->r, &g_cli->cluster, &d)) != APPM_OK)
         rc = lib_error(s, &d, NULL);

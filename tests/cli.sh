@@ -64,6 +64,13 @@ refused_with() { [ "$rc" -ne 0 ] && contains "$T/err" "$1"; }
 nonempty() {
     for f in "$@"; do [ -s "$f" ] || return 1; done
 }
+# est_below E: the last run's summary line has an est_relerr below E
+est_below() {
+    v=$(sed -n 's/.*est_relerr=\([0-9.e+-]*\).*/\1/p' "$T/out")
+    [ -n "$v" ] && awk -v v="$v" -v e="$1" 'BEGIN { exit !(v < e) }'
+}
+# lacks FILE WORD: FILE does not hold WORD
+lacks() { ! grep -q -- "$2" "$1"; }
 # contains FILE WORD...: FILE holds every WORD
 contains() {
     f=$1
@@ -406,10 +413,22 @@ for bad in "--light spot 0 0 0 1 1 1" "--light point 0 0 0 1 1" "--light point 0
 done
 check "no image from the refused renders" absent "$T/never.png"
 
-# pt cannot find a point or spot light through glass: it says so, once, and only then
-run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --passes 1 -o "$T/pt-glass.pfm"
+# pt cannot find a point or spot light through glass: it says so, once, and only then,
+# and reports no error estimate there (its passes cannot measure light they never find)
+run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --passes 3 -o "$T/pt-glass.pfm"
 check "pt on a spot light behind glass warns about its caustics (exit $rc)" \
     warned 'pt does not render the light of point and spot lights' 1
+check "... and its summary has no est_relerr" lacks "$T/out" est_relerr=
+run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --until-error 0.1 -o "$T/never.pfm"
+check "... so --until-error alone is refused there (exit $rc)" refused_with 'would never stop'
+run "$APPM" render "$SCENE" --method ppm --size 16x16 --until-error 0.1 -o "$T/never.pfm"
+check "--until-error alone is refused for ppm, which keeps no estimate (exit $rc)" refused_with 'ppm keeps no error'
+check "... and renders nothing" absent "$T/never.pfm"
+run "$APPM" render "$SCENE" --method sppm --size 16x16 --until-error 0.1 --passes 2 -o "$T/sppm-u.pfm"
+check "--until-error beside --passes: sppm renders, saying it has no effect (exit $rc)" \
+    warned 'until-error has no effect: sppm' 1
+run "$APPM" render "$SCENE" --method pt --size 16x16 --until-error 0.5 -q -o "$T/pt-u.pfm"
+check "pt on a box stops on --until-error, below it (exit $rc)" est_below 0.5
 run "$APPM" render scenes/caustic-glass.scene --size 16x20 --passes 1 -o "$T/appm-glass.pfm"
 check "... appm does not" warned 'pt does not' 0
 run "$APPM" render "$SCENE" --method pt --size 16x16 --passes 1 -o "$T/pt-box.pfm"

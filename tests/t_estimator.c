@@ -30,6 +30,10 @@
  *      corner pixel; not when it shows a light, nor when several passes hold
  *      it; which pixels show a light (appm__pixel.lit) in renders of a box
  *      whose light the camera sees, with photons and with the path tracer.
+ *   9. The path tracer reports no error estimate where a point or spot light
+ *      may reach a surface through a mirror or glass (caustic-glass), and does
+ *      where there is no such light (the box) or no such surface (the teapot's
+ *      spot); appm reports one on caustic-glass.
  */
 #include "../appm.c"
 #include "check.h"
@@ -616,6 +620,34 @@ static void test_lit(appm_scene *box)
     appm_scene_destroy(pot);
 }
 
+static void test_pt_blind(appm_scene *box)
+{
+    const char *name[3] = {"scenes/caustic-glass.scene", "scenes/teapot.scene", NULL};
+    int k, m;
+    for (k = 0; k < 3; ++k) {
+        appm_scene *s = name[k] ? check_load_scene(name[k]) : box;
+        for (m = 0; m < 2 && s; ++m) {
+            appm_config cfg;
+            appm_renderer *r;
+            appm_config_init(&cfg);
+            cfg.width = 16;
+            cfg.height = 20;
+            cfg.photons = 2000;
+            cfg.method = m ? APPM_METHOD_APPM : APPM_METHOD_PT;
+            r = check_renderer(s, &cfg);
+            if (r && check_passes(r, 3)) {
+                appm_stats st;
+                appm_renderer_stats(r, &st);
+                if (k == 0 && m == 0) CHECK_MSG(st.est_relerr == -1.0, "pt on caustic-glass: est_relerr %g", st.est_relerr);
+                else CHECK_MSG(st.est_relerr > 0.0, "%s on %s: est_relerr %g", appm_method_name(cfg.method),
+                               name[k] ? name[k] : "the box", st.est_relerr);
+            }
+            appm_renderer_destroy(r);
+        }
+        if (name[k]) appm_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     appm_scene *s;
@@ -634,6 +666,7 @@ int main(void)
         test_error_parts(s);
         test_err_weight(s);
         test_lit(s);
+        test_pt_blind(s);
     }
     appm_scene_destroy(s);
     return check_finish();
