@@ -94,7 +94,8 @@ rm -f "$out/last.pfm"
     NR > 1 {
         t = $6 - $8; t = t > 0 ? sqrt(t) : 1e-30
         k = $1 SUBSEP $2 SUBSEP $3 SUBSEP $5
-        r[k] = (k in r) ? r[k] " " ($7 / t) : ($7 / t)
+        e = $7 == "" ? -1 : $7 / t # an empty est_relerr: the method reports none there
+        r[k] = (k in r) ? r[k] " " e : e
         tr[k] = (k in tr) ? tr[k] " " t : t
         if (!(($1 SUBSEP $2) in seen)) { seen[$1 SUBSEP $2] = 1; order[++n] = $1 SUBSEP $2 }
         if ($3 == "old") old = 1
@@ -109,8 +110,8 @@ rm -f "$out/last.pfm"
             for (p = 1; p <= 3; ++p) {
                 k = order[i] SUBSEP "new" SUBSEP ps[p]; ko = order[i] SUBSEP "old" SUBSEP ps[p]
                 if (!(k in r)) { line = line " | - | -"; continue }
-                line = line sprintf(" | %.4f | %.2f", med(tr[k]), med(r[k]))
-                if (old && (ko in r)) line = line sprintf(" (%.2f)", med(r[ko]))
+                line = line sprintf(" | %.4f | ", med(tr[k])) (med(r[k]) < 0 ? "none" : sprintf("%.2f", med(r[k])))
+                if (old && (ko in r)) line = line (med(r[ko]) < 0 ? " (none)" : sprintf(" (%.2f)", med(r[ko])))
             }
             print line " |"
         }
