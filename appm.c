@@ -11059,7 +11059,8 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 96 
     uint8_t edge_dist;    /* how many pixels along the row to the nearest pixel with a neighbour
                            * on another surface (0: this one; 255: none near; 10.4, step 6) */
     uint8_t lit;          /* 1: the eye path met a light or the environment through specular
-                           * vertices only (the pixel shows a light; appm__pixel.lit) */
+                           * vertices only (the pixel shows a light; appm__pixel.lit), a glossy
+                           * lobe it follows as a mirror (appm__eye_split) counting as one */
     uint8_t pad;
     uint32_t tri;         /* the triangle of x: its open edges (5.5) cut the kernel */
 } appm__vp;
@@ -11133,7 +11134,8 @@ struct appm_renderer {
     uint64_t err_pass;   /* the pass err_b2 holds (0: none) */
     int err_blind;       /* no error estimate: the path tracer on a scene whose point or spot
                           * lights may reach a surface through a mirror or glass (appm__pt_blind) */
-    float *err_lum;      /* per pixel, its luminance I after the last pass (appm__err_weight's input) */
+    float *err_lum;      /* per pixel, its luminance I after the last pass (appm__err_weight's input;
+                          * a float: 4 bytes a pixel, and a weight needs no more digits) */
     float pixel_angle;   /* 2 tan(fov/2) / height */
     appm__vp *vp;
     appm__pixel *pix;
@@ -13684,6 +13686,7 @@ static int appm__sampler_alloc(appm_renderer *r, const appm_config *c)
 static int appm__error_alloc(appm_renderer *r)
 {
     const size_t npix = (size_t)r->w * r->h;
+    r->err_blind = !(r->est->caps & APPM__CAP_PHOTONS) && appm__pt_blind(r->scene);
     if (r->est->caps & APPM__CAP_ERROR) {
         r->err_w = (double *)appm__alloc(&r->mem, npix, sizeof(double));
         r->err_lum = (float *)appm__alloc(&r->mem, npix, sizeof(float));
@@ -13719,7 +13722,6 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->est = &appm__estimators[c.method];
     r->cut = (r->est->caps & APPM__CAP_CUT) != 0;
     r->edges = r->cut || (r->est->caps & APPM__CAP_MASS) != 0;
-    r->err_blind = !(r->est->caps & APPM__CAP_PHOTONS) && appm__pt_blind(scene);
     r->direct = c.direct;
     r->w = c.width;
     r->h = c.height;
@@ -13864,9 +13866,9 @@ static double appm__pixel_lum(const appm_renderer *r, size_t i, double j)
  * textured scene 0.62; docs/algorithm.md 7.3).  Such a pixel takes the median
  * of the I of its 3 x 3 neighbourhood when that is lower: one sample cannot
  * move it.  "One pass holds it": j mu^2 / (mu^2 + s^2) < 2, mu and s^2 the mean
- * and spread of the per-pass luminance, the number of passes that would give
- * that spread if each pass were 0 or one value X (X with probability q: mu = qX,
- * s^2 = q (1 - q) X^2, so j mu^2 / (mu^2 + s^2) = j q).  A pixel that shows a
+ * and spread (M2 / j) of the per-pass luminance: the number of passes that would
+ * give that spread if each pass were 0 or one value X (k passes of X: mu = q X,
+ * s^2 = q (1 - q) X^2 with q = k / j, so j mu^2 / (mu^2 + s^2) = j q = k).  A pixel that shows a
  * light through specular vertices only (appm__pixel.lit) keeps its I: a light
  * smaller than the pixel is met as rarely as a firefly, and there the reference
  * is as bright as the render (a 5 x 4 mm light on water-caustic read 1744x the
@@ -13876,7 +13878,7 @@ static double appm__err_weight(const appm_renderer *r, size_t i)
     const appm__pixel *p = &r->pix[i];
     double I = r->err_lum[i], j = (double)r->pass;
     if (p->lit == 0 && j >= 2.0) {
-        double mu = p->wmean, s2 = p->wm2 / (j - 1.0);
+        double mu = p->wmean, s2 = p->wm2 / j; /* the passes' own spread, not the sample variance */
         if (j * mu * mu < 2.0 * (mu * mu + s2)) {
             int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
             float v[9];
@@ -14023,8 +14025,15 @@ static void appm__err_b2_fill(appm_renderer *r)
     r->err_pass = r->pass;
 }
 
+APPM_API int appm_renderer_keeps_error(const appm_renderer *r)
+{
+    return r && (r->est->caps & APPM__CAP_ERROR) && !r->err_blind;
+}
+
 /* The estimated relative error of the image (appm_stats.est_relerr):
- *   sqrt( mean over pixels of (bias^2 + Var) / (I^2 + 0.01) ),
+ *   sqrt( mean over pixels of (bias^2 + Var) w ), w = appm__err_weight's
+ *   1 / (I~^2 + 0.01); none (-1) where the renderer keeps none
+ *   (appm_renderer_keeps_error),
  * bias^2 from appm__bias2, Var from the Welford spread of the per-pass
  * estimates divided by j, scaled by appm__var_scale, or from the spread between
  * the chains (appm__mean_var). */
@@ -14033,7 +14042,7 @@ static void appm__estimate_error(appm_renderer *r)
     size_t i, npix = (size_t)r->w * r->h;
     double sum = 0.0;
     r->var_scale = 1.0;
-    if (r->pass < 2 || !(r->est->caps & APPM__CAP_ERROR) || r->err_blind) {
+    if (r->pass < 2 || !(r->est->caps & APPM__CAP_ERROR)) {
         r->stats.est_relerr = -1.0;
         return;
     }
@@ -14044,7 +14053,8 @@ static void appm__estimate_error(appm_renderer *r)
     appm__err_b2_fill(r);
     appm__parallel_for(r->threads, r->h, appm__err_term_task, r);
     for (i = 0; i < npix; ++i) sum += r->err_w[i];
-    r->stats.est_relerr = sqrt(sum / (double)npix);
+    /* the VARIANCE and ERROR maps keep the halves' scale; the image's estimate says none */
+    r->stats.est_relerr = r->err_blind ? -1.0 : sqrt(sum / (double)npix);
 }
 
 /* ---- 12.1 Passes split over a cluster -----------------------------------------

@@ -549,6 +549,16 @@ typedef struct appm_stats {
 
 APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
 
+/* 1 when the renderer keeps an error estimate (appm_stats.est_relerr >= 0 from
+ * its second pass on, what --until-error stops on): appm, appm-paper and pt,
+ * but not pt on a scene with a point or spot light and a mirror or glass.
+ * Those lights reach a surface only by shadow rays, which no mirror or glass
+ * lets through, so the light they send through one (a caustic) is missing from
+ * the path tracer's image, and the spread of its passes cannot measure light
+ * they never found.  Its VARIANCE and ERROR maps still show the noise of what
+ * it renders. */
+APPM_API int appm_renderer_keeps_error(const appm_renderer *r);
+
 /* Diagnostic images of the adaptive method (a teacher's pictures), width*height
  * floats each, borrowed until the next pass.  Returns NULL when the method keeps
  * no such map (e.g. laplacian for ppm), before the first pass, or when the map's

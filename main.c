@@ -689,21 +689,11 @@ static void render_defaults(render_run *R)
 
 /* The path tracer reaches a point or spot light only by a shadow ray, which no
  * mirror or glass lets through: light from such a light that reaches a surface
- * through one (a caustic) is missing from its image, and the library reports no
- * error estimate for it there (est_relerr -1): the spread of its passes cannot
- * measure light its paths never find.  The scene's counts include materials its
- * MTL defines and no face uses: such a mirror counts too. */
-static int pt_blind(const render_opts *o, const appm_scene *scene)
+ * through one (a caustic) is missing from its image, and the renderer keeps no
+ * error estimate there (appm_renderer_keeps_error). */
+static void warn_pt_caustics(const render_opts *o, const appm_renderer *r)
 {
-    appm_scene_info in;
-    if (o->cfg.method != APPM_METHOD_PT) return 0;
-    appm_scene_get_info(scene, &in);
-    return in.lights_point + in.lights_spot > 0 && in.materials_mirror + in.materials_dielectric > 0;
-}
-
-static void warn_pt_caustics(const render_opts *o, const appm_scene *scene)
-{
-    if (!o->cfg.log || !pt_blind(o, scene)) return;
+    if (o->cfg.method != APPM_METHOD_PT || !o->cfg.log || appm_renderer_keeps_error(r)) return;
     o->cfg.log(o->cfg.log_user, o->scene, 0,
                "pt does not render the light of point and spot lights that reaches a surface through a mirror "
                "or glass (caustics): its image leaves it out, and it reports no error estimate "
@@ -711,18 +701,15 @@ static void warn_pt_caustics(const render_opts *o, const appm_scene *scene)
 }
 
 /* --until-error needs an error estimate: ppm and sppm keep none, nor does the
- * path tracer where it cannot see some of the light (pt_blind).  Alone it would
- * never stop the render, so it is refused; beside --time or --passes it is only
- * said to have no effect. */
-static int check_until_error(const render_opts *o, const appm_scene *scene)
+ * path tracer where it cannot see some of the light.  Alone it would never stop
+ * the render, so it is refused; beside --time or --passes it is only said to
+ * have no effect. */
+static int check_until_error(const render_opts *o, const appm_renderer *r)
 {
-    const char *why = NULL;
-    if (!o->have_until) return EXIT_OK;
-    if (o->cfg.method == APPM_METHOD_PPM || o->cfg.method == APPM_METHOD_SPPM)
-        why = "keeps no error estimate";
-    else if (pt_blind(o, scene))
-        why = "reports no error estimate on a scene with a point or spot light and a mirror or glass";
-    if (!why) return EXIT_OK;
+    const char *why = o->cfg.method == APPM_METHOD_PT
+                          ? "reports no error estimate on a scene with a point or spot light and a mirror or glass"
+                          : "keeps no error estimate";
+    if (!o->have_until || appm_renderer_keeps_error(r)) return EXIT_OK;
     if (!o->have_time && !o->have_passes)
         return usage_error("--until-error: %s %s, so the render would never stop (--method appm keeps one; "
                            "or add --time or --passes)",
@@ -751,12 +738,12 @@ static int render_setup(render_run *R)
         return cli_agree(rc);
     }
     if ((rc = cli_agree(add_cli_lights(o, R->scene))) != EXIT_OK) return rc;
-    warn_pt_caustics(o, R->scene);
-    if ((rc = cli_agree(check_until_error(o, R->scene))) != EXIT_OK) return rc;
     if ((s = appm_renderer_create(R->scene, &o->cfg, &R->r, &d)) != APPM_OK) rc = lib_error(s, &d, NULL);
     else if (g_cli && (s = appm_renderer_set_cluster(R->r, &g_cli->cluster, &d)) != APPM_OK)
         rc = lib_error(s, &d, NULL);
     if ((rc = cli_agree(rc)) != EXIT_OK) return rc; /* before the --resume read every rank takes part in */
+    warn_pt_caustics(o, R->r);
+    if ((rc = cli_agree(check_until_error(o, R->r))) != EXIT_OK) return rc;
     if (o->resume && (rc = resume_render(R->r, o, &R->resumed)) != EXIT_OK) return rc;
     /* what rank 0 alone reads comes after the reads every rank of a job takes part in */
     if (o->reference && cli_root() && (s = appm_image_read(o->reference, NULL, &R->ref, &d)) != APPM_OK)

@@ -418,6 +418,7 @@ check "no image from the refused renders" absent "$T/never.png"
 run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --passes 3 -o "$T/pt-glass.pfm"
 check "pt on a spot light behind glass warns about its caustics (exit $rc)" \
     warned 'pt does not render the light of point and spot lights' 1
+check "... which it prints" contains "$T/out" passes=3
 check "... and its summary has no est_relerr" lacks "$T/out" est_relerr=
 run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --until-error 0.1 -o "$T/never.pfm"
 check "... so --until-error alone is refused there (exit $rc)" refused_with 'would never stop'
@@ -427,7 +428,7 @@ check "... and renders nothing" absent "$T/never.pfm"
 run "$APPM" render "$SCENE" --method sppm --size 16x16 --until-error 0.1 --passes 2 -o "$T/sppm-u.pfm"
 check "--until-error beside --passes: sppm renders, saying it has no effect (exit $rc)" \
     warned 'until-error has no effect: sppm' 1
-run "$APPM" render "$SCENE" --method pt --size 16x16 --until-error 0.5 -q -o "$T/pt-u.pfm"
+run "$APPM" render "$SCENE" --method pt --size 16x16 --until-error 0.5 --time 60 -q -o "$T/pt-u.pfm"
 check "pt on a box stops on --until-error, below it (exit $rc)" est_below 0.5
 run "$APPM" render scenes/caustic-glass.scene --size 16x20 --passes 1 -o "$T/appm-glass.pfm"
 check "... appm does not" warned 'pt does not' 0

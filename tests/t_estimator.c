@@ -28,8 +28,8 @@
  *   8. The error's weight (appm__err_weight): a pixel that one pass holds takes
  *      its neighbourhood's median luminance, worked by hand for a middle and a
  *      corner pixel; not when it shows a light, nor when several passes hold
- *      it; which pixels show a light (appm__pixel.lit) in renders of a box
- *      whose light the camera sees, with photons and with the path tracer.
+ *      it; which pixels show a light (appm__pixel.lit), counted alike by appm
+ *      and the path tracer, where the geometry puts them.
  *   9. The path tracer reports no error estimate where a point or spot light
  *      may reach a surface through a mirror or glass (caustic-glass), and does
  *      where there is no such light (the box) or no such surface (the teapot's
@@ -442,7 +442,7 @@ static int cmp_float(const void *a, const void *b)
  * state, pixel by pixel, in one loop: sqrt(mean of (bias2 + Var) w), bias2 the
  * 3 x 3 mean of b^2 - var_scale noise without its largest, Var the spread
  * times var_scale, w = 1 / (I~^2 + 0.01), I~ the pixel's luminance (a float)
- * or, where one pass holds the pixel (j mu^2 / (mu^2 + s^2) < 2) and it shows
+ * or, where one pass holds the pixel (j mu^2 / (mu^2 + s^2) < 2, s^2 = M2 / j) and it shows
  * no light, the median of its 3 x 3 neighbourhood's if lower (qsort here); for
  * every method that reports it, after 9 passes (the Laplacian's; halves of 8),
  * with 1 and 3 threads.  Returns -1 when out of memory. */
@@ -460,7 +460,7 @@ static double relerr_by_hand(const appm_renderer *r, int *lowered)
     *lowered = 0;
     for (i = 0; i < n; ++i) {
         const appm__pixel *p = &r->pix[i];
-        double I = lum[i], b2 = 0.0, top = -HUGE_VAL, var, mu = p->wmean, s2 = p->wm2 / (j - 1.0);
+        double I = lum[i], b2 = 0.0, top = -HUGE_VAL, var, mu = p->wmean, s2 = p->wm2 / j;
         int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy, k = 0;
         if (p->lit == 0 && j * mu * mu / (mu * mu + s2) < 2.0) {
             float v[9];
@@ -537,7 +537,8 @@ static void test_error_parts(appm_scene *s)
 /* 8. appm__err_weight worked by hand.  A 4 x 4 render (its state then set by
  * hand) after 4 passes: the middle pixel (1, 1) and the corner (0, 0).  One
  * pass holding the pixel: per-pass luminances 0, 0, 0, X give mu = X / 4 and
- * s^2 = X^2 / 4, so j mu^2 / (mu^2 + s^2) = 0.8. */
+ * s^2 = M2 / j = 3 X^2 / 16, so j mu^2 / (mu^2 + s^2) = 1; two such passes,
+ * 0, 0, X, X, give 2: no longer one pass's. */
 static void test_err_weight(appm_scene *s)
 {
     appm_config cfg;
@@ -565,8 +566,16 @@ static void test_err_weight(appm_scene *s)
         r->pix[5].lit = 1; /* it shows a light: its own I */
         CHECK_NEAR(appm__err_weight(r, 5), 1.0 / (X * X / 16.0 + 0.01), 1e-9);
         r->pix[5].lit = 0;
-        r->pix[5].wm2 = 3.0 * 0.01 * X * X / 16.0; /* spread over the passes: j mu^2 / (mu^2 + s^2) = 3.96 */
+        r->pix[5].wm2 = 3.0 * 0.01 * X * X / 16.0; /* spread over the passes: j mu^2 / (mu^2 + s^2) = 3.97 */
         CHECK_NEAR(appm__err_weight(r, 5), 1.0 / (X * X / 16.0 + 0.01), 1e-9);
+        r->pix[5].wmean = X / 2.0; /* 0, 0, X, X: M2 = X^2, the threshold itself */
+        r->pix[5].wm2 = X * X;
+        r->err_lum[5] = (float)(X / 2.0);
+        CHECK_NEAR(appm__err_weight(r, 5), 1.0 / (X * X / 4.0 + 0.01), 1e-9);
+        r->pix[5].wm2 = 1.01 * X * X; /* a little more spread: below it */
+        CHECK_NEAR(appm__err_weight(r, 5), 1.0 / (0.16 * 0.16 + 0.01), 1e-4);
+        r->err_lum[5] = (float)(X / 4.0);
+        r->pix[5].wmean = X / 4.0;
         r->pix[5].wm2 = 3.0 * X * X / 4.0;
         /* the corner: itself, (1, 0), (0, 1), (1, 1) = 0.11, 0.14 and 5: median (0.14 + 5) / 2 < 5 */
         r->err_lum[0] = 8.0f;
@@ -581,43 +590,59 @@ static void test_err_weight(appm_scene *s)
     appm_renderer_destroy(r);
 }
 
-/* 8b. appm__pixel.lit, with photons and with the path tracer, 6 passes at
- * 24 x 16: CornellBox-Original's ceiling light is a sliver in the top rows (on
- * 1-4 of the passes, by the jittered rays), nothing below them shows it; the
- * teapot under its sky shows the sky in the corner on every pass, and not
- * where the teapot stands, in the middle. */
+/* 8b. appm__pixel.lit, 6 passes at 24 x 16.  appm's eye pass and the path
+ * tracer draw the same camera rays and follow a mirror or glass alike on the
+ * first bounces, so their counts agree pixel by pixel (two ways of counting,
+ * one in the visible point and its commit, one in the path).  Where the
+ * geometry says: CornellBox-Original's ceiling light is a sliver in the top
+ * rows (on some of the passes, by the jittered rays) and nothing below them
+ * shows it; the sphere box shows it in its glass and mirror balls, below the
+ * middle; the teapot under its sky shows the sky in the corner on every pass,
+ * and not where the teapot stands. */
 static void test_lit(appm_scene *box)
 {
-    appm_scene *pot = check_load_scene("scenes/teapot.scene");
-    int m, k;
-    for (k = 0; k < 2; ++k)
-        for (m = 0; m < 2; ++m) {
+    const char *name[3] = {NULL, "scenes/cornell-sphere.scene", "scenes/teapot.scene"};
+    int k, m;
+    for (k = 0; k < 3; ++k) {
+        appm_scene *s = name[k] ? check_load_scene(name[k]) : box;
+        appm_renderer *r[2] = {NULL, NULL};
+        for (m = 0; m < 2 && s; ++m) {
             appm_config cfg;
-            appm_renderer *r;
             appm_config_init(&cfg);
             cfg.width = 24;
             cfg.height = 16;
             cfg.photons = 2000;
             cfg.method = m ? APPM_METHOD_PT : APPM_METHOD_APPM;
-            if (k && !pot) continue;
-            r = check_renderer(k ? pot : box, &cfg);
-            if (!r) continue;
-            if (check_passes(r, 6)) {
-                size_t i, top = 0, below = 0;
-                if (k == 0) {
-                    for (i = 0; i < (size_t)24 * 4; ++i) top += r->pix[i].lit > 0 && r->pix[i].lit <= 6;
-                    for (i = (size_t)24 * 4; i < (size_t)24 * 16; ++i) below += r->pix[i].lit != 0;
-                    CHECK_MSG(top > 0 && below == 0, "%s: %lu pixels of the top rows lit, %lu below them",
-                              appm_method_name(cfg.method), (unsigned long)top, (unsigned long)below);
-                } else {
-                    CHECK_MSG(r->pix[0].lit == 6 && r->pix[8 * 24 + 12].lit == 0, "%s: the teapot's sky %lu, middle %lu",
-                              appm_method_name(cfg.method), (unsigned long)r->pix[0].lit,
-                              (unsigned long)r->pix[8 * 24 + 12].lit);
-                }
+            r[m] = check_renderer(s, &cfg);
+            if (r[m] && !check_passes(r[m], 6)) {
+                appm_renderer_destroy(r[m]);
+                r[m] = NULL;
             }
-            appm_renderer_destroy(r);
         }
-    appm_scene_destroy(pot);
+        if (r[0] && r[1]) {
+            size_t i, differ = 0, top = 0, below = 0, half = 0;
+            uint64_t most = 0;
+            for (i = 0; i < (size_t)24 * 16; ++i) {
+                uint64_t n = r[0]->pix[i].lit;
+                differ += n != r[1]->pix[i].lit;
+                if (n > most) most = n;
+                if (i < (size_t)24 * 4) top += n > 0;
+                else below += n > 0;
+                half += i >= (size_t)24 * 8 && n > 0;
+            }
+            CHECK_MSG(differ == 0 && most <= 6, "%s: %lu pixels count differently, the most %lu",
+                      name[k] ? name[k] : "the box", (unsigned long)differ, (unsigned long)most);
+            if (k == 0) CHECK_MSG(top > 0 && below == 0, "the box: %lu lit in the top rows, %lu below",
+                                  (unsigned long)top, (unsigned long)below);
+            if (k == 1) CHECK_MSG(half > 0, "the sphere box: no ball shows the light below the middle");
+            if (k == 2) CHECK_MSG(r[0]->pix[0].lit == 6 && r[0]->pix[8 * 24 + 12].lit == 0,
+                                  "the teapot: the sky's corner %lu, the middle %lu",
+                                  (unsigned long)r[0]->pix[0].lit, (unsigned long)r[0]->pix[8 * 24 + 12].lit);
+        }
+        appm_renderer_destroy(r[0]);
+        appm_renderer_destroy(r[1]);
+        if (name[k]) appm_scene_destroy(s);
+    }
 }
 
 static void test_pt_blind(appm_scene *box)
