@@ -327,6 +327,28 @@ static void test_fields_matter(const appm_scene *s)
     }
 }
 
+/* A checkpoint of r without the pixel field `name`, in *n bytes (NULL on
+ * failure), and in *L (its field list in `less`) the layout to load it with. */
+static unsigned char *save_without(appm_renderer *r, const char *name, appm__ck_layout *L, appm__field *less,
+                                   size_t *n)
+{
+    unsigned char *buf = NULL;
+    size_t k, j = 0;
+    appm__ck_layout_of(r, L);
+    for (k = 0; k < L->n[0]; ++k)
+        if (strcmp(L->f[0][k].name, name) != 0) less[j++] = L->f[0][k];
+    CHECK(j + 1 == L->n[0]);
+    L->f[0] = less;
+    L->n[0] = (unsigned)j;
+    *n = 0;
+    if (appm__ck_save_mem(r, L, NULL, 0, n, NULL) != APPM_OK || !(buf = (unsigned char *)malloc(*n))) return NULL;
+    if (appm__ck_save_mem(r, L, buf, *n, n, NULL) != APPM_OK) {
+        free(buf);
+        return NULL;
+    }
+    return buf;
+}
+
 /* appm__pixel.lit is state: the path tracer on the teapot under its sky,
  * 12 x 10, 6 passes (the sky's pixels count 6), loaded into a renderer that
  * has made 3 passes of its own (its sky's counts are 3): with the field, every
@@ -340,7 +362,7 @@ static void test_lit_carried(void)
     appm__ck_layout L;
     appm__field less[APPM__CK_MAXFIELDS];
     unsigned char *buf = NULL, *full = NULL;
-    size_t n = 0, k, j = 0, npix, lit = 0, kept = 0, same = 0;
+    size_t n = 0, k, npix, lit = 0, kept = 0, same = 0;
     if (!s) return;
     c = config(APPM_METHOD_PT, 1);
     a = make(s, &c, 6);
@@ -349,15 +371,7 @@ static void test_lit_carried(void)
     if (!a || !b || !b2) goto done;
     npix = (size_t)a->w * a->h;
     CHECK(b->pix[0].lit == 3);
-    appm__ck_layout_of(a, &L);
-    for (k = 0; k < L.n[0]; ++k)
-        if (strcmp(L.f[0][k].name, "lit") != 0) less[j++] = L.f[0][k];
-    CHECK(j + 1 == L.n[0]);
-    L.f[0] = less;
-    L.n[0] = (unsigned)j;
-    if (appm__ck_save_mem(a, &L, NULL, 0, &n, NULL) != APPM_OK || !(buf = (unsigned char *)malloc(n))) goto done;
-    if (appm__ck_save_mem(a, &L, buf, n, &n, NULL) != APPM_OK) goto done;
-    if (appm__ck_load_mem(b, &L, buf, n, NULL) != APPM_OK) goto done;
+    if (!(buf = save_without(a, "lit", &L, less, &n)) || appm__ck_load_mem(b, &L, buf, n, NULL) != APPM_OK) goto done;
     if (!(full = save(a, &n)) || appm_renderer_load(b2, full, n, NULL) != APPM_OK) goto done;
     for (k = 0; k < npix; ++k) {
         lit += a->pix[k].lit == 6;
@@ -388,7 +402,7 @@ static void test_halves_matter(void)
     appm__ck_layout L;
     appm__field less[APPM__CK_MAXFIELDS];
     unsigned char *buf = NULL, *full = NULL;
-    size_t n = 0, k, j = 0;
+    size_t n = 0;
     if (!s) return;
     c = config(APPM_METHOD_PT, 1);
     c.width = c.height = 24;
@@ -399,14 +413,7 @@ static void test_halves_matter(void)
     if (!whole || !a || !b || !b2) goto done;
     CHECK_MSG(whole->var_scale < 1.0, "var_scale %.4f: the halves' scale should be below its bound here",
               whole->var_scale);
-    appm__ck_layout_of(a, &L);
-    for (k = 0; k < L.n[0]; ++k)
-        if (strcmp(L.f[0][k].name, "lh") != 0) less[j++] = L.f[0][k];
-    CHECK(j + 1 == L.n[0]);
-    L.f[0] = less;
-    L.n[0] = (unsigned)j;
-    if (appm__ck_save_mem(a, &L, NULL, 0, &n, NULL) != APPM_OK || !(buf = (unsigned char *)malloc(n))) goto done;
-    if (appm__ck_save_mem(a, &L, buf, n, &n, NULL) != APPM_OK) goto done;
+    if (!(buf = save_without(a, "lh", &L, less, &n))) goto done;
     if (appm__ck_load_mem(b, &L, buf, n, NULL) != APPM_OK || !check_passes(b, 20)) goto done;
     CHECK_MSG(b->stats.est_relerr != whole->stats.est_relerr, "without the halves: est_relerr %.6g, whole %.6g",
               b->stats.est_relerr, whole->stats.est_relerr);
