@@ -31,9 +31,10 @@
  *      it; which pixels show a light (appm__pixel.lit), counted alike by appm
  *      and the path tracer, where the geometry puts them.
  *   9. The path tracer reports no error estimate where a point or spot light
- *      may reach a surface through a mirror or glass (caustic-glass), and does
- *      where there is no such light (the box) or no such surface (the teapot's
- *      spot); appm reports one on caustic-glass.
+ *      may reach a surface through a mirror or glass (the sphere box with a
+ *      point light added), and does where there is no such light (the sphere
+ *      box as it is, the box) or no such surface (the teapot's spot); appm
+ *      reports one on all of them.
  */
 #include "../appm.c"
 #include "check.h"
@@ -647,11 +648,22 @@ static void test_lit(appm_scene *box)
 
 static void test_pt_blind(appm_scene *box)
 {
-    const char *name[3] = {"scenes/caustic-glass.scene", "scenes/teapot.scene", NULL};
+    /* the sphere box (glass and mirror balls under an area light), then with a
+     * point light added; the teapot (a spot, no mirror or glass); the box.
+     * caustic-glass itself is left to tests/cli.sh: its 6 MB OBJ crashes Node's
+     * WASI runner, under which this test also runs. */
+    static const double pos[3] = {0.0, 1.5, 0.0}, rgb[3] = {1.0, 1.0, 1.0};
+    appm_scene *balls = check_load_scene("scenes/cornell-sphere.scene");
+    appm_scene *pot = check_load_scene("scenes/teapot.scene");
+    appm_scene *scene[4];
+    appm_diag d;
     int k, m;
-    for (k = 0; k < 3; ++k) {
-        appm_scene *s = name[k] ? check_load_scene(name[k]) : box;
-        for (m = 0; m < 2 && s; ++m) {
+    scene[0] = scene[1] = balls;
+    scene[2] = pot;
+    scene[3] = box;
+    for (k = 0; k < 4; ++k) {
+        if (k == 1 && balls) CHECK(appm_scene_add_point_light(balls, pos, rgb, &d) == APPM_OK);
+        for (m = 0; m < 2 && scene[k]; ++m) {
             appm_config cfg;
             appm_renderer *r;
             appm_config_init(&cfg);
@@ -659,18 +671,20 @@ static void test_pt_blind(appm_scene *box)
             cfg.height = 20;
             cfg.photons = 2000;
             cfg.method = m ? APPM_METHOD_APPM : APPM_METHOD_PT;
-            r = check_renderer(s, &cfg);
+            r = check_renderer(scene[k], &cfg);
             if (r && check_passes(r, 3)) {
                 appm_stats st;
+                int none = k == 1 && m == 0;
                 appm_renderer_stats(r, &st);
-                if (k == 0 && m == 0) CHECK_MSG(st.est_relerr == -1.0, "pt on caustic-glass: est_relerr %g", st.est_relerr);
-                else CHECK_MSG(st.est_relerr > 0.0, "%s on %s: est_relerr %g", appm_method_name(cfg.method),
-                               name[k] ? name[k] : "the box", st.est_relerr);
+                CHECK_MSG(none ? st.est_relerr == -1.0 && !appm_renderer_keeps_error(r)
+                               : st.est_relerr > 0.0 && appm_renderer_keeps_error(r),
+                          "%s, scene %d: est_relerr %g", appm_method_name(cfg.method), k, st.est_relerr);
             }
             appm_renderer_destroy(r);
         }
-        if (name[k]) appm_scene_destroy(s);
     }
+    appm_scene_destroy(balls);
+    appm_scene_destroy(pot);
 }
 
 int main(void)
