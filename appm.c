@@ -13855,6 +13855,22 @@ static double appm__pixel_lum(const appm_renderer *r, size_t i, double j)
     return I;
 }
 
+/* The pixels of the (up to) 3 x 3 window around pixel i, clipped at the
+ * image's border, row by row: their indices into idx; returns how many (4 at a
+ * corner, 6 along an edge). */
+static int appm__window3(const appm_renderer *r, size_t i, size_t idx[9])
+{
+    int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
+    int n = 0;
+    for (dy = -1; dy <= 1; ++dy)
+        for (dx = -1; dx <= 1; ++dx) {
+            int64_t x = x0 + dx, y = y0 + dy;
+            if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
+            idx[n++] = (size_t)(y * (int64_t)r->w + x);
+        }
+    return n;
+}
+
 /* The weight of pixel i's squared error in the relative error, 1 / (I~^2 + 0.01),
  * as appm_image_compare's relmse weighs it with the reference's value there.
  * I~ is the pixel's own I (r->err_lum, filled for this pass), except where one
@@ -13880,16 +13896,11 @@ static double appm__err_weight(const appm_renderer *r, size_t i)
     if (p->lit == 0 && j >= 2.0) {
         double mu = p->wmean, s2 = p->wm2 / j; /* the passes' own spread, not the sample variance */
         if (j * mu * mu < 2.0 * (mu * mu + s2)) {
-            int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
+            size_t idx[9];
             float v[9];
-            int n = 0, a, b;
+            int n = appm__window3(r, i, idx), a, b;
             double m;
-            for (dy = -1; dy <= 1; ++dy)
-                for (dx = -1; dx <= 1; ++dx) {
-                    int64_t x = x0 + dx, y = y0 + dy;
-                    if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
-                    v[n++] = r->err_lum[(size_t)(y * (int64_t)r->w + x)];
-                }
+            for (a = 0; a < n; ++a) v[a] = r->err_lum[idx[a]];
             for (a = 1; a < n; ++a) /* insertion sort of at most 9 */
                 for (b = a; b > 0 && v[b - 1] > v[b]; --b) {
                     float t = v[b];
@@ -13952,20 +13963,16 @@ static double appm__var_scale(const appm_renderer *r)
  * is floored at 0. */
 static double appm__bias2(const appm_renderer *r, size_t i)
 {
-    int64_t x0 = (int64_t)(i % r->w), y0 = (int64_t)(i / r->w), dx, dy;
+    size_t idx[9];
     double sum = 0.0, top = -HUGE_VAL, b2;
-    int n = 0;
+    int n, k;
     if (!r->err_b2) return 0.0;
-    for (dy = -1; dy <= 1; ++dy)
-        for (dx = -1; dx <= 1; ++dx) {
-            int64_t x = x0 + dx, y = y0 + dy;
-            double b;
-            if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
-            b = r->err_b2[(size_t)(y * (int64_t)r->w + x)];
-            sum += b;
-            if (b > top) top = b;
-            n++;
-        }
+    n = appm__window3(r, i, idx);
+    for (k = 0; k < n; ++k) {
+        double b = r->err_b2[idx[k]];
+        sum += b;
+        if (b > top) top = b;
+    }
     b2 = n > 1 ? (sum - top) / (double)(n - 1) : sum;
     return b2 > 0.0 ? b2 : 0.0;
 }
