@@ -551,9 +551,13 @@ APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
 
 /* 1 when the renderer keeps an error estimate (appm_stats.est_relerr >= 0 from
  * its second pass on, what --until-error stops on): appm, appm-paper and pt,
- * but not pt on a scene with a point or spot light and a mirror or glass.
- * Those lights reach a surface only by shadow rays, which no mirror or glass
- * lets through, so the light they send through one (a caustic) is missing from
+ * but not pt on a scene with a mirror or glass and a point or spot light, or
+ * an area light too small to be met by chance (an emissive material whose
+ * triangles cover less than 1e-4 of pi R^2, R half the diagonal of the scene's
+ * bounding box, and that carries at least 1 % of the power).  A point or spot
+ * light reaches a surface only by shadow rays, which no mirror or glass lets
+ * through, and a diffuse bounce meets such a small light about once in 10^4,
+ * so the light they send through a mirror or glass (a caustic) is missing from
  * the path tracer's image, and the spread of its passes cannot measure light
  * they never found.  Its VARIANCE and ERROR maps still show the noise of what
  * it renders. */

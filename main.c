@@ -696,9 +696,9 @@ static void warn_pt_caustics(const render_opts *o, const appm_renderer *r)
 {
     if (o->cfg.method != APPM_METHOD_PT || !o->cfg.log || appm_renderer_keeps_error(r)) return;
     o->cfg.log(o->cfg.log_user, o->scene, 0,
-               "pt does not render the light of point and spot lights that reaches a surface through a mirror "
-               "or glass (caustics): its image leaves it out, and it reports no error estimate "
-               "(--method appm renders it)");
+               "pt does not render the light that reaches a surface through a mirror or glass from a point or "
+               "spot light, or from an area light too small to be met by chance (caustics): its image leaves "
+               "it out, and it reports no error estimate (--method appm renders it)");
 }
 
 /* --until-error needs an error estimate: ppm and sppm keep none, nor does the
@@ -707,9 +707,9 @@ static void warn_pt_caustics(const render_opts *o, const appm_renderer *r)
  * have no effect. */
 static int check_until_error(const render_opts *o, const appm_renderer *r)
 {
-    const char *why = o->cfg.method == APPM_METHOD_PT
-                          ? "reports no error estimate on a scene with a point or spot light and a mirror or glass"
-                          : "keeps no error estimate";
+    const char *why = o->cfg.method == APPM_METHOD_PT ? "reports no error estimate on a scene whose caustics it "
+                                                        "cannot find (a point, spot or tiny light and a mirror or glass)"
+                                                      : "keeps no error estimate";
     if (!o->have_until || appm_renderer_keeps_error(r)) return EXIT_OK;
     if (!o->have_time && !o->have_passes)
         return usage_error("--until-error: %s %s, so the render would never stop (--method appm keeps one; "

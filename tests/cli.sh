@@ -417,11 +417,16 @@ check "no image from the refused renders" absent "$T/never.png"
 # and reports no error estimate there (its passes cannot measure light they never find)
 run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --passes 3 -o "$T/pt-glass.pfm"
 check "pt on a spot light behind glass warns about its caustics (exit $rc)" \
-    warned 'pt does not render the light of point and spot lights' 1
+    warned 'pt does not render the light that reaches a surface through a mirror or glass' 1
 check "... which it prints" contains "$T/out" passes=3
 check "... and its summary has no est_relerr" lacks "$T/out" est_relerr=
 run "$APPM" render scenes/caustic-glass.scene --method pt --size 16x20 --until-error 0.1 -o "$T/never.pfm"
 check "... so --until-error alone is refused there (exit $rc)" refused_with 'would never stop'
+# the same for an area light of 5 x 4 mm under water, which no diffuse bounce meets by chance
+run "$APPM" render scenes/water-caustic.scene --method pt --size 8x8 --passes 2 -o "$T/pt-water.pfm"
+check "pt under water-caustic's tiny light warns about its caustics (exit $rc)" \
+    warned 'pt does not render the light that reaches a surface through a mirror or glass' 1
+check "... and its summary has no est_relerr" lacks "$T/out" est_relerr=
 run "$APPM" render "$SCENE" --method ppm --size 16x16 --until-error 0.1 -o "$T/never.pfm"
 check "--until-error alone is refused for ppm, which keeps no estimate (exit $rc)" refused_with 'ppm keeps no error'
 check "... and renders nothing" absent "$T/never.pfm"

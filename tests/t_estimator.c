@@ -687,10 +687,88 @@ static void test_pt_blind(appm_scene *box)
     appm_scene_destroy(pot);
 }
 
+/* A floor, a pane of glass (or of white) above it and two square lights
+ * under a ceiling that is not there: the first of half-side h and radiance
+ * k1, the second of half-side 0.25 and radiance k2 (none if k2 = 0).  The
+ * box spans [-1, 1] x [0, 1.9] x [-1, 1], whatever the lights. */
+static appm_scene *tiny_light_scene(double h, double k1, double k2, int glass)
+{
+    char obj[1024], mtl[512];
+    appm_scene *sc = NULL;
+    appm_diag d;
+    snprintf(obj, sizeof obj,
+             "mtllib t.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nusemtl floor\nf 1 3 2\nf 1 4 3\n"
+             "v -.5 1 -.5\nv .5 1 -.5\nv .5 1 .5\nv -.5 1 .5\nusemtl pane\nf 5 7 6\nf 5 8 7\n"
+             "v %g 1.9 %g\nv %g 1.9 %g\nv %g 1.9 %g\nv %g 1.9 %g\nusemtl one\nf 9 10 11\nf 9 11 12\n"
+             "v .5 1.9 .5\nv 1 1.9 .5\nv 1 1.9 1\nv .5 1.9 1\nusemtl two\nf 13 14 15\nf 13 15 16\n",
+             -h, -h, h, -h, h, h, -h, h);
+    snprintf(mtl, sizeof mtl,
+             "newmtl floor\nKd .8 .8 .8\nnewmtl pane\n%s\nnewmtl one\nKd 0 0 0\nKe %g %g %g\n"
+             "newmtl two\nKd %g %g %g\nKe %g %g %g\n",
+             glass ? "illum 7\nNi 1.5\nKs 1 1 1\nTf 1 1 1" : "Kd .8 .8 .8", k1, k1, k1, k2 > 0 ? 0.0 : 0.5,
+             k2 > 0 ? 0.0 : 0.5, k2 > 0 ? 0.0 : 0.5, k2, k2, k2);
+    CHECK_MSG(appm_scene_load_obj_memory(obj, strlen(obj), mtl, strlen(mtl), "tiny.obj", NULL, &sc, &d) == APPM_OK,
+              "tiny.obj: %s", d.message);
+    return sc;
+}
+
+/* pt's blindness to a tiny light's caustics (appm__pt_blind): an area light
+ * below APPM__PT_TINY of the bounding disk, pi R^2 with R half the box's
+ * diagonal, counts as a point, where a mirror or glass is and where it carries
+ * at least APPM__PT_TINY_POWER of the photons.  Lights at half and at twice the
+ * threshold's area, with and without the glass, alone and beside a brighter
+ * light. */
+static void test_pt_blind_tiny(void)
+{
+    static const struct { double area, k1, k2; int glass, blind; } c[] = {
+        {0.5, 100.0, 0.0, 1, 1},   /* half the threshold: blind               */
+        {2.0, 100.0, 0.0, 1, 0},   /* twice: found by chance often enough     */
+        {0.5, 100.0, 0.0, 0, 0},   /* no glass: the shadow rays find it       */
+        {0.5, 100.0, 1000.0, 1, 0},/* 0.2 % of the photons: it does not count */
+        {0.5, 100.0, 10.0, 1, 1},  /* 2 %: it does                            */
+    };
+    const double R = 0.5 * sqrt(2.0 * 2.0 + 1.9 * 1.9 + 2.0 * 2.0), disk = APPM__PI * R * R;
+    size_t i;
+    for (i = 0; i < sizeof c / sizeof c[0]; ++i) {
+        double h = 0.5 * sqrt(c[i].area * APPM__PT_TINY * disk);
+        appm_scene *sc = tiny_light_scene(h, c[i].k1, c[i].k2, c[i].glass);
+        if (!sc) continue;
+        CHECK_NEAR(sc->radius, R, 1e-5);
+        if (c[i].k2 > 0.0) { /* the first light's share of the photons, as the case says */
+            double one = 0.0;
+            uint32_t k;
+            for (k = 0; k < sc->nlight; ++k)
+                if (sc->light[k].kind == APPM__LIGHT_AREA && sc->info[sc->light[k].tri].mat == sc->info[4].mat)
+                    one += sc->light[k].pick;
+            CHECK_MSG(c[i].blind ? one > 0.015 : one < 0.005, "case %u: share %g", (unsigned)i, one);
+        }
+        CHECK_MSG(appm__pt_blind(sc) == c[i].blind, "case %u: blind %d", (unsigned)i, appm__pt_blind(sc));
+        if (i < 2) { /* and the renderer says so */
+            appm_config cfg;
+            appm_renderer *r;
+            appm_config_init(&cfg);
+            cfg.width = 8;
+            cfg.height = 8;
+            cfg.method = APPM_METHOD_PT;
+            r = check_renderer(sc, &cfg);
+            if (r && check_passes(r, 2)) {
+                appm_stats st;
+                appm_renderer_stats(r, &st);
+                CHECK_MSG(c[i].blind ? st.est_relerr == -1.0 && !appm_renderer_keeps_error(r)
+                                     : st.est_relerr >= 0.0 && appm_renderer_keeps_error(r),
+                          "case %u: est_relerr %g", (unsigned)i, st.est_relerr);
+            }
+            appm_renderer_destroy(r);
+        }
+        appm_scene_destroy(sc);
+    }
+}
+
 int main(void)
 {
     appm_scene *s;
     test_names();
+    test_pt_blind_tiny();
     test_entries();
     test_paper_radius();
     s = check_load_scene("scenes/cornell-original.scene");
