@@ -5550,6 +5550,7 @@ typedef struct appm__material {
      * none.  map_Kd multiplies color (Kd), map_Ks ks (a mirror's color), map_d
      * cuts the surface away where its alpha is below 1/2 (appm__cut_away). */
     uint32_t map_kd, map_ks, map_d;
+    double emit_area; /* emissive: the area of the triangles that use it (appm__pt_blind) */
 } appm__material;
 
 /* A decoded texture map: 8-bit samples (colour sRGB-encoded, alpha linear)
@@ -9965,6 +9966,7 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
         l->kind = APPM__LIGHT_AREA;
         l->tri = i;
         l->value = m->ke;
+        s->mat[s->info[i].mat].emit_area += s->info[i].area;
         appm__light_power(s, l, l->power);
         s->info[i].light = (int32_t)k++;
     }
@@ -13420,19 +13422,14 @@ static int appm__pt_blind(const appm_scene *s)
 {
     appm_scene_info in;
     double tiny = 0.0, disk = APPM__PI * (double)s->radius * s->radius;
-    uint32_t m, k;
+    uint32_t k;
     appm_scene_get_info(s, &in);
     if (in.materials_mirror + in.materials_dielectric == 0) return 0;
     if (in.lights_point + in.lights_spot > 0) return 1;
-    for (m = 0; m < s->nmat; ++m) {
-        double area = 0.0, pick = 0.0;
-        if (!s->mat[m].emissive) continue;
-        for (k = 0; k < s->nlight; ++k)
-            if (s->light[k].kind == APPM__LIGHT_AREA && s->info[s->light[k].tri].mat == m) {
-                area += s->info[s->light[k].tri].area;
-                pick += s->light[k].pick;
-            }
-        if (area < APPM__PT_TINY * disk) tiny += pick;
+    for (k = 0; k < s->nlight; ++k) {
+        const appm__light *l = &s->light[k];
+        if (l->kind == APPM__LIGHT_AREA && s->mat[s->info[l->tri].mat].emit_area < APPM__PT_TINY * disk)
+            tiny += l->pick;
     }
     return tiny >= APPM__PT_TINY_POWER;
 }
