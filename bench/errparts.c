@@ -9,7 +9,8 @@
  * part (appm__bias2), each a weighted mean over the pixels with the weights of
  * the relative error.  The truth of each, in the same luminance measure: the
  * spread of the seeds' images (the variance), and the squared difference of
- * their mean from REFERENCE less that spread over SEEDS (the squared bias).  The
+ * their mean from REFERENCE less that spread over SEEDS (the squared bias), each
+ * weighted as relmse weighs it, by the reference (1 / (ref^2 + 0.01)).  The
  * references are make bench-errbar's (bench/ref/NAME-64e.pfm).  Also prints the
  * halves' and the quarters' differences of the last power of two of passes, as
  * docs/algorithm.md 7.3 uses them. */
@@ -84,11 +85,10 @@ int main(int argc, char **argv)
         appm_renderer_destroy(r);
     }
     for (i = 0; i < EP_N; ++i) {
-        double m = 0, v = 0, w = 0, Lr = lum(ref.rgb + 3 * i);
+        double m = 0, v = 0, w, Lr = lum(ref.rgb + 3 * i);
         for (k = 0; k < seeds; ++k) {
             double qv[4], h1, h2;
             m += L[k][i];
-            w += W[k][i];
             est_b += W[k][i] * B2[k][i];
             est_v += W[k][i] * V[k][i];
             for (q = 0; q < 4; ++q) qv[q] = (Q[k][q][i] - (q ? Q[k][q - 1][i] : 0.0)) / (double)(P / 4);
@@ -98,7 +98,11 @@ int main(int argc, char **argv)
             quarters += W[k][i] * 0.125 * ((qv[0] - qv[1]) * (qv[0] - qv[1]) + (qv[2] - qv[3]) * (qv[2] - qv[3]));
         }
         m /= seeds;
-        w /= seeds;
+        /* the truth's weight is relmse's, from the reference: the renders' own
+         * (appm__err_weight) differ most where a rare path decides a pixel (the
+         * light seen in the water of water-caustic), where they gave the seeds'
+         * spread of a pixel that one seed met the weight 1 / 0.01 */
+        w = 1.0 / (Lr * Lr + 0.01);
         for (k = 0; k < seeds; ++k) v += (L[k][i] - m) * (L[k][i] - m);
         v /= seeds - 1;
         true_v += w * v;
