@@ -5598,11 +5598,18 @@ typedef struct appm__light {
  * turns it about +y by that angle (column 0 then looks along +x at 90).  The
  * loader keeps the decoded file in px; the scene (6.2) keeps linear RGB times
  * `scale` in rgb and the distribution appm__env_sample draws from. */
+#define APPM__ENV_PB 7 /* bins of shading normals per side of the octahedral grid (odd: +y is a bin's centre) */
+#define APPM__ENV_BINS (APPM__ENV_PB * APPM__ENV_PB)
 typedef struct appm__envmap {
     appm__pixels px;   /* loader: the decoded file */
     float *rgb;        /* w * h * 3 radiances */
     uint32_t w, h;
     double *cdf;       /* rows' CDF (h + 1 entries), then each row's CDF over its columns (w + 1 each) */
+    /* The product densities (appm__env_prod_build): per bin of shading normals, a
+     * coarse pw x ph grid over the map laid out as cdf is; pcdf NULL: none. */
+    double *pcdf;
+    uint32_t pw, ph;
+    unsigned char pok[APPM__ENV_BINS]; /* the bin's density exists (its hemisphere is not black) */
     double scale, rotate; /* as written; rotate in degrees */
     float rot;         /* rotate in radians */
     uint64_t hash;     /* of the file's samples, scale and rotate (checkpoints) */
@@ -9237,6 +9244,145 @@ static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v
                    (2.0 * APPM__PI * APPM__PI * st));
 }
 
+/* Product sampling.  A shading point's light from the map is the integral of
+ * L(w) max(0, n.w); the map's density draws w by L alone, the cosine's by
+ * max(0, n.w) alone, and where the map is smooth (a sky) neither follows the
+ * product: a grey ground under a sky brighter above than below, lit by one
+ * shadow ray a pass, kept the grain of that mismatch.  So the map also keeps,
+ * for each of APPM__ENV_BINS bins of shading normals (an octahedral grid, y
+ * up, whose centre bin is +y: a flat ground's normal exactly), a density over
+ * a coarse grid of at most APPM__ENV_PW x APPM__ENV_PH cells (each the mean
+ * RGB of its texels) proportional to
+ *      L_cell max(0, n_b . w_cell) sin theta_cell,
+ * n_b the bin's centre normal and w_cell the cell's centre direction, drawn
+ * as the map's own (rows, then a column, by inverting CDFs) and uniformly
+ * within the cell.  For a normal at a bin's centre, under a sky smooth at the
+ * cell's scale, the sample's weight f / p is close to the irradiance itself.
+ * A sun smaller than a cell is still the map's density's to find: the shadow
+ * ray draws from the mixture of 6.2's two and this one (appm__env_mix_pdf). */
+#define APPM__ENV_PW 128
+#define APPM__ENV_PH 64
+
+/* The bin of unit normal n: its place (a, b) on the octahedral map, the
+ * lower hemisphere folded over the diagonals, on a PB x PB grid. */
+static uint32_t appm__env_bin(appm__v3 n)
+{
+    float l = fabsf(n.x) + fabsf(n.y) + fabsf(n.z), a, b;
+    int i, k;
+    if (!(l > 0.0f)) return (APPM__ENV_BINS - 1) / 2;
+    a = n.x / l;
+    b = n.z / l;
+    if (n.y < 0.0f) {
+        float fa = (1.0f - fabsf(b)) * (a >= 0.0f ? 1.0f : -1.0f);
+        b = (1.0f - fabsf(a)) * (b >= 0.0f ? 1.0f : -1.0f);
+        a = fa;
+    }
+    i = (int)((a + 1.0f) * 0.5f * (float)APPM__ENV_PB);
+    k = (int)((b + 1.0f) * 0.5f * (float)APPM__ENV_PB);
+    i = i < 0 ? 0 : (i >= APPM__ENV_PB ? APPM__ENV_PB - 1 : i);
+    k = k < 0 ? 0 : (k >= APPM__ENV_PB ? APPM__ENV_PB - 1 : k);
+    return (uint32_t)(i * APPM__ENV_PB + k);
+}
+
+/* The unit normal at the centre of bin `bin` (appm__env_bin's inverse there). */
+static appm__v3 appm__env_bin_normal(uint32_t bin)
+{
+    float a = (2.0f * (float)(bin / APPM__ENV_PB) + 1.0f) / (float)APPM__ENV_PB - 1.0f;
+    float b = (2.0f * (float)(bin % APPM__ENV_PB) + 1.0f) / (float)APPM__ENV_PB - 1.0f;
+    float y = 1.0f - fabsf(a) - fabsf(b);
+    if (y < 0.0f) {
+        float fa = (1.0f - fabsf(b)) * (a >= 0.0f ? 1.0f : -1.0f);
+        b = (1.0f - fabsf(a)) * (b >= 0.0f ? 1.0f : -1.0f);
+        a = fa;
+    }
+    return appm__normalize(appm__v(a, y, b));
+}
+
+/* Doubles of one bin's CDFs: rows (ph + 1), then each row's columns (pw + 1). */
+static size_t appm__env_prod_size(const appm__envmap *e)
+{
+    return (size_t)e->ph + 1 + (size_t)e->ph * ((size_t)e->pw + 1);
+}
+
+/* The solid-angle density with which bin `bin`'s product density draws the
+ * direction at (u, v) of appm__env_uv (0 where the bin has none). */
+static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double u, double v)
+{
+    const double *c, *cr;
+    double st = sin(APPM__PI * v);
+    uint32_t x, y;
+    if (!e->pcdf || !e->pok[bin] || !(st > 0.0)) return 0.0;
+    c = e->pcdf + bin * appm__env_prod_size(e);
+    x = (uint32_t)(u * e->pw);
+    y = (uint32_t)(v * e->ph);
+    if (x >= e->pw) x = e->pw - 1;
+    if (y >= e->ph) y = e->ph - 1;
+    cr = c + (e->ph + 1) + (size_t)y * (e->pw + 1);
+    return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * e->pw * e->ph / (2.0 * APPM__PI * APPM__PI * st);
+}
+
+/* A direction *d drawn from bin `bin`'s product density (which must exist). */
+static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1, float u2, appm__v3 *d)
+{
+    const double *c = e->pcdf + bin * appm__env_prod_size(e);
+    int y, x;
+    float v = appm__cdf_invert(c, (int)e->ph, u1, &y);
+    float u = appm__cdf_invert(c + (e->ph + 1) + (size_t)y * (e->pw + 1), (int)e->pw, u2, &x);
+    *d = appm__env_dir(e, u, v);
+}
+
+/* The product densities of every bin, from e->rgb; a bin whose hemisphere
+ * sees no light gets none (pok 0).  scratch: the coarse cells' means. */
+static appm_status appm__env_prod_build(appm__mem *m, appm__envmap *e, const char *name, appm_diag *diag)
+{
+    const uint32_t w = e->w, h = e->h;
+    uint32_t pw = w < APPM__ENV_PW ? w : APPM__ENV_PW, ph = h < APPM__ENV_PH ? h : APPM__ENV_PH, x, y, bin;
+    double *mean;
+    size_t S;
+    e->pw = pw;
+    e->ph = ph;
+    S = appm__env_prod_size(e);
+    e->pcdf = (double *)appm__alloc(m, (size_t)APPM__ENV_BINS * S, sizeof(double));
+    mean = (double *)appm__alloc(m, (size_t)pw * ph, 2 * sizeof(double)); /* sums, then counts */
+    if (!e->pcdf || !mean) {
+        appm__free(m, mean);
+        return appm__fail(diag, APPM_ERR_NOMEM, name, 0, "out of memory for the environment map");
+    }
+    memset(mean, 0, (size_t)pw * ph * 2 * sizeof(double));
+    for (y = 0; y < h; ++y) /* every texel into its cell: cell (x pw / w, y ph / h) */
+        for (x = 0; x < w; ++x) {
+            const float *t = appm__env_texel(e, x, y);
+            size_t c = (size_t)((uint64_t)y * ph / h) * pw + (size_t)((uint64_t)x * pw / w);
+            mean[2 * c] += ((double)t[0] + t[1] + t[2]) / 3.0;
+            mean[2 * c + 1] += 1.0;
+        }
+    for (bin = 0; bin < APPM__ENV_BINS; ++bin) {
+        const appm__v3 nb = appm__env_bin_normal(bin);
+        double *rows = e->pcdf + bin * S, *cols = rows + ph + 1, total;
+        rows[0] = 0.0;
+        for (y = 0; y < ph; ++y) {
+            double v = (y + 0.5) / ph, st = sin(APPM__PI * v), sum;
+            double *cr = cols + (size_t)y * (pw + 1);
+            cr[0] = 0.0;
+            for (x = 0; x < pw; ++x) {
+                const double *mc = mean + 2 * ((size_t)y * pw + x);
+                double c = (double)appm__dot(nb, appm__env_dir(e, (x + 0.5) / pw, v));
+                cr[x + 1] = cr[x] + (c > 0.0 && mc[1] > 0.0 ? mc[0] / mc[1] * c : 0.0);
+            }
+            sum = cr[pw];
+            for (x = 1; x <= pw; ++x) cr[x] = sum > 0.0 ? cr[x] / sum : (double)x / pw;
+            cr[pw] = 1.0;
+            rows[y + 1] = rows[y] + sum * st;
+        }
+        total = rows[ph];
+        e->pok[bin] = total > 0.0 && total < HUGE_VAL;
+        for (y = 1; y <= ph; ++y) rows[y] = e->pok[bin] ? rows[y] / total : (double)y / ph;
+        rows[ph] = 1.0;
+    }
+    appm__free(m, mean);
+    return APPM_OK;
+}
+
 /* The map's radiances (linear RGB times scale) and its sampling CDFs, from
  * the decoded file in e->px.  A map that holds NaN or infinity, or that is
  * black, is refused; negative samples (a lossy encoder's ringing) become 0. */
@@ -9338,7 +9484,7 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
         return appm__fail(diag, APPM_ERR_PARSE, name, 0, "environment map: it is black, or its scale is 0, or its light sums to infinity");
     for (y = 1; y <= h; ++y) rows[y] /= total;
     rows[h] = 1.0;
-    return APPM_OK;
+    return appm__env_prod_build(m, e, name, diag);
 }
 
 /* Integral of L over the sphere (W / m^2 / sr times sr), RGB, texel by
@@ -9362,16 +9508,27 @@ static void appm__env_integral(const appm__envmap *e, double *out)
 #define APPM_ENV_UNIFORM 0
 #endif
 
-/* Shadow rays towards a map draw their direction from a mixture: half from
- * the map's density pm (a sun gets its samples), half from the cosine about
- * the shading normal (the rest of the sky is sampled as a constant one
- * would be); the mixture's density is their mean, so neither strategy's
- * failure case (a small sun for the cosine, a dim sky behind a bright
- * horizon for the map) costs more than twice the variance of the other. */
-static double appm__env_mix_pdf(float pm, float cos_n)
+/* Shadow rays towards a map draw their direction from a mixture: a quarter
+ * from the map's density (a sun gets its samples), a quarter from the cosine
+ * about the shading normal (the rest of the sky is sampled as a constant one
+ * would be) and half from the product density of the normal's bin (6.2: a
+ * smooth sky times the cosine); where the bin has none, half from each of
+ * the first two.  The mixture's density is their weighted mean, so no
+ * strategy's failure case (a small sun for the cosine and the coarse product,
+ * a dim sky behind a bright horizon for the map) costs more than four times
+ * the variance of another.  (u, v): the direction's place in the map; cos_n:
+ * its cosine to the shading normal n. */
+#define APPM__ENV_MIX_PROD 0.5 /* the product density's share, where the bin has one */
+static double appm__env_mix_pdf(const appm__envmap *e, appm__v3 n, double u, double v, float cos_n)
 {
-    if (APPM_ENV_UNIFORM) return (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI;
-    return 0.5 * (double)pm + 0.5 * (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI;
+    double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm;
+    uint32_t bin;
+    if (APPM_ENV_UNIFORM) return pc;
+    pm = appm__env_pdf_uv(e, u, v);
+    bin = appm__env_bin(n);
+    if (e->pcdf && e->pok[bin])
+        return 0.5 * (1.0 - APPM__ENV_MIX_PROD) * (pm + pc) + APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, u, v);
+    return 0.5 * pm + 0.5 * pc;
 }
 
 /* L(d) of the scene's environment: its map's, its constant's, or 0. */
@@ -9712,27 +9869,21 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
     if (!(l->pick > 0.0)) return 0;
     if (l->kind == APPM__LIGHT_ENV) {
         float c;
-        if (s->envmap.rgb) { /* the map's density and the cosine's, half and half */
-            float pm;
-            double eu = 0.0, ev = 0.0; /* the direction's place in the map, found once */
-            int have_uv = 0;
-            if (APPM_ENV_UNIFORM) {
-                ls->wi = appm__cosine_dir(n, u1, u2);
-                pm = 0.0f;
-            } else if (u1 < 0.5f) {
-                ls->wi = appm__cosine_dir(n, 2.0f * u1, u2);
-                appm__env_uv(&s->envmap, ls->wi, &eu, &ev);
-                have_uv = 1;
-                pm = appm__env_pdf_uv(&s->envmap, eu, ev);
-            } else {
-                pm = appm__env_sample(&s->envmap, 2.0f * u1 - 1.0f, u2, &ls->wi);
-            }
+        if (s->envmap.rgb) { /* the mixture of appm__env_mix_pdf, split by u1 */
+            const appm__envmap *e = &s->envmap;
+            const uint32_t bin = appm__env_bin(n);
+            const float a = e->pcdf && e->pok[bin] ? (float)(0.5 * (1.0 - APPM__ENV_MIX_PROD)) : 0.5f;
+            double eu = 0.0, ev = 0.0; /* the direction's place in the map */
+            if (APPM_ENV_UNIFORM) ls->wi = appm__cosine_dir(n, u1, u2);
+            else if (u1 < a) ls->wi = appm__cosine_dir(n, u1 / a, u2);
+            else if (u1 < 2.0f * a) appm__env_sample(e, (u1 - a) / a, u2, &ls->wi);
+            else appm__env_prod_sample(e, bin, (u1 - 2.0f * a) / (1.0f - 2.0f * a), u2, &ls->wi);
             c = appm__dot(ls->wi, n);
             if (!(c > 0.0f)) return 0;
-            ls->pdf = (float)(l->pick * appm__env_mix_pdf(pm, c));
+            appm__env_uv(e, ls->wi, &eu, &ev);
+            ls->pdf = (float)(l->pick * appm__env_mix_pdf(e, n, eu, ev, c));
             if (!(ls->pdf > 0.0f)) return 0;
-            if (!have_uv) appm__env_uv(&s->envmap, ls->wi, &eu, &ev);
-            ls->li = appm__scale(appm__env_lookup_uv(&s->envmap, eu, ev), 1.0f / ls->pdf);
+            ls->li = appm__scale(appm__env_lookup_uv(e, eu, ev), 1.0f / ls->pdf);
         } else { /* a constant: by the cosine, the product's best */
             ls->wi = appm__cosine_dir(n, u1, u2);
             c = appm__dot(ls->wi, n);
@@ -9883,6 +10034,7 @@ static void appm__envmap_free(appm__mem *m, appm__envmap *e)
 {
     appm__free(m, e->rgb);
     appm__free(m, e->cdf);
+    appm__free(m, e->pcdf);
     appm__free(m, e->px.data);
     memset(e, 0, sizeof *e);
 }
@@ -13446,8 +13598,7 @@ static float appm__pt_env(const appm_scene *s, appm__v3 d, int prev_specular, fl
     if (!prev_specular) {
         float c = appm__dot(d, prev_ns);
         if (s->envmap.rgb)
-            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick *
-                                            appm__env_mix_pdf(appm__env_pdf_uv(&s->envmap, eu, ev), c)));
+            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * appm__env_mix_pdf(&s->envmap, prev_ns, eu, ev, c)));
         else
             w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
     }

@@ -5,8 +5,8 @@
 # Scene (written here): a white sphere (Kd 0.8) on a grey floor (Kd 0.5) under
 # a 256 x 128 map: a dim sky (0.2 .. 0.5) and a sun 1 degree wide, 35 degrees
 # high, holding about three quarters of the light (bench/envmap.py).  Two
-# builds of appm: the default (the map's density, mixed half and half with
-# the cosine for shadow rays) and -DAPPM_ENV_UNIFORM=1 (shadow rays by the
+# builds of appm: the default (the map's density; for shadow rays mixed with the cosine and the
+# product density, docs/algorithm.md 5.9) and -DAPPM_ENV_UNIFORM=1 (shadow rays by the
 # cosine alone, photons from uniform directions: what a constant environment
 # does).  Each renders ENV_SECONDS (default 10) of wall time for each seed of
 # ENV_SEEDS (default 1 2 3), appm and pt; the RMSE against a long path-traced

@@ -2,7 +2,8 @@
  * maps (section 4.5, 6.2): lookups against hand-computed bilinear values, a
  * textured plane whose rendered value is its texel times the light, cut-outs
  * that let light and rays through, an emitter whose cut-out holes emit nothing, the environment sampler against its own
- * density (chi-square) and against a quadrature of the sphere, a white-map
+ * density (chi-square) and against a quadrature of the sphere, its product densities and the shadow rays'
+ * irradiance against a quadrature, a white-map
  * furnace, rotation, missing maps, and the checkpoint hash. */
 #include "../appm.c"
 #include "check.h"
@@ -503,6 +504,131 @@ static void test_env_sampler(void)
     CHECK(m.live == 0);
 }
 
+/* The product densities of shadow rays (appm.c 6.2).  Each bin's centre
+ * normal falls in its own bin; on a 300 x 150 map (coarse cells of 2-3 texels)
+ * every bin's density integrates to 1 over the sphere (quadrature) and the
+ * centre bin's draws what it says (chi-square over its cells). */
+static void test_env_product(void)
+{
+    appm__mem m;
+    appm__envmap e;
+    const uint32_t N = check_quick() ? 200000 : 1000000;
+    uint32_t b, i, x, y, bad_bin = 0;
+    double *count, chi2 = 0.0;
+    int dof = 0;
+    appm__mem_init(&m, NULL);
+    for (b = 0; b < APPM__ENV_BINS; ++b) bad_bin += appm__env_bin(appm__env_bin_normal(b)) != b;
+    CHECK_MSG(bad_bin == 0, "%u bins whose centre normal lies in another bin", bad_bin);
+    CHECK(appm__env_bin_normal((APPM__ENV_BINS - 1) / 2).y == 1.0f); /* a flat ground's normal: a centre */
+    if (!make_env(&m, &e, 300, 150, 40, 30, 0.0)) return;
+    CHECK(e.pw == APPM__ENV_PW && e.ph == APPM__ENV_PH);
+    for (b = 0; b < APPM__ENV_BINS; b += 6) {
+        double integral = 0.0;
+        CHECK(e.pok[b]);
+        for (y = 0; y < 5 * APPM__ENV_PH; ++y) /* 5 x 5 points a cell: the sum is exact to rounding */
+            for (x = 0; x < 5 * APPM__ENV_PW; ++x) {
+                double th = CHECK_PI * (y + 0.5) / (5 * APPM__ENV_PH), ph = 2 * CHECK_PI * (x + 0.5) / (5 * APPM__ENV_PW);
+                double u, v;
+                appm__v3 d = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
+                appm__env_uv(&e, d, &u, &v);
+                integral += appm__env_prod_pdf_uv(&e, b, u, v) * sin(th) * (CHECK_PI / (5 * APPM__ENV_PH)) *
+                            (2 * CHECK_PI / (5 * APPM__ENV_PW));
+            }
+        CHECK_MSG(fabs(integral - 1.0) < 1e-3, "bin %u: its density integrates to %.5f", b, integral);
+    }
+    count = (double *)calloc((size_t)e.pw * e.ph, sizeof(double));
+    if (!count) return;
+    b = (APPM__ENV_BINS - 1) / 2;
+    for (i = 0; i < N; ++i) {
+        appm__v3 d;
+        double u, v;
+        appm__env_prod_sample(&e, b, (float)((i + 0.5) / N), (float)vdc(i), &d);
+        appm__env_uv(&e, d, &u, &v);
+        x = (uint32_t)(u * e.pw);
+        y = (uint32_t)(v * e.ph);
+        count[(size_t)(y < e.ph ? y : e.ph - 1) * e.pw + (x < e.pw ? x : e.pw - 1)] += 1.0;
+    }
+    for (y = 0; y < e.ph; ++y)
+        for (x = 0; x < e.pw; ++x) {
+            const double *c = e.pcdf + b * appm__env_prod_size(&e), *cr = c + (e.ph + 1) + (size_t)y * (e.pw + 1);
+            double pr = (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * N, o = count[(size_t)y * e.pw + x];
+            if (pr < 5.0) {
+                if (pr == 0.0) CHECK(o == 0.0); /* below the centre normal's horizon: never drawn */
+                continue;
+            }
+            chi2 += (o - pr) * (o - pr) / pr;
+            dof++;
+        }
+    CHECK_MSG(dof > 1000 && chi2 < dof + 4.0 * sqrt(2.0 * dof), "chi2 %g with %d degrees of freedom", chi2, dof);
+    free(count);
+    appm__envmap_free(&m, &e);
+    CHECK(m.live == 0);
+}
+
+/* A shadow ray's estimate of the irradiance from a map, E(n) = integral of
+ * L(w) max(0, n.w), through appm__sample_light's mixture (map, cosine and the
+ * product density of n's bin), matches a quadrature within 1 % for normals at
+ * a bin's centre and off it, up and down, under a sky brighter above with a
+ * small bright patch (visibility aside: the samples are not traced). */
+static void test_env_irradiance(void)
+{
+    static const float nrm[5][3] = {{0, 1, 0}, {0.3f, 0.9f, 0.2f}, {1, 0, 0}, {-0.2f, -0.7f, 0.5f}, {0, -1, 0}};
+    const uint32_t W = 96, H = 48, K = check_quick() ? 160 : 400;
+    char map[256], scn[256], obj[256];
+    float *px = (float *)malloc((size_t)W * H * 3 * sizeof(float));
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm__surf sf;
+    uint32_t x, y, i, j, k;
+    if (!px) return;
+    tpath(map, "sky.pfm");
+    tpath(obj, "sky-floor.obj");
+    tpath(scn, "sky.scene");
+    for (y = 0; y < H; ++y)
+        for (x = 0; x < W; ++x) {
+            float v = y < H / 2 ? 1.0f - 0.8f * (float)y / (float)H : 0.15f;
+            if (x >= 60 && x < 63 && y >= 10 && y < 13) v = 60.0f; /* a patch of 3 x 3 texels */
+            px[3 * ((size_t)y * W + x)] = v;
+            px[3 * ((size_t)y * W + x) + 1] = v;
+            px[3 * ((size_t)y * W + x) + 2] = v;
+        }
+    CHECK(write_pfm(map, W, H, px));
+    free(px);
+    CHECK(check_write_file(obj, "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n"));
+    CHECK(check_write_file(scn, "mesh texture-sky-floor.obj\nenvironment map texture-sky.pfm\n"));
+    CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
+    if (!s) return;
+    {
+        appm__ray ray;
+        appm__hit h;
+        appm__ray_init(&ray, appm__v(0.1f, 1.0f, 0.2f), appm__v(0, -1, 0), FLT_MAX);
+        CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
+        appm__surface(s, &h, &sf);
+    }
+    for (k = 0; k < 5; ++k) {
+        const appm__v3 n = appm__normalize(appm__v(nrm[k][0], nrm[k][1], nrm[k][2]));
+        double est = 0.0, want = 0.0;
+        for (y = 0; y < 600; ++y)
+            for (x = 0; x < 1200; ++x) {
+                double th = CHECK_PI * (y + 0.5) / 600, ph = 2 * CHECK_PI * (x + 0.5) / 1200, c;
+                appm__v3 w = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
+                c = appm__dot(n, w);
+                if (c > 0.0)
+                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / 600) * (2 * CHECK_PI / 1200);
+            }
+        for (j = 0; j < K; ++j)
+            for (i = 0; i < K; ++i) {
+                appm__light_sample ls;
+                if (appm__sample_light(s, &sf, n, 0.5f, ((float)i + 0.5f) / (float)K, ((float)j + 0.5f) / (float)K,
+                                       &ls))
+                    est += (double)ls.li.x * appm__dot(ls.wi, n);
+            }
+        est /= (double)K * K;
+        CHECK_MSG(fabs(est / want - 1.0) < 0.01, "normal %u: irradiance %.5f, the quadrature's %.5f", k, est, want);
+    }
+    appm_scene_destroy(s);
+}
+
 /* The contract's orientation: row 0 is +y, column 0 looks along -z, columns
  * advance towards +x; rotate 90 turns column 0 to +x. */
 static void test_env_orientation(void)
@@ -729,6 +855,8 @@ int main(void)
     test_env_small_maps();
     test_cdf_invert();
     test_env_sampler();
+    test_env_product();
+    test_env_irradiance();
     test_env_orientation();
     test_env_furnace();
     test_loading();
