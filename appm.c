@@ -9332,7 +9332,8 @@ static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1,
 }
 
 /* The product densities of every bin, from e->rgb; a bin whose hemisphere
- * sees no light gets none (pok 0).  scratch: the coarse cells' means. */
+ * sees no light gets none (pok 0).  mean: each coarse cell's sum of its
+ * texels' mean RGB and their count. */
 static appm_status appm__env_prod_build(appm__mem *m, appm__envmap *e, const char *name, appm_diag *diag)
 {
     const uint32_t w = e->w, h = e->h;
