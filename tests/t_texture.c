@@ -513,7 +513,7 @@ static void test_env_product(void)
     appm__mem m;
     appm__envmap e;
     const uint32_t N = check_quick() ? 200000 : 1000000;
-    uint32_t b, i, x, y, bad_bin = 0;
+    uint32_t b, i, x, y, bad_bin = 0, stray = 0;
     double *count, chi2 = 0.0;
     int dof = 0;
     appm__mem_init(&m, NULL);
@@ -552,14 +552,13 @@ static void test_env_product(void)
         for (x = 0; x < e.pw; ++x) {
             const double *c = e.pcdf + b * appm__env_prod_size(&e), *cr = c + (e.ph + 1) + (size_t)y * (e.pw + 1);
             double pr = (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * N, o = count[(size_t)y * e.pw + x];
-            if (pr < 5.0) {
-                if (pr == 0.0) CHECK(o == 0.0); /* below the centre normal's horizon: never drawn */
-                continue;
-            }
+            if (pr == 0.0 && o > 0.0) stray++; /* below the centre normal's horizon: never drawn */
+            if (pr < 5.0) continue;
             chi2 += (o - pr) * (o - pr) / pr;
             dof++;
         }
     CHECK_MSG(dof > 1000 && chi2 < dof + 4.0 * sqrt(2.0 * dof), "chi2 %g with %d degrees of freedom", chi2, dof);
+    CHECK_MSG(stray == 0, "%u cells of density 0 drawn", stray);
     free(count);
     appm__envmap_free(&m, &e);
     CHECK(m.live == 0);
@@ -567,7 +566,7 @@ static void test_env_product(void)
 
 /* A shadow ray's estimate of the irradiance from a map, E(n) = integral of
  * L(w) max(0, n.w), through appm__sample_light's mixture (map, cosine and the
- * product density of n's bin), matches a quadrature within 1 % for normals at
+ * product density of n's bin), matches a quadrature within 0.5 % for normals at
  * a bin's centre and off it, up and down, under a sky brighter above with a
  * small bright patch (visibility aside: the samples are not traced). */
 static void test_env_irradiance(void)
@@ -608,13 +607,13 @@ static void test_env_irradiance(void)
     for (k = 0; k < 5; ++k) {
         const appm__v3 n = appm__normalize(appm__v(nrm[k][0], nrm[k][1], nrm[k][2]));
         double est = 0.0, want = 0.0;
-        for (y = 0; y < 600; ++y)
-            for (x = 0; x < 1200; ++x) {
-                double th = CHECK_PI * (y + 0.5) / 600, ph = 2 * CHECK_PI * (x + 0.5) / 1200, c;
+        for (y = 0; y < 240; ++y) /* 5 x 5 points a texel */
+            for (x = 0; x < 480; ++x) {
+                double th = CHECK_PI * (y + 0.5) / 240, ph = 2 * CHECK_PI * (x + 0.5) / 480, c;
                 appm__v3 w = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
                 c = appm__dot(n, w);
                 if (c > 0.0)
-                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / 600) * (2 * CHECK_PI / 1200);
+                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / 240) * (2 * CHECK_PI / 480);
             }
         for (j = 0; j < K; ++j)
             for (i = 0; i < K; ++i) {
@@ -624,7 +623,7 @@ static void test_env_irradiance(void)
                     est += (double)ls.li.x * appm__dot(ls.wi, n);
             }
         est /= (double)K * K;
-        CHECK_MSG(fabs(est / want - 1.0) < 0.01, "normal %u: irradiance %.5f, the quadrature's %.5f", k, est, want);
+        CHECK_MSG(fabs(est / want - 1.0) < 5e-3, "normal %u: irradiance %.5f, the quadrature's %.5f", k, est, want);
     }
     appm_scene_destroy(s);
 }
