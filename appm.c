@@ -9509,17 +9509,20 @@ static void appm__env_integral(const appm__envmap *e, double *out)
 #define APPM_ENV_UNIFORM 0
 #endif
 
-/* Shadow rays towards a map draw their direction from a mixture: a quarter
- * from the map's density (a sun gets its samples), a quarter from the cosine
- * about the shading normal (the rest of the sky is sampled as a constant one
- * would be) and half from the product density of the normal's bin (6.2: a
+/* Shadow rays towards a map draw their direction from a mixture: 1/8 from
+ * the cosine about the shading normal n, 3/8 from the map's density (a sun
+ * gets its samples) and half from the product density of n's bin (6.2: a
  * smooth sky times the cosine); where the bin has none, half from each of
- * the first two.  The mixture's density is their weighted mean, so no
- * strategy's failure case (a small sun for the cosine and the coarse product,
- * a dim sky behind a bright horizon for the map) costs more than four times
- * the variance of another.  (u, v): the direction's place in the map; cos_n:
- * its cosine to the shading normal n. */
-#define APPM__ENV_MIX_PROD 0.5 /* the product density's share, where the bin has one */
+ * the first two, as before the product.  The mixture's density is their
+ * weighted mean, so no strategy's failure case (a small sun for the cosine
+ * and the coarse product, a dim sky behind a bright horizon for the map)
+ * costs more than a bounded factor of the variance of another; the cosine
+ * keeps every direction above the surface possible.  Measured at equal passes
+ * (docs/algorithm.md 5.9): a quarter each for the cosine and the map took 2-4 %
+ * more error on a sun that holds three quarters of the light.  (u, v): the
+ * direction's place in the map; cos_n: its cosine to n. */
+#define APPM__ENV_MIX_COS 0.125 /* the cosine's share, where n's bin has a product density */
+#define APPM__ENV_MIX_PROD 0.5  /* the product density's; the map's is the rest */
 static double appm__env_mix_pdf(const appm__envmap *e, appm__v3 n, double u, double v, float cos_n)
 {
     double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm;
@@ -9528,7 +9531,8 @@ static double appm__env_mix_pdf(const appm__envmap *e, appm__v3 n, double u, dou
     pm = appm__env_pdf_uv(e, u, v);
     bin = appm__env_bin(n);
     if (e->pcdf && e->pok[bin])
-        return 0.5 * (1.0 - APPM__ENV_MIX_PROD) * (pm + pc) + APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, u, v);
+        return APPM__ENV_MIX_COS * pc + (1.0 - APPM__ENV_MIX_COS - APPM__ENV_MIX_PROD) * pm +
+               APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, u, v);
     return 0.5 * pm + 0.5 * pc;
 }
 
@@ -9873,12 +9877,14 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
         if (s->envmap.rgb) { /* the mixture of appm__env_mix_pdf, split by u1 */
             const appm__envmap *e = &s->envmap;
             const uint32_t bin = appm__env_bin(n);
-            const float a = e->pcdf && e->pok[bin] ? (float)(0.5 * (1.0 - APPM__ENV_MIX_PROD)) : 0.5f;
+            const int prod = e->pcdf && e->pok[bin];
+            const float a = prod ? (float)APPM__ENV_MIX_COS : 0.5f;                  /* [0, a): the cosine */
+            const float b = prod ? (float)(1.0 - APPM__ENV_MIX_PROD) : 1.0f;         /* [a, b): the map */
             double eu = 0.0, ev = 0.0; /* the direction's place in the map */
             if (APPM_ENV_UNIFORM) ls->wi = appm__cosine_dir(n, u1, u2);
             else if (u1 < a) ls->wi = appm__cosine_dir(n, u1 / a, u2);
-            else if (u1 < 2.0f * a) appm__env_sample(e, (u1 - a) / a, u2, &ls->wi);
-            else appm__env_prod_sample(e, bin, (u1 - 2.0f * a) / (1.0f - 2.0f * a), u2, &ls->wi);
+            else if (u1 < b) appm__env_sample(e, (u1 - a) / (b - a), u2, &ls->wi);
+            else appm__env_prod_sample(e, bin, (u1 - b) / (1.0f - b), u2, &ls->wi);
             c = appm__dot(ls->wi, n);
             if (!(c > 0.0f)) return 0;
             appm__env_uv(e, ls->wi, &eu, &ev);
