@@ -9203,23 +9203,29 @@ static appm__v3 appm__env_dir(const appm__envmap *e, double u, double v)
     return appm__v((float)(st * sin(phi)), (float)cos(theta), (float)(-st * cos(phi)));
 }
 
+/* The solid-angle density of (u, v) under the piecewise-constant density
+ * whose CDFs c lays out over a w x h grid of the map (rows' CDF, h + 1
+ * entries, then each row's over its columns, w + 1 each): the map's own
+ * (appm__env_sample) and each product density (appm__env_prod_sample). */
+static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double u, double v)
+{
+    double st = sin(APPM__PI * v);
+    const double *cr;
+    uint32_t x, y;
+    if (!(st > 0.0)) return 0.0;
+    x = (uint32_t)(u * w);
+    y = (uint32_t)(v * h);
+    if (x >= w) x = w - 1;
+    if (y >= h) y = h - 1;
+    cr = c + (h + 1) + (size_t)y * (w + 1);
+    return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * w * h / (2.0 * APPM__PI * APPM__PI * st);
+}
+
 /* The solid-angle density with which appm__env_sample draws the direction at
  * (u, v) of appm__env_uv. */
 static float appm__env_pdf_uv(const appm__envmap *e, double u, double v)
 {
-    double st, pr, pc;
-    const double *cr;
-    uint32_t x, y;
-    st = sin(APPM__PI * v);
-    if (!(st > 0.0)) return 0.0f;
-    x = (uint32_t)(u * e->w);
-    y = (uint32_t)(v * e->h);
-    if (x >= e->w) x = e->w - 1;
-    if (y >= e->h) y = e->h - 1;
-    cr = e->cdf + (e->h + 1) + (size_t)y * (e->w + 1);
-    pr = e->cdf[y + 1] - e->cdf[y];
-    pc = cr[x + 1] - cr[x];
-    return (float)(pr * pc * e->w * e->h / (2.0 * APPM__PI * APPM__PI * st));
+    return (float)appm__env_grid_pdf(e->cdf, e->w, e->h, u, v);
 }
 
 /* The same of direction d (the tests' entry: the library finds (u, v) once for both). */
@@ -9231,13 +9237,25 @@ APPM__UNUSED static float appm__env_pdf(const appm__envmap *e, appm__v3 d)
 }
 
 /* A direction *d from (u1, u2) with its solid-angle density (0: none). */
+/* (u1, u2) to the place (*u, *v) of the grid density c of appm__env_grid_pdf:
+ * a row by u1, a column of it by u2, each by inverting its CDF (so the
+ * low-discrepancy points stay stratified); its cell (*x, *y). */
+static void appm__env_grid_invert(const double *c, uint32_t w, uint32_t h, float u1, float u2, float *u, float *v,
+                                  int *x, int *y)
+{
+    *v = appm__cdf_invert(c, (int)h, u1, y);
+    *u = appm__cdf_invert(c + (h + 1) + (size_t)*y * (w + 1), (int)w, u2, x);
+}
+
 static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v3 *d)
 {
     int y, x;
-    float v = appm__cdf_invert(e->cdf, (int)e->h, u1, &y);
-    const double *cr = e->cdf + (e->h + 1) + (size_t)y * (e->w + 1);
-    float u = appm__cdf_invert(cr, (int)e->w, u2, &x);
-    double st = sin(APPM__PI * (double)v);
+    float u, v;
+    const double *cr;
+    double st;
+    appm__env_grid_invert(e->cdf, e->w, e->h, u1, u2, &u, &v, &x, &y);
+    cr = e->cdf + (e->h + 1) + (size_t)y * (e->w + 1);
+    st = sin(APPM__PI * (double)v);
     *d = appm__env_dir(e, u, v);
     if (!(st > 0.0)) return 0.0f;
     return (float)((e->cdf[y + 1] - e->cdf[y]) * (cr[x + 1] - cr[x]) * e->w * e->h /
@@ -9308,26 +9326,16 @@ static size_t appm__env_prod_size(const appm__envmap *e)
  * direction at (u, v) of appm__env_uv (0 where the bin has none). */
 static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double u, double v)
 {
-    const double *c, *cr;
-    double st = sin(APPM__PI * v);
-    uint32_t x, y;
-    if (!e->pcdf || !e->pok[bin] || !(st > 0.0)) return 0.0;
-    c = e->pcdf + bin * appm__env_prod_size(e);
-    x = (uint32_t)(u * e->pw);
-    y = (uint32_t)(v * e->ph);
-    if (x >= e->pw) x = e->pw - 1;
-    if (y >= e->ph) y = e->ph - 1;
-    cr = c + (e->ph + 1) + (size_t)y * (e->pw + 1);
-    return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * e->pw * e->ph / (2.0 * APPM__PI * APPM__PI * st);
+    if (!e->pcdf || !e->pok[bin]) return 0.0;
+    return appm__env_grid_pdf(e->pcdf + bin * appm__env_prod_size(e), e->pw, e->ph, u, v);
 }
 
 /* A direction *d drawn from bin `bin`'s product density (which must exist). */
 static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1, float u2, appm__v3 *d)
 {
-    const double *c = e->pcdf + bin * appm__env_prod_size(e);
     int y, x;
-    float v = appm__cdf_invert(c, (int)e->ph, u1, &y);
-    float u = appm__cdf_invert(c + (e->ph + 1) + (size_t)y * (e->pw + 1), (int)e->pw, u2, &x);
+    float u, v;
+    appm__env_grid_invert(e->pcdf + bin * appm__env_prod_size(e), e->pw, e->ph, u1, u2, &u, &v, &x, &y);
     *d = appm__env_dir(e, u, v);
 }
 
@@ -9519,17 +9527,16 @@ static void appm__env_integral(const appm__envmap *e, double *out)
  * costs more than a bounded factor of the variance of another; the cosine
  * keeps every direction above the surface possible.  Measured at equal passes
  * (docs/algorithm.md 5.9): a quarter each for the cosine and the map took 2-4 %
- * more error on a sun that holds three quarters of the light.  (u, v): the
- * direction's place in the map; cos_n: its cosine to n. */
+ * more error on a sun that holds three quarters of the light.  bin: n's
+ * (appm__env_bin); (u, v): the direction's place in the map; cos_n: its
+ * cosine to n. */
 #define APPM__ENV_MIX_COS 0.125 /* the cosine's share, where n's bin has a product density */
 #define APPM__ENV_MIX_PROD 0.5  /* the product density's; the map's is the rest */
-static double appm__env_mix_pdf(const appm__envmap *e, appm__v3 n, double u, double v, float cos_n)
+static double appm__env_mix_pdf(const appm__envmap *e, uint32_t bin, double u, double v, float cos_n)
 {
     double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm;
-    uint32_t bin;
     if (APPM_ENV_UNIFORM) return pc;
     pm = appm__env_pdf_uv(e, u, v);
-    bin = appm__env_bin(n);
     if (e->pcdf && e->pok[bin])
         return APPM__ENV_MIX_COS * pc + (1.0 - APPM__ENV_MIX_COS - APPM__ENV_MIX_PROD) * pm +
                APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, u, v);
@@ -9888,7 +9895,7 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
             c = appm__dot(ls->wi, n);
             if (!(c > 0.0f)) return 0;
             appm__env_uv(e, ls->wi, &eu, &ev);
-            ls->pdf = (float)(l->pick * appm__env_mix_pdf(e, n, eu, ev, c));
+            ls->pdf = (float)(l->pick * appm__env_mix_pdf(e, bin, eu, ev, c));
             if (!(ls->pdf > 0.0f)) return 0;
             ls->li = appm__scale(appm__env_lookup_uv(e, eu, ev), 1.0f / ls->pdf);
         } else { /* a constant: by the cosine, the product's best */
@@ -13605,7 +13612,7 @@ static float appm__pt_env(const appm_scene *s, appm__v3 d, int prev_specular, fl
     if (!prev_specular) {
         float c = appm__dot(d, prev_ns);
         if (s->envmap.rgb)
-            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * appm__env_mix_pdf(&s->envmap, prev_ns, eu, ev, c)));
+            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * appm__env_mix_pdf(&s->envmap, appm__env_bin(prev_ns), eu, ev, c)));
         else
             w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
     }
