@@ -5588,7 +5588,10 @@ typedef struct appm__light {
     appm__v3 target;           /* spot: as written (axis is derived from it) */
     double cone, falloff;      /* spot: degrees, as written */
     double power[3]; /* emitted power (W), RGB */
-    double pick;     /* probability of choosing this light for a photon or a shadow ray */
+    double pick;     /* probability of choosing this light for a photon */
+    double nee[2];   /* probability of choosing it for a shadow ray's one sample (6.4): [0] appm's
+                      * eye pass, [1] the path tracer's; 0 when nee_all or left out */
+    int nee_all;     /* a point or spot light that every shading point sends a shadow ray of its own */
     unsigned line;   /* line of the `.scene` statement (0 for area lights) */
 } appm__light;
 
@@ -7153,6 +7156,10 @@ typedef struct appm__tpack { /* 160 bytes */
 #define APPM_BVH_BINARY 0
 #endif
 
+/* At most this many point and spot lights get a shadow ray of their own at
+ * every shading point (6.4, appm__light_table); beyond it they are picked. */
+#define APPM__NEE_DELTA 8
+
 struct appm_scene {
     appm__mem mem;
     appm__tri *tri;        /* BVH order */
@@ -7173,6 +7180,11 @@ struct appm_scene {
     appm__light *light;
     uint32_t nlight;
     double *light_cdf;     /* nlight + 1 entries, light_cdf[nlight] == 1 */
+    double *nee_cdf[2];    /* nlight + 1 entries each after light_cdf's, in its allocation: the
+                            * shadow ray's one-sample choice (appm__light.nee[t]); nee_cdf[t][nlight]
+                            * 1, or 0 when there is nothing to pick */
+    uint32_t nee_delta[APPM__NEE_DELTA]; /* the nee_all lights */
+    uint32_t nnee_delta;
     int env;               /* index of the environment light, or -1 */
     int env_auto;          /* that environment is the stand-in of a bare OBJ without light: 1 white, 2 the studio's sky */
     appm__envmap envmap;   /* the environment's map (rgb NULL: a constant environment) */
@@ -9555,16 +9567,33 @@ static appm__v3 appm__env_radiance(const appm_scene *s, appm__v3 d)
 
 /* Index of the light whose CDF interval holds u (binary search; u < 1 always,
  * and lights of zero power have empty intervals so are never returned). */
-static uint32_t appm__pick_light(const appm_scene *s, float u)
+/* The last of n entries of cumulative table cdf at or below u. */
+static uint32_t appm__cdf_find(const double *cdf, uint32_t n, float u)
 {
-    uint32_t lo = 0, hi = s->nlight;
+    uint32_t lo = 0, hi = n;
     double x = (double)u;
     while (hi - lo > 1) {
         uint32_t mid = lo + (hi - lo) / 2;
-        if (s->light_cdf[mid] <= x) lo = mid;
+        if (cdf[mid] <= x) lo = mid;
         else hi = mid;
     }
+    return lo;
+}
+
+/* The light a photon starts at (picked by power, 6.4). */
+static uint32_t appm__pick_light(const appm_scene *s, float u)
+{
+    uint32_t lo = appm__cdf_find(s->light_cdf, s->nlight, u);
     while (lo + 1 < s->nlight && s->light[lo].pick == 0.0) lo++;
+    return lo;
+}
+
+/* The light of a shadow ray's one sample from table t (6.4); the caller
+ * checks that there is one (nee_cdf[t][nlight] > 0). */
+static uint32_t appm__pick_nee(const appm_scene *s, int t, float u)
+{
+    uint32_t lo = appm__cdf_find(s->nee_cdf[t], s->nlight, u);
+    while (lo + 1 < s->nlight && s->light[lo].nee[t] == 0.0) lo++;
     return lo;
 }
 
@@ -9868,17 +9897,17 @@ typedef struct appm__light_sample {
     uint32_t skip;     /* the light's triangle, or UINT32_MAX */
 } appm__light_sample;
 
-/* Next-event sample from shading point sf (n: the shading normal on the side
- * the light must be on).  Returns 0 when the sample carries nothing. */
-static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v3 n, float u0,
-                              float u1, float u2, appm__light_sample *ls)
+/* Next-event sample of light li from shading point sf (n: the shading normal
+ * on the side the light must be on), chosen with probability pick.  Returns 0
+ * when the sample carries nothing. */
+static int appm__sample_light_k(const appm_scene *s, uint32_t li, double pick, const appm__surf *sf, appm__v3 n,
+                                float u1, float u2, appm__light_sample *ls)
 {
-    uint32_t li = appm__pick_light(s, u0);
     const appm__light *l = &s->light[li];
     appm__v3 o, target, d;
     float dist2;
     ls->skip = UINT32_MAX;
-    if (!(l->pick > 0.0)) return 0;
+    if (!(pick > 0.0)) return 0;
     if (l->kind == APPM__LIGHT_ENV) {
         float c;
         if (s->envmap.rgb) { /* the mixture of appm__env_mix_pdf, split by u1 */
@@ -9895,14 +9924,14 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
             c = appm__dot(ls->wi, n);
             if (!(c > 0.0f)) return 0;
             appm__env_uv(e, ls->wi, &eu, &ev);
-            ls->pdf = (float)(l->pick * appm__env_mix_pdf(e, bin, eu, ev, c));
+            ls->pdf = (float)(pick * appm__env_mix_pdf(e, bin, eu, ev, c));
             if (!(ls->pdf > 0.0f)) return 0;
             ls->li = appm__scale(appm__env_lookup_uv(e, eu, ev), 1.0f / ls->pdf);
         } else { /* a constant: by the cosine, the product's best */
             ls->wi = appm__cosine_dir(n, u1, u2);
             c = appm__dot(ls->wi, n);
             if (!(c > 0.0f)) return 0;
-            ls->pdf = (float)(l->pick * c * APPM__INV_PI);
+            ls->pdf = (float)(pick * c * APPM__INV_PI);
             ls->li = appm__scale(l->value, 1.0f / ls->pdf);
         }
         o = appm__offset(sf, ls->wi);
@@ -9922,7 +9951,7 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
         ls->wi = appm__scale(d, 1.0f / dist);
         cos_l = -appm__dot(ls->wi, lf.ng);
         if (!(cos_l > 0.0f)) return 0; /* one-sided emitter seen from behind */
-        ls->pdf = (float)(l->pick / s->info[l->tri].area * (double)dist2 / cos_l);
+        ls->pdf = (float)(pick / s->info[l->tri].area * (double)dist2 / cos_l);
         ls->li = appm__scale(l->value, 1.0f / ls->pdf);
         target = appm__offset(&lf, appm__neg(ls->wi));
         ls->skip = l->tri;
@@ -9935,7 +9964,7 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
         if (l->kind == APPM__LIGHT_SPOT) f = appm__spot_falloff(l, -appm__dot(ls->wi, l->axis));
         if (!(f > 0.0f)) return 0;
         ls->pdf = 0.0f;
-        ls->li = appm__scale(l->value, (float)(f / ((double)dist2 * l->pick)));
+        ls->li = appm__scale(l->value, (float)(f / ((double)dist2 * pick)));
         target = l->pos;
     }
     o = appm__offset(sf, ls->wi);
@@ -9945,13 +9974,30 @@ static int appm__sample_light(const appm_scene *s, const appm__surf *sf, appm__v
     return appm__finite3(ls->li);
 }
 
+/* The one sample of the area and environment lights from table t (6.4: 0
+ * appm's eye pass, 1 the path tracer's; u0 picks the light by
+ * appm__light.nee[t], u1, u2 the point or direction); the point and spot
+ * lights that every shading point samples are appm__sample_light_k's with
+ * pick 1 (appm_scene.nee_delta). */
+static int appm__sample_light(const appm_scene *s, int t, const appm__surf *sf, appm__v3 n, float u0, float u1,
+                              float u2, appm__light_sample *ls)
+{
+    uint32_t li;
+    if (!(s->nee_cdf[t][s->nlight] > 0.0)) return 0;
+    li = appm__pick_nee(s, t, u0);
+    return appm__sample_light_k(s, li, s->light[li].nee[t], sf, n, u1, u2, ls);
+}
+
 /* Which numbers the lights of scene s make the samplers read (appm__smp_light,
- * appm__smp_emit): bit 0 the light choice (more than one light); for next-event
- * estimation bit 1 a point on the light (an area or environment light); for
- * emission bit 1 u1, u2 (every kind) and bit 2 u3, u4 (area and environment). */
+ * appm__smp_emit): bit 0 the light choice (more than one light to pick from);
+ * for next-event estimation bit 1 a point on the light (an area or environment
+ * light); for emission bit 1 u1, u2 (every kind) and bit 2 u3, u4 (area and
+ * environment). */
 static unsigned appm__light_dims(const appm_scene *s, int emission)
 {
-    unsigned mask = s->nlight > 1 ? 1u : 0u, k;
+    unsigned mask = 0u, k, picked = 0u;
+    for (k = 0; k < s->nlight; ++k) picked += emission ? s->light[k].pick > 0.0 : s->light[k].nee[0] > 0.0;
+    if (emission ? s->nlight > 1 : picked > 1) mask |= 1u;
     if (emission) mask |= 2u;
     for (k = 0; k < s->nlight; ++k)
         if (s->light[k].kind == APPM__LIGHT_AREA || s->light[k].kind == APPM__LIGHT_ENV)
@@ -9959,14 +10005,15 @@ static unsigned appm__light_dims(const appm_scene *s, int emission)
     return mask;
 }
 
-/* Solid-angle pdf with which appm__sample_light would have produced direction
- * wi reaching area light `tri` at distance t (for MIS in the path tracer). */
+/* Solid-angle pdf with which the path tracer's light sample (table 1 of
+ * appm__sample_light) would have produced direction wi reaching area light
+ * `tri` at distance t (for MIS in the path tracer). */
 static float appm__area_light_pdf(const appm_scene *s, uint32_t tri, appm__v3 wi, float t)
 {
     const appm__tri_info *in = &s->info[tri];
     float cos_l = -appm__dot(wi, in->ng);
     if (in->light < 0 || !(cos_l > 0.0f)) return 0.0f;
-    return (float)(s->light[in->light].pick / in->area * ((double)t * t) / cos_l);
+    return (float)(s->light[in->light].nee[1] / in->area * ((double)t * t) / cos_l);
 }
 
 /* ---- 6.4 The light table and scene assembly -------------------------------
@@ -10074,11 +10121,42 @@ static void appm__scene_free_parts(appm__mem *m, appm_scene *s)
 
 static double appm__mean3(const double *v) { return (v[0] + v[1] + v[2]) / 3.0; }
 
-/* The light-choice table: each light picked with its share of the total
- * power (the mean of the three channels), as the cumulative s->light_cdf. */
+/* Whether light l is in shadow-ray table t's one sample (t = 0 appm's eye
+ * pass, 1 the path tracer's). */
+static int appm__nee_picked(const appm_scene *s, const appm__light *l, int t)
+{
+    if (l->nee_all || !(l->pick > 0.0)) return 0;
+    return !(t == 1 && l->kind == APPM__LIGHT_ENV && !s->envmap.rgb);
+}
+
+/* The light-choice tables.  A photon starts at a light picked with its share
+ * of the total power (the mean of the three channels), the cumulative
+ * s->light_cdf.
+ *
+ * A shadow ray is not a photon: it is one sample of a sum over the lights,
+ * and picking the term by power makes the sum noisy wherever the lights that
+ * light a point are not the powerful ones.  An environment's power is its
+ * flux through the whole scene, so beside it a spot light that lights the
+ * model carries little of the scene's power (the teapot's 11 %), and a
+ * shading point in the spot's cone took a shadow ray towards it once in 9
+ * passes, with 9 times its weight.  A point or spot light costs one
+ * shadow ray and no random number, so every shading point sends one to each
+ * (appm__light.nee_all, up to APPM__NEE_DELTA of them; with more, all are
+ * picked as before), and one sample picks among the area and environment
+ * lights by their power (appm__light.nee[0], the cumulative s->nee_cdf[0]).
+ * The sum of the two is the same expectation with the delta lights' share
+ * of the variance gone.
+ *
+ * The path tracer's table (nee[1], nee_cdf[1]) leaves out a constant
+ * environment: there the light sample would draw the cosine lobe, the very
+ * directions of a diffuse vertex's BSDF sample, which the path traces anyway
+ * and which, where it meets the model instead of the sky, carries the
+ * model's light rather than nothing; so the BSDF sample alone finds it
+ * (appm__pt_env, weight 1).  Measured in docs/algorithm.md 5.11. */
 static appm_status appm__light_table(appm_scene *s, appm_diag *diag, const char *name)
 {
     uint32_t i, k = s->nlight;
+    int t;
     double total = 0.0;
     for (i = 0; i < k; ++i) total += appm__mean3(s->light[i].power);
     if (!(total > 0.0) || !(total < HUGE_VAL))
@@ -10098,6 +10176,29 @@ static appm_status appm__light_table(appm_scene *s, appm_diag *diag, const char 
         s->light_cdf[i + 1] = s->light_cdf[i] + s->light[i].pick;
     }
     s->light_cdf[k] = 1.0;
+    s->nnee_delta = 0;
+    for (i = 0; i < k; ++i) {
+        appm__light *l = &s->light[i];
+        l->nee_all = (l->kind == APPM__LIGHT_POINT || l->kind == APPM__LIGHT_SPOT) && l->pick > 0.0;
+        s->nnee_delta += (uint32_t)l->nee_all;
+    }
+    if (s->nnee_delta > APPM__NEE_DELTA)
+        for (i = 0; i < k; ++i) s->light[i].nee_all = 0;
+    s->nnee_delta = 0;
+    for (i = 0; i < k; ++i)
+        if (s->light[i].nee_all) s->nee_delta[s->nnee_delta++] = i;
+    for (t = 0; t < 2; ++t) {
+        double *cdf = s->nee_cdf[t] = s->light_cdf + (size_t)(t + 1) * (k + 1);
+        total = 0.0;
+        for (i = 0; i < k; ++i) total += appm__nee_picked(s, &s->light[i], t) ? s->light[i].pick : 0.0;
+        cdf[0] = 0.0;
+        for (i = 0; i < k; ++i) {
+            appm__light *l = &s->light[i];
+            l->nee[t] = appm__nee_picked(s, l, t) && total > 0.0 ? l->pick / total : 0.0;
+            cdf[i + 1] = cdf[i] + l->nee[t];
+        }
+        cdf[k] = total > 0.0 ? 1.0 : 0.0;
+    }
     return APPM_OK;
 }
 
@@ -10121,7 +10222,7 @@ static appm_status appm__scene_lights(appm_scene *s, appm__loader *L, const char
         return appm__fail(L->diag, APPM_ERR_PARSE, name, 0,
                           "the scene has no light (no material with Ke > 0, no light or environment)");
     s->light = (appm__light *)appm__alloc(&s->mem, (size_t)n + extra, sizeof *s->light);
-    s->light_cdf = (double *)appm__alloc(&s->mem, (size_t)n + extra + 1, sizeof *s->light_cdf);
+    s->light_cdf = (double *)appm__alloc(&s->mem, 3 * ((size_t)n + extra + 1), sizeof *s->light_cdf);
     if (!s->light || !s->light_cdf) return APPM_ERR_NOMEM;
     s->env = -1;
     for (i = 0; i < s->ntri; ++i) {
@@ -10551,7 +10652,7 @@ static appm_status appm__scene_relight(appm_scene *s, int drop, const appm__ligh
     if (n == 0) return appm__fail(diag, APPM_ERR_INVALID_ARG, s->name, 0, "the scene would have no light");
     m->diag = diag;
     nl = (appm__light *)appm__alloc(m, n, sizeof *nl);
-    cdf = (double *)appm__alloc(m, (size_t)n + 1, sizeof *cdf);
+    cdf = (double *)appm__alloc(m, 3 * ((size_t)n + 1), sizeof *cdf);
     m->diag = NULL;
     if (!nl || !cdf) {
         appm__free(m, nl);
@@ -11407,22 +11508,36 @@ static void appm__add3(double *acc, appm__v3 v)
     acc[2] += v.z;
 }
 
-/* Direct light at diffuse or glossy point sf seen from wo, by one shadow ray. */
+/* What light sample ls brings to diffuse or glossy point sf seen from wo (ns,
+ * ng: its normals on wo's side), after its shadow ray. */
+static appm__v3 appm__direct_one(const appm_scene *s, const appm__surf *sf, const appm__material *m, appm__v3 wo,
+                                 appm__v3 ns, appm__v3 ng, const appm__light_sample *ls)
+{
+    float c = appm__dot(ls->wi, ns);
+    if (!(c > 0.0f) || !(appm__dot(ls->wi, ng) > 0.0f)) return appm__v(0, 0, 0);
+    if (appm__occluded(s, &ls->shadow, sf->tri, ls->skip)) return appm__v(0, 0, 0);
+    if (m->kind == APPM__MAT_GLOSSY) return appm__scale(appm__mul(appm__bsdf_f(m, ns, ls->wi, wo), ls->li), c);
+    return appm__scale(appm__mul(m->color, ls->li), c * (float)APPM__INV_PI);
+}
+
+/* Direct light at diffuse or glossy point sf seen from wo: a shadow ray to
+ * each point and spot light and one sample of the others (6.4). */
 static appm__v3 appm__direct(const appm_renderer *r, const appm__surf *sf, const appm__material *m,
                              appm__v3 wo, appm__sampler *smp, unsigned vertex)
 {
-    float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f, c;
-    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side);
+    float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f;
+    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side), sum = appm__v(0, 0, 0);
     float u[3];
+    uint32_t k;
     appm__light_sample ls;
     const appm_scene *s = r->scene;
+    for (k = 0; k < s->nnee_delta; ++k)
+        if (appm__sample_light_k(s, s->nee_delta[k], 1.0, sf, ns, 0.0f, 0.0f, &ls))
+            sum = appm__add(sum, appm__direct_one(s, sf, m, wo, ns, ng, &ls));
     appm__smp_light(smp, vertex, r->nee_dims, u);
-    if (!appm__sample_light(s, sf, ns, u[0], u[1], u[2], &ls)) return appm__v(0, 0, 0);
-    c = appm__dot(ls.wi, ns);
-    if (!(c > 0.0f) || !(appm__dot(ls.wi, ng) > 0.0f)) return appm__v(0, 0, 0);
-    if (appm__occluded(s, &ls.shadow, sf->tri, ls.skip)) return appm__v(0, 0, 0);
-    if (m->kind == APPM__MAT_GLOSSY) return appm__scale(appm__mul(appm__bsdf_f(m, ns, ls.wi, wo), ls.li), c);
-    return appm__scale(appm__mul(m->color, ls.li), c * (float)APPM__INV_PI);
+    if (appm__sample_light(s, 0, sf, ns, u[0], u[1], u[2], &ls))
+        sum = appm__add(sum, appm__direct_one(s, sf, m, wo, ns, ng, &ls));
+    return sum;
 }
 
 /* ---- 8.2 Where eye paths stop ------------------------------------------------
@@ -13545,26 +13660,40 @@ static float appm__mis(float a, float b)
     return a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f;
 }
 
+/* What light sample ls brings to a path vertex (ns, ng: its normals on wo's
+ * side) with throughput W, weighted by the power heuristic against the BSDF
+ * sampling that could have found the same light (a delta light's pdf is 0:
+ * weight 1). */
+static appm__v3 appm__pt_direct_one(const appm_scene *s, const appm__surf *sf, const appm__material *m, appm__v3 wo,
+                                    appm__v3 ns, appm__v3 ng, appm__v3 W, const appm__light_sample *ls)
+{
+    float c = appm__dot(ls->wi, ns), w;
+    if (!(c > 0.0f) || !(appm__dot(ls->wi, ng) > 0.0f) || appm__occluded(s, &ls->shadow, sf->tri, ls->skip))
+        return appm__v(0, 0, 0);
+    if (m->kind == APPM__MAT_GLOSSY) { /* MIS against the mixture pdf of section 6.1 */
+        w = ls->pdf > 0.0f ? appm__mis(ls->pdf, appm__bsdf_pdf(m, ns, ls->wi, wo)) : 1.0f;
+        return appm__scale(appm__mul(appm__mul(W, appm__bsdf_f(m, ns, ls->wi, wo)), ls->li), c * w);
+    }
+    w = ls->pdf > 0.0f ? appm__mis(ls->pdf, c * (float)APPM__INV_PI) : 1.0f;
+    return appm__scale(appm__mul(appm__mul(W, m->color), ls->li), c * (float)APPM__INV_PI * w);
+}
+
 /* Next-event estimate at a diffuse or glossy path vertex with throughput W
- * (side: wo's side of the geometric normal; u: the light sample's numbers),
- * weighted by the power heuristic against the BSDF sampling that could have
- * found the same light. */
+ * (side: wo's side of the geometric normal; u: the light sample's numbers): a
+ * shadow ray to each point and spot light and one sample of the others (6.4),
+ * as appm__direct. */
 static appm__v3 appm__pt_direct(const appm_scene *s, const appm__surf *sf, const appm__material *m, appm__v3 wo,
                                 float side, appm__v3 W, const float *u)
 {
-    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side);
-    float c, w;
+    appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side), sum = appm__v(0, 0, 0);
     appm__light_sample ls;
-    if (!appm__sample_light(s, sf, ns, u[0], u[1], u[2], &ls)) return appm__v(0, 0, 0);
-    c = appm__dot(ls.wi, ns);
-    if (!(c > 0.0f) || !(appm__dot(ls.wi, ng) > 0.0f) || appm__occluded(s, &ls.shadow, sf->tri, ls.skip))
-        return appm__v(0, 0, 0);
-    if (m->kind == APPM__MAT_GLOSSY) { /* MIS against the mixture pdf of section 6.1 */
-        w = ls.pdf > 0.0f ? appm__mis(ls.pdf, appm__bsdf_pdf(m, ns, ls.wi, wo)) : 1.0f;
-        return appm__scale(appm__mul(appm__mul(W, appm__bsdf_f(m, ns, ls.wi, wo)), ls.li), c * w);
-    }
-    w = ls.pdf > 0.0f ? appm__mis(ls.pdf, c * (float)APPM__INV_PI) : 1.0f;
-    return appm__scale(appm__mul(appm__mul(W, m->color), ls.li), c * (float)APPM__INV_PI * w);
+    uint32_t k;
+    for (k = 0; k < s->nnee_delta; ++k)
+        if (appm__sample_light_k(s, s->nee_delta[k], 1.0, sf, ns, 0.0f, 0.0f, &ls))
+            sum = appm__add(sum, appm__pt_direct_one(s, sf, m, wo, ns, ng, W, &ls));
+    if (appm__sample_light(s, 1, sf, ns, u[0], u[1], u[2], &ls))
+        sum = appm__add(sum, appm__pt_direct_one(s, sf, m, wo, ns, ng, W, &ls));
+    return sum;
 }
 
 /* Whether a path tracer cannot see some of the scene's light that reaches a
@@ -13612,9 +13741,8 @@ static float appm__pt_env(const appm_scene *s, appm__v3 d, int prev_specular, fl
     if (!prev_specular) {
         float c = appm__dot(d, prev_ns);
         if (s->envmap.rgb)
-            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * appm__env_mix_pdf(&s->envmap, appm__env_bin(prev_ns), eu, ev, c)));
-        else
-            w = appm__mis(prev_pdf, (float)(s->light[s->env].pick * (c > 0 ? c : 0) * APPM__INV_PI));
+            w = appm__mis(prev_pdf, (float)(s->light[s->env].nee[1] * appm__env_mix_pdf(&s->envmap, appm__env_bin(prev_ns), eu, ev, c)));
+        /* else a constant environment, which the light samples leave to this ray (6.4): w = 1 */
     }
     *Le = s->envmap.rgb ? appm__env_lookup_uv(&s->envmap, eu, ev) : s->light[s->env].value;
     return w;

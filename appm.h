@@ -99,7 +99,8 @@
  * ALGORITHM IN ONE SCREEN (method APPM, one pass j = 1, 2, ...)
  *     1. eye pass: per pixel, one jittered camera path through mirrors and glass to
  *        its first diffuse vertex x with weight W; direct light at x by next-event
- *        estimation (shadow rays).
+ *        estimation (a shadow ray to each point and spot light, and one to an
+ *        area or environment light picked by power).
  *     2. radius: r = [c R(K) S / (M j mu2^2 dI^2)]^(1/6) from the pixel's running
  *        second moment S and Laplacian dI, per photon component (caustic:
  *        photons whose last bounce was specular; diffuse: the rest), clamped

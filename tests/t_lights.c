@@ -63,8 +63,8 @@ static double rect_mean(const appm_image *img, uint32_t x0, uint32_t x1, uint32_
     return sum / ((double)(x1 - x0) * (y1 - y0));
 }
 
-/* Renders `passes` passes of the path tracer at 32x32 into *img (a copy, to free). */
-static int render_lights(const appm_scene *s, int passes, warnings *w, appm_image *img)
+/* Renders `passes` passes of `method` at 32x32 into *img (a copy, to free). */
+static int render_method(const appm_scene *s, appm_method method, int passes, warnings *w, appm_image *img)
 {
     appm_config cfg;
     appm_renderer *r = NULL;
@@ -72,7 +72,7 @@ static int render_lights(const appm_scene *s, int passes, warnings *w, appm_imag
     appm_image view;
     int k;
     appm_config_init(&cfg);
-    cfg.method = APPM_METHOD_PT;
+    cfg.method = method;
     cfg.width = cfg.height = 32;
     cfg.threads = 1; /* a build without threads would warn about 2 */
     cfg.log = on_log;
@@ -89,6 +89,12 @@ static int render_lights(const appm_scene *s, int passes, warnings *w, appm_imag
     if (img->rgb) memcpy(img->rgb, view.rgb, sizeof(float) * 3 * 32 * 32);
     appm_renderer_destroy(r);
     return img->rgb != NULL;
+}
+
+/* The same with the path tracer. */
+static int render_lights(const appm_scene *s, int passes, warnings *w, appm_image *img)
+{
+    return render_method(s, APPM_METHOD_PT, passes, w, img);
 }
 
 static void test_white_environment(void)
@@ -142,18 +148,132 @@ static void test_point_light_falloff(void)
     }
     CHECK_MSG(w.n == 0, "%d warnings, last '%s'", w.n, w.last);
     /* a second point light behind the square: it lights the back face only, so
-     * the camera's side keeps its mean (each light now picked half the time) */
+     * the camera's side keeps its mean.  Every shading point sends a shadow ray
+     * to each point light (appm.c 6.4), so 4 passes give it as closely as one
+     * light did; picking one light by power, half the time each, would give 1
+     * or 0 a sample (the mean of 16 samples off by 0.125 per sample off half). */
     {
         const double back[3] = {0, 0, -2};
         CHECK(appm_scene_add_point_light(s, back, I, &d) == APPM_OK);
         appm_scene_get_info(s, &in);
         CHECK(in.lights_point == 2);
+        CHECK(s->nnee_delta == 2 && s->nee_cdf[0][s->nlight] == 0.0); /* nothing left to pick */
         CHECK_NEAR(in.power_point[0], 32.0 * APPM__PI * APPM__PI, 1e-3);
-        if (render_lights(s, 256, &w, &img)) { /* each shadow ray picks one light: 1 or 0, 1024 samples */
-            CHECK_NEAR(rect_mean(&img, 15, 17, 15, 17), 0.5, 0.05);
+        if (render_lights(s, 4, &w, &img)) {
+            CHECK_NEAR(rect_mean(&img, 15, 17, 15, 17), 0.5, 0.006);
             free(img.rgb);
         }
     }
+    appm_scene_destroy(s);
+}
+
+/* Shadow rays (appm.c 6.4): a point light of intensity 4 pi at height 2 over
+ * the square (0.5 at its centre) and a constant environment L = 1/4 (rho L =
+ * 0.125), so 0.625.  The point light gets a shadow ray at every shading point
+ * and the environment one cosine-distributed sample, exact for a constant sky
+ * seen whole: 4 passes of appm and of the path tracer give 0.625 within the
+ * pixels' own spread.  Picked by power (the point light 0.89 of it) one
+ * sample in nine would see only the sky, at 9x its weight.  With more than
+ * APPM__NEE_DELTA point lights they are picked again: nine lights of a ninth of
+ * the intensity at one place, each picked 1/9 of the time with 9x the weight,
+ * give the same value in every sample. */
+static void test_delta_lights_every_point(void)
+{
+    appm_scene *s = load_quad(NULL);
+    appm_image img;
+    appm_diag d;
+    warnings w = {0, ""};
+    const double pos[3] = {0, 0, 2}, I[3] = {4 * APPM__PI, 4 * APPM__PI, 4 * APPM__PI};
+    const double I9[3] = {4 * APPM__PI / 9, 4 * APPM__PI / 9, 4 * APPM__PI / 9}, L[3] = {0.25, 0.25, 0.25};
+    const appm_method methods[2] = {APPM_METHOD_APPM, APPM_METHOD_PT};
+    int k, m;
+    if (!s) return;
+    CHECK(appm_scene_set_environment(s, L, &d) == APPM_OK);
+    CHECK(appm_scene_add_point_light(s, pos, I, &d) == APPM_OK);
+    CHECK(s->nnee_delta == 1 && s->nee_cdf[0][s->nlight] == 1.0);
+    CHECK_NEAR(s->light[s->env].nee[0], 1.0, 1e-12);    /* the sky alone is picked */
+    CHECK(s->light[s->env].pick < 0.2);             /* while photons start mostly at the point light */
+    CHECK(appm__light_dims(s, 0) == 2u);            /* no choice left to draw */
+    CHECK(s->nee_cdf[1][s->nlight] == 0.0);         /* the path tracer's BSDF sample finds the sky */
+    for (m = 0; m < 2; ++m)
+        if (render_method(s, methods[m], 4, &w, &img)) {
+            CHECK_NEAR(rect_mean(&img, 15, 17, 15, 17), 0.625, 0.006);
+            free(img.rgb);
+        }
+    appm_scene_destroy(s);
+    s = load_quad(NULL);
+    if (!s) return;
+    for (k = 0; k < 9; ++k) CHECK(appm_scene_add_point_light(s, pos, I9, &d) == APPM_OK);
+    CHECK(s->nnee_delta == 0 && s->nee_cdf[0][s->nlight] == 1.0);
+    CHECK_NEAR(s->light[4].nee[0], 1.0 / 9.0, 1e-12);
+    CHECK(appm__light_dims(s, 0) == 1u);
+    for (m = 0; m < 2; ++m)
+        if (render_method(s, methods[m], 4, &w, &img)) {
+            CHECK_NEAR(rect_mean(&img, 15, 17, 15, 17), 0.5, 0.006);
+            free(img.rgb);
+        }
+    CHECK_MSG(w.n == 0, "%d warnings, last '%s'", w.n, w.last);
+    appm_scene_destroy(s);
+}
+
+/* The path tracer's shadow-ray table (appm.c 6.4) leaves a constant sky to
+ * its BSDF sample, and its MIS weights must use that table's probabilities,
+ * not appm's.  Two strips emitting L_e = 4 downwards (Kd 0: they only emit
+ * and block) at height c = 1/2 over the square, |x| in [0.3, 0.8], |y| < 1/2,
+ * under a sky of L = 1/4.  At the centre the strips fill a cosine-weighted
+ * share F of the hemisphere (the form factor of a point to a parallel
+ * rectangle over one of its corners, F(a, b) = (X/sqrt(1+X^2) atan(Y/sqrt(1+X^2))
+ * + Y/sqrt(1+Y^2) atan(X/sqrt(1+Y^2))) / 2pi, X = a/c, Y = b/c, summed over
+ * corners with signs), and the sky the rest: Lo = rho (L_e F + L (1 - F)) =
+ * 0.5592; symmetric in x, so within 0.1 of the centre F moves by < 1 %.
+ * Nothing the camera sees gathers photons (the square's bounces leave or end
+ * on the strips), so appm's image is its direct light too. */
+static double corner_ff(double a, double b, double c)
+{
+    double X = fabs(a) / c, Y = fabs(b) / c, sx = sqrt(1 + X * X), sy = sqrt(1 + Y * Y);
+    double f = (X / sx * atan(Y / sx) + Y / sy * atan(X / sy)) / (2 * APPM__PI);
+    return (a < 0) != (b < 0) ? -f : f;
+}
+
+static void test_pt_sky_by_bsdf(void)
+{
+    static const char obj[] = "mtllib s.mtl\nusemtl grey\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n"
+                              "usemtl lamp\nv 0.3 -0.5 0.5\nv 0.3 0.5 0.5\nv 0.8 0.5 0.5\nv 0.8 -0.5 0.5\nf 5 6 7 8\n"
+                              "v -0.8 -0.5 0.5\nv -0.8 0.5 0.5\nv -0.3 0.5 0.5\nv -0.3 -0.5 0.5\nf 9 10 11 12\n";
+    static const char mtl[] = "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 4 4 4\n";
+    const double L[3] = {0.25, 0.25, 0.25}, c = 0.5;
+    const appm_method methods[2] = {APPM_METHOD_APPM, APPM_METHOD_PT};
+    double F = 0.0, want, area[2] = {0, 0};
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_image img;
+    warnings w = {0, ""};
+    uint32_t k;
+    int m, side;
+    for (side = -1; side <= 1; side += 2) { /* x in side * [0.3, 0.8], y in [-0.5, 0.5] */
+        double x0 = side < 0 ? -0.8 : 0.3, x1 = side < 0 ? -0.3 : 0.8;
+        F += corner_ff(x1, 0.5, c) - corner_ff(x0, 0.5, c) - corner_ff(x1, -0.5, c) + corner_ff(x0, -0.5, c);
+    }
+    want = 0.5 * (4.0 * F + 0.25 * (1.0 - F));
+    CHECK_NEAR(want, 0.5592, 1e-4);
+    CHECK(appm_scene_load_obj_memory(obj, strlen(obj), mtl, strlen(mtl), "strips.obj", NULL, &s, &d) == APPM_OK);
+    if (!s) return;
+    CHECK(appm_scene_set_environment(s, L, &d) == APPM_OK);
+    for (k = 0; k < s->nlight; ++k)
+        if (s->light[k].kind == APPM__LIGHT_AREA) {
+            area[0] += s->light[k].nee[0];
+            area[1] += s->light[k].nee[1];
+        }
+    CHECK_NEAR(area[1], 1.0, 1e-12); /* the path tracer's table: the strips alone */
+    CHECK(area[0] > 0.2 && area[0] < 0.8); /* appm's: the strips and the sky by power */
+    CHECK(s->light[s->env].nee[1] == 0.0 && s->light[s->env].nee[0] > 0.2);
+    for (m = 0; m < 2; ++m)
+        if (render_method(s, methods[m], 256, &w, &img)) {
+            double got = rect_mean(&img, 15, 17, 15, 17);
+            CHECK_MSG(fabs(got - want) < 0.012, "%s: %.4f, want %.4f", m ? "pt" : "appm", got, want);
+            free(img.rgb);
+        }
+    CHECK_MSG(w.n == 0, "%d warnings, last '%s'", w.n, w.last);
     appm_scene_destroy(s);
 }
 
@@ -546,6 +666,8 @@ int main(void)
     test_focus_disk();
     test_white_environment();
     test_point_light_falloff();
+    test_delta_lights_every_point();
+    test_pt_sky_by_bsdf();
     test_set_environment();
     test_allocation_failure();
     return check_finish();

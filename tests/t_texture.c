@@ -298,7 +298,7 @@ static void test_cut_emitter(void)
                 const float ue[5] = {u0, u1, u2, 0.3f, 0.6f};
                 appm__light_sample ls;
                 appm__photon_start ps;
-                if (appm__sample_light(s, &sf, appm__v(0, 0, 1), u0, u1, u2, &ls))
+                if (appm__sample_light(s, 0, &sf, appm__v(0, 0, 1), u0, u1, u2, &ls))
                     e_sum += (double)ls.li.x * ls.wi.z;
                 else
                     e_zero++;
@@ -618,7 +618,7 @@ static void test_env_irradiance(void)
         for (j = 0; j < K; ++j)
             for (i = 0; i < K; ++i) {
                 appm__light_sample ls;
-                if (appm__sample_light(s, &sf, n, 0.5f, ((float)i + 0.5f) / (float)K, ((float)j + 0.5f) / (float)K,
+                if (appm__sample_light(s, 0, &sf, n, 0.5f, ((float)i + 0.5f) / (float)K, ((float)j + 0.5f) / (float)K,
                                        &ls))
                     est += (double)ls.li.x * appm__dot(ls.wi, n);
             }
