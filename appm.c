@@ -7156,8 +7156,9 @@ typedef struct appm__tpack { /* 160 bytes */
 #define APPM_BVH_BINARY 0
 #endif
 
-/* At most this many point and spot lights get a shadow ray of their own at
- * every shading point (6.4, appm__light_table); beyond it they are picked. */
+/* At most this many point and spot lights (the most powerful) get a shadow
+ * ray of their own at every shading point (6.4, appm__light_table); any
+ * others join the one sample that picks among the rest. */
 #define APPM__NEE_DELTA 8
 
 struct appm_scene {
@@ -8934,8 +8935,8 @@ done:
  * A sample that would leave through the wrong side of the geometric normal
  * (possible with shading normals) is absorbed: light must not leak.
  *
- * Lights are chosen by power (mean of R, G, B) for photon emission and for
- * shadow rays alike.  Emission is sampled so that a photon's weight gamma is
+ * A photon starts at a light chosen by power (mean of R, G, B); shadow rays
+ * choose otherwise (6.4, appm__light_table).  Emission is sampled so that a photon's weight gamma is
  * constant per light (zero-variance emission): gamma = Phi_light / pick -
  * on average only where the studio aims its sky's photons (6.3).
  */
@@ -9565,9 +9566,9 @@ static appm__v3 appm__env_radiance(const appm_scene *s, appm__v3 d)
 
 /* ---- 6.3 Lights -------------------------------------------------------------- */
 
-/* Index of the light whose CDF interval holds u (binary search; u < 1 always,
- * and lights of zero power have empty intervals so are never returned). */
-/* The last of n entries of cumulative table cdf at or below u. */
+/* The last of n entries of cumulative table cdf at or below u (binary search;
+ * u < 1 always; the callers step past lights of probability 0, whose
+ * intervals are empty). */
 static uint32_t appm__cdf_find(const double *cdf, uint32_t n, float u)
 {
     uint32_t lo = 0, hi = n;
@@ -10141,9 +10142,10 @@ static int appm__nee_picked(const appm_scene *s, const appm__light *l, int t)
  * shading point in the spot's cone took a shadow ray towards it once in 9
  * passes, with 9 times its weight.  A point or spot light costs one
  * shadow ray and no random number, so every shading point sends one to each
- * (appm__light.nee_all, up to APPM__NEE_DELTA of them; with more, all are
- * picked as before), and one sample picks among the area and environment
- * lights by their power (appm__light.nee[0], the cumulative s->nee_cdf[0]).
+ * (appm__light.nee_all: the APPM__NEE_DELTA most powerful of them), and one
+ * sample picks among the other lights - area, environment and any further
+ * point or spot lights - by their power (appm__light.nee[0], the cumulative
+ * s->nee_cdf[0]).
  * The sum of the two is the same expectation with the delta lights' share
  * of the variance gone.
  *
@@ -10176,14 +10178,20 @@ static appm_status appm__light_table(appm_scene *s, appm_diag *diag, const char 
         s->light_cdf[i + 1] = s->light_cdf[i] + s->light[i].pick;
     }
     s->light_cdf[k] = 1.0;
-    s->nnee_delta = 0;
-    for (i = 0; i < k; ++i) {
-        appm__light *l = &s->light[i];
-        l->nee_all = (l->kind == APPM__LIGHT_POINT || l->kind == APPM__LIGHT_SPOT) && l->pick > 0.0;
-        s->nnee_delta += (uint32_t)l->nee_all;
+    /* the APPM__NEE_DELTA most powerful point and spot lights (the first of
+     * equals), in light order */
+    for (i = 0; i < k; ++i) s->light[i].nee_all = 0;
+    for (t = 0; t < APPM__NEE_DELTA; ++t) {
+        uint32_t best = k;
+        for (i = 0; i < k; ++i) {
+            const appm__light *l = &s->light[i];
+            if ((l->kind == APPM__LIGHT_POINT || l->kind == APPM__LIGHT_SPOT) && l->pick > 0.0 && !l->nee_all &&
+                (best == k || l->pick > s->light[best].pick))
+                best = i;
+        }
+        if (best == k) break;
+        s->light[best].nee_all = 1;
     }
-    if (s->nnee_delta > APPM__NEE_DELTA)
-        for (i = 0; i < k; ++i) s->light[i].nee_all = 0;
     s->nnee_delta = 0;
     for (i = 0; i < k; ++i)
         if (s->light[i].nee_all) s->nee_delta[s->nnee_delta++] = i;
@@ -11301,7 +11309,8 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  * meets on the way is added to the pixel's direct term:
  *   emission Le of every surface hit on its front side (the light seen
  *   directly, or in a mirror), and at x the direct light by next-event
- *   estimation (one shadow ray to a light chosen by power).
+ *   estimation (a shadow ray to each point and spot light and one to an
+ *   area or environment light chosen by power, 6.4).
  * With --direct photons the shadow ray is skipped and first-bounce photons are
  * gathered instead (the analytic tests and the teaching mode use this).
  *
@@ -13645,10 +13654,12 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
 /* ==== 11. PATH-TRACING REFERENCE ==========================================
  *
  * An unbiased unidirectional path tracer for reference images: at every
- * diffuse or glossy vertex one shadow ray to a light chosen by power and one
- * BSDF-sampled continuation (section 6.1's mixture for glossy), combined by
- * multiple importance sampling (power heuristic, Veach 1997) for area and
- * environment lights; point and spot
+ * diffuse or glossy vertex a shadow ray to each point and spot light, one to
+ * an area light or environment map chosen by power from the path tracer's own
+ * table (6.4), and one BSDF-sampled continuation (section 6.1's mixture for
+ * glossy), the two combined by multiple importance sampling (power
+ * heuristic, Veach 1997) for area lights and environment maps.  A constant
+ * environment is found by the continuation alone (weight 1); point and spot
  * lights are reached by shadow rays only.  After a specular bounce, emission
  * found by the continuation counts fully (no shadow ray could have found it).
  * Caustics from point lights are therefore missing by construction - that is

@@ -173,10 +173,11 @@ static void test_point_light_falloff(void)
  * and the environment one cosine-distributed sample, exact for a constant sky
  * seen whole: 4 passes of appm and of the path tracer give 0.625 within the
  * pixels' own spread.  Picked by power (the point light 0.89 of it) one
- * sample in nine would see only the sky, at 9x its weight.  With more than
- * APPM__NEE_DELTA point lights they are picked again: nine lights of a ninth of
- * the intensity at one place, each picked 1/9 of the time with 9x the weight,
- * give the same value in every sample. */
+ * sample in nine would see only the sky, at 9x its weight.  Beyond
+ * APPM__NEE_DELTA point lights the weakest join the one sample: nine lights at
+ * one place with intensities 1 : 2 : ... : 9 (4 pi in all) give the eight
+ * strongest a ray each and leave the weakest alone in the one sample (no
+ * choice, weight 1), so every sample is 0.5. */
 static void test_delta_lights_every_point(void)
 {
     appm_scene *s = load_quad(NULL);
@@ -184,7 +185,7 @@ static void test_delta_lights_every_point(void)
     appm_diag d;
     warnings w = {0, ""};
     const double pos[3] = {0, 0, 2}, I[3] = {4 * APPM__PI, 4 * APPM__PI, 4 * APPM__PI};
-    const double I9[3] = {4 * APPM__PI / 9, 4 * APPM__PI / 9, 4 * APPM__PI / 9}, L[3] = {0.25, 0.25, 0.25};
+    const double L[3] = {0.25, 0.25, 0.25};
     const appm_method methods[2] = {APPM_METHOD_APPM, APPM_METHOD_PT};
     int k, m;
     if (!s) return;
@@ -203,10 +204,14 @@ static void test_delta_lights_every_point(void)
     appm_scene_destroy(s);
     s = load_quad(NULL);
     if (!s) return;
-    for (k = 0; k < 9; ++k) CHECK(appm_scene_add_point_light(s, pos, I9, &d) == APPM_OK);
-    CHECK(s->nnee_delta == 0 && s->nee_cdf[0][s->nlight] == 1.0);
-    CHECK_NEAR(s->light[4].nee[0], 1.0 / 9.0, 1e-12);
-    CHECK(appm__light_dims(s, 0) == 1u);
+    for (k = 0; k < 9; ++k) {
+        const double f = 4 * APPM__PI * (k + 1) / 45.0, Ik[3] = {f, f, f};
+        CHECK(appm_scene_add_point_light(s, pos, Ik, &d) == APPM_OK);
+    }
+    CHECK(s->nlight == 9 && s->nnee_delta == 8 && s->nee_cdf[0][s->nlight] == 1.0);
+    CHECK(!s->light[0].nee_all && s->light[0].nee[0] == 1.0); /* the weakest, picked */
+    for (k = 1; k < 9; ++k) CHECK(s->light[k].nee_all && s->light[k].nee[0] == 0.0);
+    CHECK(appm__light_dims(s, 0) == 0u);
     for (m = 0; m < 2; ++m)
         if (render_method(s, methods[m], 4, &w, &img)) {
             CHECK_NEAR(rect_mean(&img, 15, 17, 15, 17), 0.5, 0.006);

