@@ -10617,6 +10617,8 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
         info->lights_point += l->kind == APPM__LIGHT_POINT;
         info->lights_spot += l->kind == APPM__LIGHT_SPOT;
         info->lights_environment += l->kind == APPM__LIGHT_ENV;
+        info->shadow_rays_own += (uint32_t)l->nee_all;
+        info->shadow_rays_picked += l->nee[0] > 0.0;
         p[0] += l->power[0];
         p[1] += l->power[1];
         p[2] += l->power[2];

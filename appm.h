@@ -442,6 +442,11 @@ typedef struct appm_scene_info {
     uint64_t open_edges;            /* edges where a surface ends against nothing: no
                                      * other triangle shares them and no surface goes on
                                      * beyond; appm's kernel is cut along them           */
+    uint32_t shadow_rays_own;       /* point and spot lights that every shading point sends
+                                     * a shadow ray of its own (the 8 most powerful)     */
+    uint32_t shadow_rays_picked;    /* the other lights, among which one more shadow ray
+                                     * a shading point picks by power (appm's eye pass;
+                                     * the path tracer leaves a constant sky out)        */
 } appm_scene_info;
 
 APPM_API void appm_scene_get_info(const appm_scene *scene, appm_scene_info *info);

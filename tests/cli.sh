@@ -127,6 +127,14 @@ for scene in scenes/*.scene; do
     got=$(awk '$1 == "triangles" { n = $2; d = $3; sub(/^\(/, "", d); print n + d }' "$T/out")
     check "info $scene: $got triangles (with dropped ones), the OBJ has $expect" [ "$got" = "$expect" ]
 done
+# Shadow rays (docs/algorithm.md 5.11): the teapot's spot gets a ray of its own and its sky the
+# other; the Cornell box's two light triangles share one ray, picked by power.
+run "$APPM" info scenes/teapot.scene
+check "info: the teapot's shadow rays" contains "$T/out" \
+    'shadow rays 2 a shading point: one to each of 1 point or spot light, one to the other light'
+run "$APPM" info scenes/cornell-original.scene
+check "info: the Cornell box's shadow ray" contains "$T/out" \
+    'shadow rays 1 a shading point: one to a light picked by power among 2 lights'
 
 # ---- render: every method to every format -------------------------------------
 

@@ -196,6 +196,11 @@ static void test_delta_lights_every_point(void)
     CHECK(s->light[s->env].pick < 0.2);             /* while photons start mostly at the point light */
     CHECK(appm__light_dims(s, 0) == 2u);            /* no choice left to draw */
     CHECK(s->nee_cdf[1][s->nlight] == 0.0);         /* the path tracer's BSDF sample finds the sky */
+    {
+        appm_scene_info in;
+        appm_scene_get_info(s, &in);
+        CHECK(in.shadow_rays_own == 1 && in.shadow_rays_picked == 1);
+    }
     for (m = 0; m < 2; ++m)
         if (render_method(s, methods[m], 4, &w, &img)) {
             CHECK_NEAR(rect_mean(&img, 15, 17, 15, 17), 0.625, 0.006);
@@ -211,6 +216,11 @@ static void test_delta_lights_every_point(void)
     CHECK(s->nlight == 9 && s->nnee_delta == 8 && s->nee_cdf[0][s->nlight] == 1.0);
     CHECK(!s->light[0].nee_all && s->light[0].nee[0] == 1.0); /* the weakest, picked */
     for (k = 1; k < 9; ++k) CHECK(s->light[k].nee_all && s->light[k].nee[0] == 0.0);
+    {
+        appm_scene_info in;
+        appm_scene_get_info(s, &in);
+        CHECK(in.shadow_rays_own == 8 && in.shadow_rays_picked == 1);
+    }
     CHECK(appm__light_dims(s, 0) == 0u);
     for (m = 0; m < 2; ++m)
         if (render_method(s, methods[m], 4, &w, &img)) {
