@@ -9220,18 +9220,23 @@ static appm__v3 appm__env_dir(const appm__envmap *e, double u, double v)
  * whose CDFs c lays out over a w x h grid of the map (rows' CDF, h + 1
  * entries, then each row's over its columns, w + 1 each): the map's own
  * (appm__env_sample) and each product density (appm__env_prod_sample). */
+/* Its density in cell (x, y), whose sin theta is st > 0. */
+static double appm__env_cell_pdf(const double *c, uint32_t w, uint32_t h, uint32_t x, uint32_t y, double st)
+{
+    const double *cr = c + (h + 1) + (size_t)y * (w + 1);
+    return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * w * h / (2.0 * APPM__PI * APPM__PI * st);
+}
+
 static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double u, double v)
 {
     double st = sin(APPM__PI * v);
-    const double *cr;
     uint32_t x, y;
     if (!(st > 0.0)) return 0.0;
     x = (uint32_t)(u * w);
     y = (uint32_t)(v * h);
     if (x >= w) x = w - 1;
     if (y >= h) y = h - 1;
-    cr = c + (h + 1) + (size_t)y * (w + 1);
-    return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * w * h / (2.0 * APPM__PI * APPM__PI * st);
+    return appm__env_cell_pdf(c, w, h, x, y, st);
 }
 
 /* The solid-angle density with which appm__env_sample draws the direction at
@@ -9249,7 +9254,6 @@ APPM__UNUSED static float appm__env_pdf(const appm__envmap *e, appm__v3 d)
     return appm__env_pdf_uv(e, u, v);
 }
 
-/* A direction *d from (u1, u2) with its solid-angle density (0: none). */
 /* (u1, u2) to the place (*u, *v) of the grid density c of appm__env_grid_pdf:
  * a row by u1, a column of it by u2, each by inverting its CDF (so the
  * low-discrepancy points stay stratified); its cell (*x, *y). */
@@ -9260,19 +9264,17 @@ static void appm__env_grid_invert(const double *c, uint32_t w, uint32_t h, float
     *u = appm__cdf_invert(c + (h + 1) + (size_t)*y * (w + 1), (int)w, u2, x);
 }
 
+/* A direction *d from (u1, u2) with its solid-angle density (0: none). */
 static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v3 *d)
 {
     int y, x;
     float u, v;
-    const double *cr;
     double st;
     appm__env_grid_invert(e->cdf, e->w, e->h, u1, u2, &u, &v, &x, &y);
-    cr = e->cdf + (e->h + 1) + (size_t)y * (e->w + 1);
     st = sin(APPM__PI * (double)v);
     *d = appm__env_dir(e, u, v);
     if (!(st > 0.0)) return 0.0f;
-    return (float)((e->cdf[y + 1] - e->cdf[y]) * (cr[x + 1] - cr[x]) * e->w * e->h /
-                   (2.0 * APPM__PI * APPM__PI * st));
+    return (float)appm__env_cell_pdf(e->cdf, e->w, e->h, (uint32_t)x, (uint32_t)y, st);
 }
 
 /* Product sampling.  A shading point's light from the map is the integral of
@@ -11519,14 +11521,25 @@ static void appm__add3(double *acc, appm__v3 v)
     acc[2] += v.z;
 }
 
+/* The cosine of light sample ls at point sf (ns, ng: its normals on the side
+ * the light must be on), or 0 where it arrives from below either normal or its
+ * shadow ray is blocked. */
+static float appm__light_reaches(const appm_scene *s, const appm__surf *sf, appm__v3 ns, appm__v3 ng,
+                                 const appm__light_sample *ls)
+{
+    float c = appm__dot(ls->wi, ns);
+    if (!(c > 0.0f) || !(appm__dot(ls->wi, ng) > 0.0f) || appm__occluded(s, &ls->shadow, sf->tri, ls->skip))
+        return 0.0f;
+    return c;
+}
+
 /* What light sample ls brings to diffuse or glossy point sf seen from wo (ns,
  * ng: its normals on wo's side), after its shadow ray. */
 static appm__v3 appm__direct_one(const appm_scene *s, const appm__surf *sf, const appm__material *m, appm__v3 wo,
                                  appm__v3 ns, appm__v3 ng, const appm__light_sample *ls)
 {
-    float c = appm__dot(ls->wi, ns);
-    if (!(c > 0.0f) || !(appm__dot(ls->wi, ng) > 0.0f)) return appm__v(0, 0, 0);
-    if (appm__occluded(s, &ls->shadow, sf->tri, ls->skip)) return appm__v(0, 0, 0);
+    float c = appm__light_reaches(s, sf, ns, ng, ls);
+    if (!(c > 0.0f)) return appm__v(0, 0, 0);
     if (m->kind == APPM__MAT_GLOSSY) return appm__scale(appm__mul(appm__bsdf_f(m, ns, ls->wi, wo), ls->li), c);
     return appm__scale(appm__mul(m->color, ls->li), c * (float)APPM__INV_PI);
 }
@@ -13680,9 +13693,8 @@ static float appm__mis(float a, float b)
 static appm__v3 appm__pt_direct_one(const appm_scene *s, const appm__surf *sf, const appm__material *m, appm__v3 wo,
                                     appm__v3 ns, appm__v3 ng, appm__v3 W, const appm__light_sample *ls)
 {
-    float c = appm__dot(ls->wi, ns), w;
-    if (!(c > 0.0f) || !(appm__dot(ls->wi, ng) > 0.0f) || appm__occluded(s, &ls->shadow, sf->tri, ls->skip))
-        return appm__v(0, 0, 0);
+    float c = appm__light_reaches(s, sf, ns, ng, ls), w;
+    if (!(c > 0.0f)) return appm__v(0, 0, 0);
     if (m->kind == APPM__MAT_GLOSSY) { /* MIS against the mixture pdf of section 6.1 */
         w = ls->pdf > 0.0f ? appm__mis(ls->pdf, appm__bsdf_pdf(m, ns, ls->wi, wo)) : 1.0f;
         return appm__scale(appm__mul(appm__mul(W, appm__bsdf_f(m, ns, ls->wi, wo)), ls->li), c * w);
@@ -13754,7 +13766,8 @@ static float appm__pt_env(const appm_scene *s, appm__v3 d, int prev_specular, fl
     if (!prev_specular) {
         float c = appm__dot(d, prev_ns);
         if (s->envmap.rgb)
-            w = appm__mis(prev_pdf, (float)(s->light[s->env].nee[1] * appm__env_mix_pdf(&s->envmap, appm__env_bin(prev_ns), eu, ev, c)));
+            w = appm__mis(prev_pdf, (float)(s->light[s->env].nee[1] *
+                                            appm__env_mix_pdf(&s->envmap, appm__env_bin(prev_ns), eu, ev, c)));
         /* else a constant environment, which the light samples leave to this ray (6.4): w = 1 */
     }
     *Le = s->envmap.rgb ? appm__env_lookup_uv(&s->envmap, eu, ev) : s->light[s->env].value;
