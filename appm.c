@@ -11364,6 +11364,8 @@ struct appm__estimator; /* a method's entry in the table of section 10 */
 #define APPM__GUIDE_RES 32        /* cells per side of a light's learned emission density (9.1) */
 #define APPM__GUIDE_CELLS (APPM__GUIDE_RES * APPM__GUIDE_RES)
 #define APPM__GUIDE_LIGHTS 16     /* lights guided at most: the most powerful */
+/* A worker's counts per pass (appm__guide.count): shares, pairs, paths, cost. */
+#define APPM__GUIDE_STRIDE(nslot) ((size_t)(nslot) * (3u * APPM__GUIDE_CELLS + 1u))
 
 typedef struct appm__guide { /* emission guided by visual importance (section 9.1) */
     uint32_t nslot;      /* guided lights (0: --emission light) */
@@ -11373,12 +11375,15 @@ typedef struct appm__guide { /* emission guided by visual importance (section 9.
     uint64_t *seen;      /* per slot: pixel-photon pairs counted so far */
     uint64_t *passes;    /* per slot: passes that counted */
     double *samples;     /* per slot and cell: the paths it emitted, expected, summed over those passes */
+    double *paths;       /* per slot and cell: the paths it emitted, counted, summed over the passes */
+    double *work;        /* per slot and cell: their cost, counted (appm__guide_tally), summed likewise */
     double ref;          /* this pass: the image's mean photon term (luminance), the unit of counts */
     float *pdf;          /* per slot and cell: the density of this pass's emission, mean 1 */
     double *cdf;         /* per slot: the CDF over rows (RES + 1), then each row's (RES x (RES + 1)) */
     unsigned char *active; /* per slot: whether pdf is learned (else 1 everywhere) */
-    uint64_t *count;     /* per worker: per slot and cell the contributions gathered this pass, in units
-                          * of ref / 2^16, then per slot the pixel-photon pairs */
+    uint64_t *count;     /* per worker, APPM__GUIDE_STRIDE(nslot) words: per slot and cell the
+                          * contributions gathered this pass, in units of ref / 2^16; per slot the
+                          * pixel-photon pairs; per slot and cell the paths traced, then their cost */
     float *map;          /* appm_renderer_emission_map's picture */
 } appm__guide;
 
@@ -11843,36 +11848,15 @@ static double appm__guide_importance(const appm__guide *gd, uint32_t slot, doubl
     return sum;
 }
 
-/* Slot `slot`'s density and CDFs for the next pass: p_c = a + (1 - a) g_c,
- * g = v / mean(v) from appm__guide_importance, if the light has counted
- * APPM__GUIDE_MIN pairs and if p pays: the second moment of the estimate of
- * sum(v) that p gives, sum(v_c^2 / p_c), at most APPM__GUIDE_GAIN times the
- * light's own, sum(v_c^2) (importance sampling's variance, against uniform; a
- * density the data cannot tell from flat is not worth its weights' noise).
- * Else p = 1 everywhere (not active). */
-static void appm__guide_density(appm__guide *gd, uint32_t slot)
+/* Slot `slot`'s CDFs from its density pdf[]: the rows' marginal, then each
+ * row's conditional. */
+static void appm__guide_cdf(appm__guide *gd, uint32_t slot)
 {
-    double v[APPM__GUIDE_CELLS], sum, own = 0.0, with = 0.0;
-    float *p = gd->pdf + (size_t)slot * APPM__GUIDE_CELLS;
+    const float *p = gd->pdf + (size_t)slot * APPM__GUIDE_CELLS;
     double *c = gd->cdf + (size_t)slot * APPM__GUIDE_CDF;
     int i, k;
-    sum = appm__guide_importance(gd, slot, v);
-    gd->active[slot] = gd->seen[slot] >= APPM__GUIDE_MIN && sum > 0.0 && sum < HUGE_VAL;
-    for (i = 0; i < APPM__GUIDE_CELLS; ++i) /* a checkpoint's scores are checked, but never trusted */
-        if (!(v[i] >= 0.0 && v[i] < HUGE_VAL)) gd->active[slot] = 0;
-    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
-        p[i] = gd->active[slot]
-                   ? (float)(APPM__GUIDE_DEFENSIVE + (1.0 - APPM__GUIDE_DEFENSIVE) * v[i] * APPM__GUIDE_CELLS / sum)
-                   : 1.0f;
-        own += v[i] * v[i];
-        with += v[i] * v[i] / p[i];
-    }
-    if (gd->active[slot] && !(with <= APPM__GUIDE_GAIN * own)) {
-        gd->active[slot] = 0;
-        for (i = 0; i < APPM__GUIDE_CELLS; ++i) p[i] = 1.0f;
-    }
     c[0] = 0.0;
-    for (i = 0; i < APPM__GUIDE_RES; ++i) { /* the rows' marginal, then each row's conditional */
+    for (i = 0; i < APPM__GUIDE_RES; ++i) {
         double *cr = c + (size_t)(i + 1) * (APPM__GUIDE_RES + 1), row = 0.0;
         for (k = 0; k < APPM__GUIDE_RES; ++k) row += p[i * APPM__GUIDE_RES + k];
         c[i + 1] = c[i] + row / APPM__GUIDE_CELLS;
@@ -11883,6 +11867,136 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot)
     c[APPM__GUIDE_RES] = 1.0;
 }
 
+/* What the choice between lights (appm__guide_select) knows of a slot, per
+ * path of that light: mu, the mean of the importance v over the cells (its
+ * share of the photon term); the second moments of a path's estimate of it
+ * with the light's own density, mean(v^2), and with the learned one,
+ * mean(v^2 / p); and a path's mean cost (appm__guide_tally) under each. */
+typedef struct appm__guide_eff {
+    double mu, m_own, m_with, k_own, k_with;
+} appm__guide_eff;
+
+/* Slot `slot`'s density and CDFs for the next pass: p_c = a + (1 - a) g_c,
+ * g = v / mean(v) from appm__guide_importance, if the light has counted
+ * APPM__GUIDE_MIN pairs and if p pays: the second moment of the estimate of
+ * sum(v) that p gives, sum(v_c^2 / p_c), at most APPM__GUIDE_GAIN times the
+ * light's own, sum(v_c^2) (importance sampling's variance, against uniform; a
+ * density the data cannot tell from flat is not worth its weights' noise).
+ * Else p = 1 everywhere (not active).  The cost of a path from cell c is its
+ * mean counted cost, shrunk like v towards the light's mean. */
+static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff *e)
+{
+    double v[APPM__GUIDE_CELLS], sum, own = 0.0, with = 0.0, n = 0.0, work = 0.0, kbar;
+    const double *np = gd->paths + (size_t)slot * APPM__GUIDE_CELLS, *wk = gd->work + (size_t)slot * APPM__GUIDE_CELLS;
+    float *p = gd->pdf + (size_t)slot * APPM__GUIDE_CELLS;
+    int i;
+    int finite;
+    sum = appm__guide_importance(gd, slot, v);
+    finite = sum >= 0.0 && sum < HUGE_VAL;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) { /* a checkpoint's state is checked, but never trusted */
+        if (!(v[i] >= 0.0 && v[i] < HUGE_VAL) || !(np[i] >= 0.0 && wk[i] >= 0.0)) finite = 0;
+        n += np[i];
+        work += wk[i];
+    }
+    gd->active[slot] = finite && gd->seen[slot] >= APPM__GUIDE_MIN && sum > 0.0;
+    kbar = n > 0.0 && work > 0.0 && work < HUGE_VAL ? work / n : 1.0;
+    memset(e, 0, sizeof *e);
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        double k = (wk[i] + APPM__GUIDE_PRIOR * kbar) / (np[i] + APPM__GUIDE_PRIOR);
+        p[i] = gd->active[slot]
+                   ? (float)(APPM__GUIDE_DEFENSIVE + (1.0 - APPM__GUIDE_DEFENSIVE) * v[i] * APPM__GUIDE_CELLS / sum)
+                   : 1.0f;
+        own += v[i] * v[i];
+        with += v[i] * v[i] / p[i];
+        e->k_own += k;
+        e->k_with += p[i] * k;
+    }
+    if (gd->active[slot] && !(with <= APPM__GUIDE_GAIN * own)) {
+        gd->active[slot] = 0;
+        for (i = 0; i < APPM__GUIDE_CELLS; ++i) p[i] = 1.0f;
+    }
+    if (!gd->active[slot]) {
+        with = own;
+        e->k_with = e->k_own;
+    }
+    appm__guide_cdf(gd, slot);
+    if (!finite || !(own < HUGE_VAL && e->k_own < HUGE_VAL && e->k_with < HUGE_VAL)) { /* counts for nothing */
+        memset(e, 0, sizeof *e);
+        return;
+    }
+    e->mu = sum / APPM__GUIDE_CELLS;
+    e->m_own = own / APPM__GUIDE_CELLS;
+    e->m_with = with / APPM__GUIDE_CELLS;
+    e->k_own /= APPM__GUIDE_CELLS;
+    e->k_with /= APPM__GUIDE_CELLS;
+}
+
+/* Which of the lights whose learned density passed appm__guide_density are
+ * guided: those that make the photon pass more efficient (efficiency = 1 /
+ * (variance x cost), Hammersley and Handscomb).  A path picks light l with
+ * probability pi_l, so its estimate of the image's photon term, sum_l mu_l,
+ * has the variance V = sum_l m_l / pi_l - (sum_l mu_l)^2 and the cost
+ * K = sum_l pi_l k_l.  Greedily, the light whose guiding lowers V K the most
+ * is guided, as long as that step at least halves V K (APPM__GUIDE_GAIN).  A
+ * light can pass its own test and still not pay: on the bunny the point
+ * light's learned density cut its own second moment 150x, but its share of
+ * the photon term is 7 %, and its aimed paths hit the model three times as
+ * often as its own, which miss; guiding it cost 30 % of each pass and removed
+ * no error (docs/algorithm.md 5.8).  V and K are of the photon pass alone. */
+static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const appm__guide_eff *e)
+{
+    unsigned char take[APPM__GUIDE_LIGHTS];
+    double V = 0.0, K = 0.0, mu = 0.0;
+    uint32_t s;
+    int c;
+    for (s = 0; s < gd->nslot; ++s) {
+        const double pi = r->scene->light[gd->light[s]].pick;
+        take[s] = gd->active[s];
+        gd->active[s] = 0;
+        V += e[s].m_own / pi;
+        K += pi * e[s].k_own;
+        mu += e[s].mu;
+    }
+    V -= mu * mu;
+    for (;;) {
+        double best_vk = HUGE_VAL, bv = 0.0, bk = 0.0;
+        uint32_t best = UINT32_MAX;
+        for (s = 0; s < gd->nslot; ++s) {
+            const double pi = r->scene->light[gd->light[s]].pick;
+            double v, k;
+            if (!take[s] || gd->active[s]) continue;
+            v = V + (e[s].m_with - e[s].m_own) / pi;
+            k = K + pi * (e[s].k_with - e[s].k_own);
+            if (v * k < best_vk) {
+                best_vk = v * k;
+                best = s;
+                bv = v;
+                bk = k;
+            }
+        }
+        if (best == UINT32_MAX || !(V * K > 0.0 && best_vk <= APPM__GUIDE_GAIN * V * K)) break;
+        gd->active[best] = 1;
+        V = bv;
+        K = bk;
+    }
+    for (s = 0; s < gd->nslot; ++s)
+        if (take[s] && !gd->active[s]) { /* passed its own test, but does not pay: back to the light's own */
+            float *p = gd->pdf + (size_t)s * APPM__GUIDE_CELLS;
+            for (c = 0; c < APPM__GUIDE_CELLS; ++c) p[c] = 1.0f;
+            appm__guide_cdf(gd, s);
+        }
+}
+
+/* Every slot's density and CDFs for the next pass: a function of the learned
+ * state alone (so a resumed render draws the same). */
+static void appm__guide_densities(const appm_renderer *r, appm__guide *gd)
+{
+    appm__guide_eff e[APPM__GUIDE_LIGHTS];
+    uint32_t s;
+    for (s = 0; s < gd->nslot; ++s) appm__guide_density(gd, s, &e[s]);
+    appm__guide_select(r, gd, e);
+}
+
 /* Before a pass: every slot's density and the share of the paths drawn from
  * learned densities (the unit of the pass's counts, guide.ref, is set with
  * the renderer's state in section 12). */
@@ -11891,10 +12005,9 @@ static void appm__guide_prepare(appm_renderer *r)
     appm__guide *gd = &r->guide;
     uint32_t s;
     double share = 0.0;
-    for (s = 0; s < gd->nslot; ++s) {
-        appm__guide_density(gd, s);
+    appm__guide_densities(r, gd);
+    for (s = 0; s < gd->nslot; ++s)
         if (gd->active[s]) share += (1.0 - APPM__GUIDE_DEFENSIVE) * r->scene->light[gd->light[s]].pick;
-    }
     r->stats.emission_guided = share;
     r->stats.emission_lights = gd->nslot;
 }
@@ -11920,9 +12033,12 @@ static void appm__guide_count(uint64_t *count, size_t pairs, uint32_t tag, float
 static void appm__guide_learn(appm_renderer *r)
 {
     appm__guide *gd = &r->guide;
-    size_t cells = (size_t)gd->nslot * APPM__GUIDE_CELLS, stride = cells + gd->nslot, c;
+    size_t cells = (size_t)gd->nslot * APPM__GUIDE_CELLS, stride = APPM__GUIDE_STRIDE(gd->nslot), c;
     unsigned w;
-    if (!(gd->ref > 0.0)) return;
+    if (!(gd->ref > 0.0)) { /* nothing gathered yet: this pass's paths and their cost teach nothing */
+        memset(gd->count, 0, stride * r->threads * sizeof *gd->count);
+        return;
+    }
     for (c = 0; c < cells; ++c) /* M pick_l p_c / RES^2 paths from cell c this pass */
         gd->samples[c] += (double)r->M * r->scene->light[gd->light[c / APPM__GUIDE_CELLS]].pick * (double)gd->pdf[c] /
                           APPM__GUIDE_CELLS;
@@ -11933,7 +12049,9 @@ static void appm__guide_learn(appm_renderer *r)
             n += gd->count[w * stride + c];
             gd->count[w * stride + c] = 0;
         }
-        if (c >= cells) gd->seen[c - cells] += n;
+        if (c >= 2 * cells + gd->nslot) gd->work[c - 2 * cells - gd->nslot] += (double)n;
+        else if (c >= cells + gd->nslot) gd->paths[c - cells - gd->nslot] += (double)n;
+        else if (c >= cells) gd->seen[c - cells] += n;
         else if (n) gd->score[c] += (double)n * (gd->ref / 65536.0) * APPM__GUIDE_CELLS;
     }
 }
@@ -11968,9 +12086,11 @@ static int appm__guide_alloc(appm_renderer *r)
     gd->pdf = (float *)appm__alloc(&r->mem, k, sizeof *gd->pdf);
     gd->cdf = (double *)appm__alloc(&r->mem, (size_t)n * APPM__GUIDE_CDF, sizeof *gd->cdf);
     gd->active = (unsigned char *)appm__alloc(&r->mem, n, 1);
-    gd->count = (uint64_t *)appm__alloc(&r->mem, ((size_t)k + n) * r->threads, sizeof *gd->count);
-    return n == 0 || (gd->score && gd->seen && gd->passes && gd->samples && gd->pdf && gd->cdf && gd->active &&
-                      gd->count);
+    gd->paths = (double *)appm__alloc(&r->mem, k, sizeof *gd->paths);
+    gd->work = (double *)appm__alloc(&r->mem, k, sizeof *gd->work);
+    gd->count = (uint64_t *)appm__alloc(&r->mem, APPM__GUIDE_STRIDE(n), (size_t)r->threads * sizeof *gd->count);
+    return n == 0 || (gd->score && gd->seen && gd->passes && gd->samples && gd->paths && gd->work && gd->pdf &&
+                      gd->cdf && gd->active && gd->count);
 }
 
 static void appm__guide_free(appm_renderer *r)
@@ -11982,6 +12102,8 @@ static void appm__guide_free(appm_renderer *r)
     appm__free(&r->mem, gd->seen);
     appm__free(&r->mem, gd->passes);
     appm__free(&r->mem, gd->samples);
+    appm__free(&r->mem, gd->paths);
+    appm__free(&r->mem, gd->work);
     appm__free(&r->mem, gd->pdf);
     appm__free(&r->mem, gd->cdf);
     appm__free(&r->mem, gd->active);
@@ -12050,6 +12172,20 @@ static unsigned appm__photon_rr_dim(const appm__material *m)
     return 8u;
 }
 
+/* Guided emission's count of one traced path from cell `tag` (9.1): a path,
+ * and its cost in quarters of a ray that hits - 1 for its start and the ray
+ * that leaves the scene, 4 for each ray that hits (a ray that misses
+ * everything is about a quarter of one that descends the BVH to a triangle). */
+static void appm__guide_tally(appm_renderer *r, unsigned worker, uint32_t tag, unsigned hits)
+{
+    uint64_t *c;
+    if (tag == UINT32_MAX) return;
+    c = r->guide.count + (size_t)worker * APPM__GUIDE_STRIDE(r->guide.nslot) +
+        (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1u) + tag;
+    c[0]++;
+    c[(size_t)r->guide.nslot * APPM__GUIDE_CELLS] += 1u + 4u * (uint64_t)hits;
+}
+
 /* Traces photon path `index` (cache: shared by the paths the worker traces in
  * turn, appm__sampler_photon); returns 0 if the task's region is full. */
 static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
@@ -12061,7 +12197,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     appm__ray ray;
     appm__v3 gamma;
     uint32_t skip;
-    unsigned segs = 0, comp = APPM__COMP_DIFFUSE; /* the component of a photon stored next */
+    unsigned segs = 0, hits = 0, comp = APPM__COMP_DIFFUSE; /* comp: the component of a photon stored next */
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
     float ue[5], w = 1.0f;
     uint32_t tag = UINT32_MAX, li;
@@ -12076,6 +12212,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     }
     if (!ok) {
         if (!appm__finite3(ps.gamma)) r->dropped[worker]++; /* its weight overflowed */
+        appm__guide_tally(r, worker, tag, 0);
         return 1;
     }
     ray = ps.ray;
@@ -12092,6 +12229,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         unsigned dims;
         float q;
         if (!appm__intersect(s, &ray, skip, &h)) break;
+        hits++;
         appm__surface(s, &h, &sf);
         m = appm__material_at(s, &sf, &tex);
         wi = appm__neg(ray.d);
@@ -12121,6 +12259,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         appm__ray_init(&ray, appm__offset(&sf, bs.wi), bs.wi, FLT_MAX);
         skip = sf.tri;
     }
+    appm__guide_tally(r, worker, tag, hits);
     return 1;
 }
 
@@ -12185,6 +12324,10 @@ static appm_status appm__photon_pass(appm_renderer *r)
         for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
         if (!failed) return APPM_OK;
         memcpy(r->dropped, dropped, sizeof dropped); /* the pass is traced again: its drops count once */
+        for (t = 0; t < r->threads && r->guide.nslot; ++t) /* and so do its paths (9.1) */
+            memset(r->guide.count + (size_t)t * APPM__GUIDE_STRIDE(r->guide.nslot) +
+                       (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1u),
+                   0, 2u * (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.count);
         /* grow every region by half and trace again (rare: the first pass, or a
          * pass that stores more photons than any before it) */
         ncap = r->cap + r->cap / 2 + 4096;
@@ -13656,7 +13799,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             else if (r->edges && appm__mass_pass(r->pass)) g.mass = appm__seam_mass(r, pi, &g);
             if (r->guide.nslot && r->guide.ref > 0.0) {
                 g.gpairs = (size_t)r->guide.nslot * APPM__GUIDE_CELLS;
-                g.gcount = r->guide.count + (size_t)worker * (g.gpairs + r->guide.nslot);
+                g.gcount = r->guide.count + (size_t)worker * APPM__GUIDE_STRIDE(r->guide.nslot);
                 g.gunit = 65536.0 / (APPM__PI * (double)r->M * r->guide.ref);
             }
             appm__gather_query(&r->pmap, &g);
@@ -14535,7 +14678,7 @@ static appm_status appm__cluster_photons(appm_renderer *r, size_t *n)
 static appm_status appm__cluster_guide(appm_renderer *r)
 {
     appm__guide *gd = &r->guide;
-    const size_t stride = (size_t)gd->nslot * APPM__GUIDE_CELLS + gd->nslot;
+    const size_t stride = APPM__GUIDE_STRIDE(gd->nslot);
     uint64_t *mine = r->cl_count + r->cluster.rank * stride;
     appm_status st;
     size_t c;
@@ -14629,7 +14772,7 @@ static appm_status appm__cluster_pixels(appm_renderer *r)
 APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_cluster *c, appm_diag *diag)
 {
     appm_diag local;
-    const size_t counts = r && r->guide.nslot ? (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1) : 0;
+    const size_t counts = r && r->guide.nslot ? APPM__GUIDE_STRIDE(r->guide.nslot) : 0;
     if (!diag) diag = &local;
     appm__diag_clear(diag);
     if (!r) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no renderer");
@@ -14842,7 +14985,7 @@ APPM_API const float *appm_renderer_emission_map(appm_renderer *r, unsigned k, u
     gd = &r->guide;
     if (!r->guide.map && !(r->guide.map = (float *)appm__alloc(&r->mem, APPM__GUIDE_CELLS, sizeof(float))))
         return NULL;
-    appm__guide_density(&r->guide, k); /* a function of the scores: the next pass makes the same */
+    appm__guide_densities(r, &r->guide); /* a function of the learned state: the next pass makes the same */
     for (v = 0; v < APPM__GUIDE_RES; ++v) /* picture row v: u2; column: u1 */
         for (i = 0; i < APPM__GUIDE_RES; ++i)
             r->guide.map[v * APPM__GUIDE_RES + i] = gd->pdf[(size_t)k * APPM__GUIDE_CELLS + (size_t)i * APPM__GUIDE_RES + v];
@@ -14892,19 +15035,21 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  *   count, then per field u32 name length, name, u32 count, u32 is_u64);
  *   per pixel, in reading order, those fields' values (8 bytes each);
  *   per guided light (9.1), u64 pairs counted, u64 passes that counted, f64 x
- *   RES^2 learned scores and f64 x RES^2 paths per cell;
+ *   RES^2 learned scores, f64 x RES^2 paths per cell (expected), f64 x RES^2
+ *   paths per cell (counted) and f64 x RES^2 their cost;
  *   u64 FNV-1a hash of all bytes before it.
  * The format version changes with this layout and with what the scene hashes
  * cover, so that a checkpoint of an older build is refused as such, never
  * misread nor taken for one of another scene (version 2: the hashes in five
  * parts, with the glossy lobe, the normals and the statements as written;
- * version 3: the guided emission's lights and scores).
+ * version 3: the guided emission's lights and scores; version 4: the cost of
+ * its paths).
  * A checkpoint of another format or library version, scene, method, option set,
  * image size or field list is refused (APPM_ERR_INVALID_ARG, saying which); a
  * truncated, altered or impossible one is APPM_ERR_PARSE.  Loading reads the
  * input twice - first to check everything, then to apply it - so a refused
  * checkpoint leaves the renderer as it was. */
-#define APPM__CK_FORMAT 3u
+#define APPM__CK_FORMAT 4u
 #define APPM__CK_BLOCK 65536              /* file buffer */
 #define APPM__CK_MAXFIELDS 64
 #define APPM__FNV_BASIS 14695981039346656037ull
@@ -15276,6 +15421,8 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
         appm__ckw_u(w, r->guide.passes[k], 8);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.score[(size_t)k * APPM__GUIDE_CELLS + c]);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.samples[(size_t)k * APPM__GUIDE_CELLS + c]);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.paths[(size_t)k * APPM__GUIDE_CELLS + c]);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.work[(size_t)k * APPM__GUIDE_CELLS + c]);
     }
     appm__ckw_u(w, w->sum, 8);
 }
@@ -15376,12 +15523,12 @@ static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *non
                     memcpy(&d, &u, sizeof d);
                     if (!F->f[t][k].is_u64 && !(d - d == 0.0)) *nonfinite = 1;
                 }
-    for (i = 0; i < (uint64_t)F->h.guided * (2 + 2 * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
+    for (i = 0; i < (uint64_t)F->h.guided * (2 + 4 * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
          ++i) {
         uint64_t u = appm__ckr_u(rd, 8);
         double d;
         memcpy(&d, &u, sizeof d);
-        if (i % (2 + 2 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* a score */
+        if (i % (2 + 4 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* a score */
     }
 }
 
@@ -15410,6 +15557,8 @@ static void appm__ck_load_pixels(appm__ckr *rd, appm_renderer *r, const appm__ck
         r->guide.passes[t] = appm__ckr_u(rd, 8);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.score[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.samples[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.paths[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.work[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
     }
 }
 
@@ -15539,6 +15688,8 @@ static void appm__ck_reset(appm_renderer *r)
     if (r->guide.nslot) {
         memset(r->guide.score, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.score);
         memset(r->guide.samples, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.samples);
+        memset(r->guide.paths, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.paths);
+        memset(r->guide.work, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.work);
         memset(r->guide.seen, 0, r->guide.nslot * sizeof *r->guide.seen);
         memset(r->guide.passes, 0, r->guide.nslot * sizeof *r->guide.passes);
     }

@@ -21,6 +21,8 @@
  *      a checkpoint after N passes, loaded and run N more, gives the image of
  *      2N passes bit for bit, and a renderer that does not guide refuses it;
  *      --emission light (the default) has no guide at all.
+ *   6. The choice between lights by the photon pass's efficiency, against
+ *      sums done by hand (test_select).
  */
 #include "../appm.c"
 #include "check.h"
@@ -29,11 +31,14 @@
 static void fake_guide(appm__guide *gd, uint32_t *slot, uint32_t *light, double *score, uint64_t *seen, float *pdf,
                        double *cdf, unsigned char *active, double (*pattern)(int i, int k))
 {
-    static double samples[APPM__GUIDE_CELLS];
+    static double samples[APPM__GUIDE_CELLS], paths[APPM__GUIDE_CELLS], work[APPM__GUIDE_CELLS];
     static uint64_t passes[1] = {1};
+    appm__guide_eff e;
     int i, k;
     memset(gd, 0, sizeof *gd);
     gd->samples = samples;
+    gd->paths = paths; /* nothing counted: every cell costs the same */
+    gd->work = work;
     gd->passes = passes;
     for (i = 0; i < APPM__GUIDE_CELLS; ++i) samples[i] = 1e12; /* no shrinkage: the pattern itself */
     gd->nslot = 1;
@@ -49,7 +54,7 @@ static void fake_guide(appm__guide *gd, uint32_t *slot, uint32_t *light, double 
     seen[0] = APPM__GUIDE_MIN;
     for (i = 0; i < APPM__GUIDE_RES; ++i)
         for (k = 0; k < APPM__GUIDE_RES; ++k) score[i * APPM__GUIDE_RES + k] = pattern(i, k);
-    appm__guide_density(gd, 0);
+    appm__guide_density(gd, 0, &e);
 }
 
 static double peaks(int i, int k)
@@ -136,7 +141,10 @@ static void test_weights_power(void)
             r->guide.score[(size_t)l * APPM__GUIDE_CELLS + j] = (j * 7 + l * 13) % 97 < 20 ? 5.0 + l : 0.1,
             r->guide.samples[(size_t)l * APPM__GUIDE_CELLS + j] = 1e6;
     }
-    appm__guide_prepare(r);
+    for (l = 0; l < 2; ++l) { /* each light's own density (appm__guide_select may guide only one) */
+        appm__guide_eff e;
+        appm__guide_density(&r->guide, (uint32_t)l, &e);
+    }
     CHECK(r->guide.active[0] && r->guide.active[1]);
     appm_scene_get_info(s, &info);
     for (l = 0; l < 2; ++l) {
@@ -303,11 +311,11 @@ static void test_glass(void)
     CHECK_MSG(stored_g >= 3 * stored_l, "guided emission stores %llu photons, the lights' own %llu",
               (unsigned long long)stored_g, (unsigned long long)stored_l);
     /* 5: threads */
-    if (glass(s, APPM_EMISSION_GUIDED, 1, 12, a, &sa)) {
+    if (glass(s, APPM_EMISSION_GUIDED, 1, 64, a, &sa)) {
         unsigned t;
         CHECK(sa.emission_guided > 0.0 && sa.emission_lights == 2);
         for (t = 2; t <= 3; ++t)
-            if (glass(s, APPM_EMISSION_GUIDED, t, 12, b, &sb))
+            if (glass(s, APPM_EMISSION_GUIDED, t, 64, b, &sb))
                 CHECK_MSG(memcmp(a, b, sizeof a) == 0, "guided emission: %u threads render another image", t);
     }
     appm_scene_destroy(s);
@@ -324,14 +332,15 @@ static void test_guide_checkpoint(void)
     appm_diag d;
     size_t size = 0;
     void *buf;
-    if (!s || !glass(s, APPM_EMISSION_GUIDED, 2, 16, a, &st)) {
+    if (!s || !glass(s, APPM_EMISSION_GUIDED, 2, 64, a, &st)) {
         appm_scene_destroy(s);
         return;
     }
+    CHECK(st.emission_guided > 0.0); /* the second half draws from learned densities */
     cfg = glass_config(APPM_EMISSION_GUIDED, 1, 32, 46);
     r = check_renderer(s, &cfg);
     q = check_renderer(s, &cfg);
-    if (r && q && check_passes(r, 8) && appm_renderer_save(r, NULL, 0, &size, &d) == APPM_OK &&
+    if (r && q && check_passes(r, 32) && appm_renderer_save(r, NULL, 0, &size, &d) == APPM_OK &&
         (buf = malloc(size)) != NULL) {
         CHECK(appm_renderer_save(r, buf, size, &size, &d) == APPM_OK);
         {   /* into a renderer that does not guide: refused, saying why */
@@ -345,9 +354,11 @@ static void test_guide_checkpoint(void)
         CHECK_MSG(appm_renderer_load(q, buf, size, &d) == APPM_OK, "load: %s", d.message);
         CHECK(memcmp(q->guide.score, r->guide.score, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.samples, r->guide.samples, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
-        if (check_passes(q, 8)) {
+        CHECK(memcmp(q->guide.paths, r->guide.paths, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
+        CHECK(memcmp(q->guide.work, r->guide.work, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
+        if (check_passes(q, 32)) {
             appm_renderer_image(q, &im);
-            CHECK_MSG(memcmp(im.rgb, a, sizeof a) == 0, "8 + 8 passes across a checkpoint differ from 16");
+            CHECK_MSG(memcmp(im.rgb, a, sizeof a) == 0, "32 + 32 passes across a checkpoint differ from 64");
         }
         free(buf);
     }
@@ -356,8 +367,77 @@ static void test_guide_checkpoint(void)
     appm_scene_destroy(s);
 }
 
+/* 6. The choice between lights (appm__guide_select), against sums done by
+ * hand.  Two lights, each picked with probability 1/2.  Light 0's importance
+ * lies in 8 of the 1024 cells (v = 128 there: mean 1, its own second moment
+ * 128, its learned density 96.25 there and 1/4 elsewhere: 1.33); light 1's is
+ * flat (v = T: nothing to learn, its own test fails).  With T = 14 guiding
+ * light 0 takes V = 2 (128 + T^2) - (1 + T)^2 = 423 to 169.7 (0.40x):
+ *   a. every path costs the same: guided;
+ *   b. its 8 cells' paths cost 12 (they hit the model; the others leave the
+ *      scene): K = 1.043 -> 5.13, V K 1.97x: not guided, although its own test
+ *      passes - the bunny's point light;
+ *   c. as b, but light 0 holds the photon term (T = 0.5): V 254.25 -> 0.91,
+ *      V K 0.018x: guided. */
+static void select_case(double hot_cost, double T, int want)
+{
+    static double score[2 * APPM__GUIDE_CELLS], samples[2 * APPM__GUIDE_CELLS], paths[2 * APPM__GUIDE_CELLS],
+        work[2 * APPM__GUIDE_CELLS], cdf[2 * APPM__GUIDE_CDF];
+    static float pdf[2 * APPM__GUIDE_CELLS];
+    static appm_renderer r;
+    static appm_scene sc;
+    static appm__light L[2];
+    uint32_t slot[2] = {0, 1}, light[2] = {0, 1};
+    uint64_t seen[2] = {APPM__GUIDE_MIN, APPM__GUIDE_MIN}, passes[2] = {1, 1};
+    unsigned char active[2];
+    int c;
+    memset(&r, 0, sizeof r);
+    memset(&sc, 0, sizeof sc);
+    memset(L, 0, sizeof L);
+    L[0].pick = L[1].pick = 0.5;
+    sc.light = L;
+    sc.nlight = 2;
+    r.scene = &sc;
+    r.guide.nslot = 2;
+    r.guide.slot = slot;
+    r.guide.light = light;
+    r.guide.score = score;
+    r.guide.samples = samples;
+    r.guide.paths = paths;
+    r.guide.work = work;
+    r.guide.seen = seen;
+    r.guide.passes = passes;
+    r.guide.pdf = pdf;
+    r.guide.cdf = cdf;
+    r.guide.active = active;
+    for (c = 0; c < APPM__GUIDE_CELLS; ++c) {
+        int hot = c % 128 == 5; /* 8 cells */
+        score[c] = hot ? 128.0 : 0.0;
+        score[APPM__GUIDE_CELLS + c] = T;
+        samples[c] = samples[APPM__GUIDE_CELLS + c] = 1e12; /* no shrinkage */
+        paths[c] = paths[APPM__GUIDE_CELLS + c] = 1e9;
+        work[c] = 1e9 * (hot ? hot_cost : 1.0);
+        work[APPM__GUIDE_CELLS + c] = 1e9;
+    }
+    appm__guide_prepare(&r);
+    CHECK_MSG(active[0] == want && !active[1], "hot cells cost %g, T %g: light 0 guided %d, light 1 %d", hot_cost,
+              T, active[0], active[1]);
+    CHECK_NEAR(r.stats.emission_guided, want ? 0.375 : 0.0, 1e-12);
+    for (c = 0; c < APPM__GUIDE_CELLS; ++c) /* a light not guided draws from its own density */
+        if (!want && pdf[c] != 1.0f) break;
+    CHECK(want || c == APPM__GUIDE_CELLS);
+}
+
+static void test_select(void)
+{
+    select_case(1.0, 14.0, 1);
+    select_case(12.0, 14.0, 0);
+    select_case(12.0, 0.5, 1);
+}
+
 int main(void)
 {
+    test_select();
     test_warp_chi2();
     test_weights_power();
     test_closed_box();
