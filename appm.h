@@ -262,8 +262,9 @@ typedef enum appm_sampler {
 } appm_sampler;
 
 /* Where photon paths start (appm.c section 9.1).
- *   LIGHT (default): the lights' own distributions.
- *   GUIDED: each light's first emission sample - the direction of a point or
+ *   LIGHT: the lights' own distributions (the images of versions before
+ *     guiding was the default, bit for bit).
+ *   GUIDED (default): each light's first emission sample - the direction of a point or
  *     spot light or of the environment, the point on an area light - is drawn
  *     from a mixture of the light's own distribution (a defensive quarter) and
  *     a 32x32 piecewise-constant density learned from where the photons that
@@ -272,13 +273,17 @@ typedef enum appm_sampler {
  *     consistent; where nothing is gathered yet (the first pass, or a light
  *     whose photons no pixel sees), emission is the light's own.  The learned
  *     densities are part of a checkpoint.  At most 16 lights (the most
- *     powerful) are guided.  Measured at equal time (docs/algorithm.md 5.8):
- *     0.73x the RMSE on a caustic seen only through glass, but 1.02x on the
- *     teapot and 1.14-1.19x on the bunny under a sky, where more photons cost
- *     more than they help; so it is not (yet) the default. */
+ *     powerful) are candidates, and a light is guided only where its learned
+ *     density makes the photon pass more efficient (variance x cost, counted,
+ *     not timed); elsewhere - a closed box, a light whose photons no pixel
+ *     sees - it emits as LIGHT, and the image is LIGHT's bit for bit when no
+ *     light ever pays.  Measured at equal time (docs/algorithm.md 5.8): 0.73x
+ *     the RMSE of LIGHT on a caustic seen only through glass, 0.94x on the
+ *     teapot, 1.02x on the bunny under a sky (where guiding stays off). */
 typedef enum appm_emission {
-    APPM_EMISSION_LIGHT = 0, /* default */
-    APPM_EMISSION_GUIDED
+    APPM_EMISSION_GUIDED = 0, /* default; LIGHT was the default (and 0) in earlier
+                               * versions: code that wants it names it */
+    APPM_EMISSION_LIGHT
 } appm_emission;
 
 /* What a texture map (map_Kd, map_Ks, map_d) that cannot be read or decoded
@@ -335,7 +340,7 @@ typedef struct appm_config {
      * are K times coarser; 4 chains lost half or more of the gain on diffuse
      * boxes at 256 passes), 8 K bytes a pixel. */
     unsigned chains;
-    appm_emission emission;   /* APPM_EMISSION_LIGHT                                 */
+    appm_emission emission;   /* APPM_EMISSION_GUIDED                                */
     appm_file_reader reader;  /* every file a load reads (scenes, meshes, materials, maps,
                                * images, a renderer's checkpoints): NULL read
                                * hook: the file system                              */

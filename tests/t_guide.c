@@ -20,7 +20,7 @@
  *   5. Determinism: the same image bit for bit with 1, 2 and 3 threads;
  *      a checkpoint after N passes, loaded and run N more, gives the image of
  *      2N passes bit for bit, and a renderer that does not guide refuses it;
- *      --emission light (the default) has no guide at all.
+ *      --emission light has no guide at all; the default is guided.
  *   6. The choice between lights by the photon pass's efficiency, against
  *      sums done by hand (test_select).
  */
@@ -437,6 +437,12 @@ static void test_select(void)
 
 int main(void)
 {
+    {   /* guided is the default, and a zeroed configuration is the default */
+        static const appm_config zero;
+        appm_config c;
+        appm_config_init(&c);
+        CHECK(c.emission == APPM_EMISSION_GUIDED && zero.emission == APPM_EMISSION_GUIDED);
+    }
     test_select();
     test_warp_chi2();
     test_weights_power();
