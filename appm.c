@@ -11372,6 +11372,8 @@ typedef struct appm__guide { /* emission guided by visual importance (section 9.
     uint32_t *slot;      /* per scene light: its slot, or UINT32_MAX */
     uint32_t *light;     /* per slot: its scene light */
     double *score;       /* per slot and cell: the learned importance, summed over passes */
+    double *score_odd;   /* per slot and cell: its part from the odd passes that learned (the 1st,
+                          * 3rd, ...): two independent halves (appm__guide_density) */
     uint64_t *seen;      /* per slot: pixel-photon pairs counted so far */
     uint64_t *passes;    /* per slot: passes that counted */
     double *samples;     /* per slot and cell: the paths it emitted, expected, summed over those passes */
@@ -11385,6 +11387,7 @@ typedef struct appm__guide { /* emission guided by visual importance (section 9.
                           * contributions gathered this pass, in units of ref / 2^16; per slot the
                           * pixel-photon pairs; per slot and cell the paths traced, then their cost */
     float *map;          /* appm_renderer_emission_map's picture */
+    double *half;        /* scratch: the two halves' importance of one slot (appm__guide_halves) */
 } appm__guide;
 
 struct appm_renderer {
@@ -11859,6 +11862,39 @@ static double appm__guide_importance(const appm__guide *gd, uint32_t slot, doubl
     return sum;
 }
 
+/* The same importance from each half of the passes that learned, the odd
+ * (1st, 3rd, ...) and the even ones, each shrunk with half the paths: into
+ * vo[c] and ve[c] (0 while a half is empty).  Their product estimates v_c^2
+ * without the noise that v_c's own square carries (E[vo ve] = E[vo] E[ve]:
+ * different passes, independent photons), which is what the test of worth
+ * needs: where a few lucky photons make v spiky (a sun's caustic through a
+ * glass sphere), sum v^2 promised a 30x lower variance that the image did
+ * not see (docs/algorithm.md 5.8). */
+static void appm__guide_halves(const appm__guide *gd, uint32_t slot, double *vo, double *ve)
+{
+    const size_t at = (size_t)slot * APPM__GUIDE_CELLS;
+    const double *sc = gd->score + at, *so = gd->score_odd + at, *n = gd->samples + at;
+    const double Jo = (double)((gd->passes[slot] + 1u) / 2u), Je = (double)(gd->passes[slot] / 2u);
+    double mo = 0.0, me = 0.0;
+    int i;
+    if (Je < 1.0) {
+        memset(vo, 0, APPM__GUIDE_CELLS * sizeof *vo);
+        memset(ve, 0, APPM__GUIDE_CELLS * sizeof *ve);
+        return;
+    }
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        mo += so[i] / Jo;
+        me += (sc[i] > so[i] ? sc[i] - so[i] : 0.0) / Je; /* a difference of sums: never below 0 */
+    }
+    mo /= APPM__GUIDE_CELLS;
+    me /= APPM__GUIDE_CELLS;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        const double h = 0.5 * n[i];
+        vo[i] = (h * (so[i] / Jo) + APPM__GUIDE_PRIOR * mo) / (h + APPM__GUIDE_PRIOR);
+        ve[i] = (h * ((sc[i] > so[i] ? sc[i] - so[i] : 0.0) / Je) + APPM__GUIDE_PRIOR * me) / (h + APPM__GUIDE_PRIOR);
+    }
+}
+
 /* Slot `slot`'s CDFs from its density pdf[]: the rows' marginal, then each
  * row's conditional. */
 static void appm__guide_cdf(appm__guide *gd, uint32_t slot)
@@ -11879,12 +11915,13 @@ static void appm__guide_cdf(appm__guide *gd, uint32_t slot)
 }
 
 /* What the choice between lights (appm__guide_select) knows of a slot, per
- * path of that light: mu, the mean of the importance v over the cells (its
- * share of the photon term); the second moments of a path's estimate of it
- * with the light's own density, mean(v^2), and with the learned one,
- * mean(v^2 / p); and a path's mean cost (appm__guide_tally) under each. */
+ * path of that light, from the two halves of its passes (appm__guide_halves):
+ * the mean of each half's importance over the cells (the light's share of the
+ * photon term); the second moments of a path's estimate of it with the
+ * light's own density, mean(vo ve), and with the learned one, mean(vo ve / p);
+ * and a path's mean cost (appm__guide_tally) under each. */
 typedef struct appm__guide_eff {
-    double mu, m_own, m_with, k_own, k_with;
+    double mu_o, mu_e, m_own, m_with, k_own, k_with;
 } appm__guide_eff;
 
 /* Slot `slot`'s density and CDFs for the next pass: p_c = a + (1 - a) g_c,
@@ -11892,20 +11929,24 @@ typedef struct appm__guide_eff {
  * APPM__GUIDE_MIN pairs and if p pays: the second moment of the estimate of
  * sum(v) that p gives, sum(v_c^2 / p_c), at most APPM__GUIDE_GAIN times the
  * light's own, sum(v_c^2) (importance sampling's variance, against uniform; a
- * density the data cannot tell from flat is not worth its weights' noise).
+ * density the data cannot tell from flat is not worth its weights' noise),
+ * each v_c^2 estimated as the product of the two halves' (appm__guide_halves).
  * Else p = 1 everywhere (not active).  The cost of a path from cell c is its
  * mean counted cost, shrunk like v towards the light's mean. */
 static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff *e)
 {
     double v[APPM__GUIDE_CELLS], sum, own = 0.0, with = 0.0, n = 0.0, work = 0.0, kbar;
     const double *np = gd->paths + (size_t)slot * APPM__GUIDE_CELLS, *wk = gd->work + (size_t)slot * APPM__GUIDE_CELLS;
+    double *vo = gd->half, *ve = gd->half + APPM__GUIDE_CELLS;
     float *p = gd->pdf + (size_t)slot * APPM__GUIDE_CELLS;
     int i;
     int finite;
     sum = appm__guide_importance(gd, slot, v);
+    appm__guide_halves(gd, slot, vo, ve);
     finite = sum >= 0.0 && sum < HUGE_VAL;
     for (i = 0; i < APPM__GUIDE_CELLS; ++i) { /* a checkpoint's state is checked, but never trusted */
         if (!(v[i] >= 0.0 && v[i] < HUGE_VAL) || !(np[i] >= 0.0 && wk[i] >= 0.0)) finite = 0;
+        if (!(vo[i] >= 0.0 && vo[i] < HUGE_VAL && ve[i] >= 0.0 && ve[i] < HUGE_VAL)) finite = 0;
         n += np[i];
         work += wk[i];
     }
@@ -11917,12 +11958,12 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff 
         p[i] = gd->active[slot]
                    ? (float)(APPM__GUIDE_DEFENSIVE + (1.0 - APPM__GUIDE_DEFENSIVE) * v[i] * APPM__GUIDE_CELLS / sum)
                    : 1.0f;
-        own += v[i] * v[i];
-        with += v[i] * v[i] / p[i];
+        own += vo[i] * ve[i];
+        with += vo[i] * ve[i] / p[i];
         e->k_own += k;
         e->k_with += p[i] * k;
     }
-    if (gd->active[slot] && !(with <= APPM__GUIDE_GAIN * own)) {
+    if (gd->active[slot] && !(own > 0.0 && with <= APPM__GUIDE_GAIN * own)) {
         gd->active[slot] = 0;
         for (i = 0; i < APPM__GUIDE_CELLS; ++i) p[i] = 1.0f;
     }
@@ -11935,7 +11976,10 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff 
         memset(e, 0, sizeof *e);
         return;
     }
-    e->mu = sum / APPM__GUIDE_CELLS;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        e->mu_o += vo[i] / APPM__GUIDE_CELLS;
+        e->mu_e += ve[i] / APPM__GUIDE_CELLS;
+    }
     e->m_own = own / APPM__GUIDE_CELLS;
     e->m_with = with / APPM__GUIDE_CELLS;
     e->k_own /= APPM__GUIDE_CELLS;
@@ -11957,7 +12001,7 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff 
 static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const appm__guide_eff *e)
 {
     unsigned char take[APPM__GUIDE_LIGHTS];
-    double V = 0.0, K = 0.0, mu = 0.0;
+    double V = 0.0, K = 0.0, mu_o = 0.0, mu_e = 0.0;
     uint32_t s;
     int c;
     for (s = 0; s < gd->nslot; ++s) {
@@ -11966,9 +12010,10 @@ static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const ap
         gd->active[s] = 0;
         V += e[s].m_own / pi;
         K += pi * e[s].k_own;
-        mu += e[s].mu;
+        mu_o += e[s].mu_o;
+        mu_e += e[s].mu_e;
     }
-    V -= mu * mu;
+    V -= mu_o * mu_e;
     for (;;) {
         double best_vk = HUGE_VAL, bv = 0.0, bk = 0.0;
         uint32_t best = UINT32_MAX;
@@ -11978,7 +12023,7 @@ static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const ap
             if (!take[s] || gd->active[s]) continue;
             v = V + (e[s].m_with - e[s].m_own) / pi;
             k = K + pi * (e[s].k_with - e[s].k_own);
-            if (v * k < best_vk) {
+            if (v > 0.0 && v * k < best_vk) { /* v <= 0: the halves disagree, a promise of noise */
                 best_vk = v * k;
                 best = s;
                 bv = v;
@@ -12063,7 +12108,11 @@ static void appm__guide_learn(appm_renderer *r)
         if (c >= 2 * cells + gd->nslot) gd->work[c - 2 * cells - gd->nslot] += (double)n;
         else if (c >= cells + gd->nslot) gd->paths[c - cells - gd->nslot] += (double)n;
         else if (c >= cells) gd->seen[c - cells] += n;
-        else if (n) gd->score[c] += (double)n * (gd->ref / 65536.0) * APPM__GUIDE_CELLS;
+        else if (n) {
+            const double add = (double)n * (gd->ref / 65536.0) * APPM__GUIDE_CELLS;
+            gd->score[c] += add;
+            if (gd->passes[c / APPM__GUIDE_CELLS] & 1u) gd->score_odd[c] += add;
+        }
     }
 }
 
@@ -12091,6 +12140,8 @@ static int appm__guide_alloc(appm_renderer *r)
     gd->nslot = n;
     k = n * APPM__GUIDE_CELLS;
     gd->score = (double *)appm__alloc(&r->mem, k, sizeof *gd->score);
+    gd->score_odd = (double *)appm__alloc(&r->mem, k, sizeof *gd->score_odd);
+    gd->half = (double *)appm__alloc(&r->mem, 2u * APPM__GUIDE_CELLS, sizeof *gd->half);
     gd->seen = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->seen);
     gd->passes = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->passes);
     gd->samples = (double *)appm__alloc(&r->mem, k, sizeof *gd->samples);
@@ -12100,8 +12151,8 @@ static int appm__guide_alloc(appm_renderer *r)
     gd->paths = (double *)appm__alloc(&r->mem, k, sizeof *gd->paths);
     gd->work = (double *)appm__alloc(&r->mem, k, sizeof *gd->work);
     gd->count = (uint64_t *)appm__alloc(&r->mem, APPM__GUIDE_STRIDE(n), (size_t)r->threads * sizeof *gd->count);
-    return n == 0 || (gd->score && gd->seen && gd->passes && gd->samples && gd->paths && gd->work && gd->pdf &&
-                      gd->cdf && gd->active && gd->count);
+    return n == 0 || (gd->score && gd->score_odd && gd->half && gd->seen && gd->passes && gd->samples &&
+                      gd->paths && gd->work && gd->pdf && gd->cdf && gd->active && gd->count);
 }
 
 static void appm__guide_free(appm_renderer *r)
@@ -12110,6 +12161,8 @@ static void appm__guide_free(appm_renderer *r)
     appm__free(&r->mem, gd->slot);
     appm__free(&r->mem, gd->light);
     appm__free(&r->mem, gd->score);
+    appm__free(&r->mem, gd->score_odd);
+    appm__free(&r->mem, gd->half);
     appm__free(&r->mem, gd->seen);
     appm__free(&r->mem, gd->passes);
     appm__free(&r->mem, gd->samples);
@@ -15046,15 +15099,16 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  *   count, then per field u32 name length, name, u32 count, u32 is_u64);
  *   per pixel, in reading order, those fields' values (8 bytes each);
  *   per guided light (9.1), u64 pairs counted, u64 passes that counted, f64 x
- *   RES^2 learned scores, f64 x RES^2 paths per cell (expected), f64 x RES^2
- *   paths per cell (counted) and f64 x RES^2 their cost;
+ *   RES^2 learned scores, f64 x RES^2 their part from the odd passes, f64 x
+ *   RES^2 paths per cell (expected), f64 x RES^2 paths per cell (counted) and
+ *   f64 x RES^2 their cost;
  *   u64 FNV-1a hash of all bytes before it.
  * The format version changes with this layout and with what the scene hashes
  * cover, so that a checkpoint of an older build is refused as such, never
  * misread nor taken for one of another scene (version 2: the hashes in five
  * parts, with the glossy lobe, the normals and the statements as written;
  * version 3: the guided emission's lights and scores; version 4: the cost of
- * its paths).
+ * its paths and the scores' odd half).
  * A checkpoint of another format or library version, scene, method, option set,
  * image size or field list is refused (APPM_ERR_INVALID_ARG, saying which); a
  * truncated, altered or impossible one is APPM_ERR_PARSE.  Loading reads the
@@ -15431,6 +15485,7 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
         appm__ckw_u(w, r->guide.seen[k], 8);
         appm__ckw_u(w, r->guide.passes[k], 8);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.score[(size_t)k * APPM__GUIDE_CELLS + c]);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.score_odd[(size_t)k * APPM__GUIDE_CELLS + c]);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.samples[(size_t)k * APPM__GUIDE_CELLS + c]);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.paths[(size_t)k * APPM__GUIDE_CELLS + c]);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.work[(size_t)k * APPM__GUIDE_CELLS + c]);
@@ -15534,12 +15589,12 @@ static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *non
                     memcpy(&d, &u, sizeof d);
                     if (!F->f[t][k].is_u64 && !(d - d == 0.0)) *nonfinite = 1;
                 }
-    for (i = 0; i < (uint64_t)F->h.guided * (2 + 4 * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
+    for (i = 0; i < (uint64_t)F->h.guided * (2 + 5 * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
          ++i) {
         uint64_t u = appm__ckr_u(rd, 8);
         double d;
         memcpy(&d, &u, sizeof d);
-        if (i % (2 + 4 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* a score */
+        if (i % (2 + 5 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* a score */
     }
 }
 
@@ -15567,6 +15622,7 @@ static void appm__ck_load_pixels(appm__ckr *rd, appm_renderer *r, const appm__ck
         r->guide.seen[t] = appm__ckr_u(rd, 8);
         r->guide.passes[t] = appm__ckr_u(rd, 8);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.score[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
+        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.score_odd[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.samples[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.paths[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
         for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.work[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
@@ -15698,6 +15754,7 @@ static void appm__ck_reset(appm_renderer *r)
     if (r->chain_sum) memset(r->chain_sum, 0, npix * r->chains * sizeof *r->chain_sum);
     if (r->guide.nslot) {
         memset(r->guide.score, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.score);
+        memset(r->guide.score_odd, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.score_odd);
         memset(r->guide.samples, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.samples);
         memset(r->guide.paths, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.paths);
         memset(r->guide.work, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.work);

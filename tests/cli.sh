@@ -460,19 +460,19 @@ check "... but with a point light added" warned 'pt does not' 1
 # each guided light's density with --aux, and is refused by a light resume; light
 # emits from the lights' own distributions, another image once a light is guided.
 GLASS=scenes/caustic-glass.scene
-run "$APPM" render "$GLASS" --size 32x46 --passes 64 -q -o "$T/glass-d.pfm"
+run "$APPM" render "$GLASS" --size 56x80 --passes 40 -q -o "$T/glass-d.pfm"
 check "no --emission: the summary says guided" contains "$T/out" "emission=guided guided="
-run "$APPM" render "$GLASS" --size 32x46 --passes 64 -q --emission light -o "$T/glass-l.pfm"
+run "$APPM" render "$GLASS" --size 56x80 --passes 40 -q --emission light -o "$T/glass-l.pfm"
 check "--emission light: the summary says so" contains "$T/out" "emission=light"
 check "--emission light: not the default's image" not cmp -s "$T/glass-d.pfm" "$T/glass-l.pfm"
-run "$APPM" render "$GLASS" --size 32x46 --passes 64 -q --emission guided --aux "$T/gl" -o "$T/glass-g.pfm" \
+run "$APPM" render "$GLASS" --size 56x80 --passes 40 -q --emission guided --aux "$T/gl" -o "$T/glass-g.pfm" \
     --checkpoint "$T/glass.ckpt"
 check "--emission guided exits 0" [ "$rc" -eq 0 ]
 check "--emission guided: the default's image, byte for byte" cmp -s "$T/glass-d.pfm" "$T/glass-g.pfm"
 check "--emission guided: the summary gives the guided share" contains "$T/out" "emission=guided guided="
-check "--emission guided: the spot is guided after 64 passes" not contains "$T/out" "guided=0.000"
+check "--emission guided: the spot is guided after 40 passes" not contains "$T/out" "guided=0.000"
 check "--emission guided --aux writes light 0's density" nonempty "$T/gl-emission-0.pfm" "$T/gl-emission-0.png"
-run "$APPM" render "$GLASS" --size 32x46 --passes 66 -q --emission light --resume "$T/glass.ckpt" -o "$T/never.pfm"
+run "$APPM" render "$GLASS" --size 56x80 --passes 42 -q --emission light --resume "$T/glass.ckpt" -o "$T/never.pfm"
 check "a guided checkpoint is refused by --emission light (exit $rc)" refused_with emission
 run "$APPM" render "$GLASS" --size 8x8 --passes 1 -q --emission both -o "$T/never.png"
 check "--emission both is a usage error" [ "$rc" -eq 1 ]

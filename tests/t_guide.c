@@ -16,7 +16,7 @@
  *      switches itself off.
  *   4. Where it helps, caustic-glass, the passes store many more photons per
  *      emitted path (deterministic counts, not times: at least 3x at 56x80
- *      after 16 and 32 passes; more with more paths a pass).
+ *      after 32 and 48 passes; more with more paths a pass).
  *   5. Determinism: the same image bit for bit with 1, 2 and 3 threads;
  *      a checkpoint after N passes, loaded and run N more, gives the image of
  *      2N passes bit for bit, and a renderer that does not guide refuses it;
@@ -31,14 +31,17 @@
 static void fake_guide(appm__guide *gd, uint32_t *slot, uint32_t *light, double *score, uint64_t *seen, float *pdf,
                        double *cdf, unsigned char *active, double (*pattern)(int i, int k))
 {
-    static double samples[APPM__GUIDE_CELLS], paths[APPM__GUIDE_CELLS], work[APPM__GUIDE_CELLS];
-    static uint64_t passes[1] = {1};
+    static double samples[APPM__GUIDE_CELLS], paths[APPM__GUIDE_CELLS], work[APPM__GUIDE_CELLS],
+        odd[APPM__GUIDE_CELLS], half[2 * APPM__GUIDE_CELLS];
+    static uint64_t passes[1] = {2}; /* two passes that learned the same: halves that agree */
     appm__guide_eff e;
     int i, k;
     memset(gd, 0, sizeof *gd);
     gd->samples = samples;
     gd->paths = paths; /* nothing counted: every cell costs the same */
     gd->work = work;
+    gd->score_odd = odd;
+    gd->half = half;
     gd->passes = passes;
     for (i = 0; i < APPM__GUIDE_CELLS; ++i) samples[i] = 1e12; /* no shrinkage: the pattern itself */
     gd->nslot = 1;
@@ -53,7 +56,10 @@ static void fake_guide(appm__guide *gd, uint32_t *slot, uint32_t *light, double 
     light[0] = 0;
     seen[0] = APPM__GUIDE_MIN;
     for (i = 0; i < APPM__GUIDE_RES; ++i)
-        for (k = 0; k < APPM__GUIDE_RES; ++k) score[i * APPM__GUIDE_RES + k] = pattern(i, k);
+        for (k = 0; k < APPM__GUIDE_RES; ++k) {
+            odd[i * APPM__GUIDE_RES + k] = pattern(i, k);
+            score[i * APPM__GUIDE_RES + k] = 2.0 * pattern(i, k);
+        }
     appm__guide_density(gd, 0, &e);
 }
 
@@ -136,9 +142,10 @@ static void test_weights_power(void)
     CHECK(r->guide.nslot == 2 && s->nlight == 2);
     for (l = 0; l < 2; ++l) { /* a learned density, different per light */
         r->guide.seen[l] = APPM__GUIDE_MIN;
-        r->guide.passes[l] = 1;
+        r->guide.passes[l] = 2;
         for (j = 0; j < APPM__GUIDE_CELLS; ++j)
-            r->guide.score[(size_t)l * APPM__GUIDE_CELLS + j] = (j * 7 + l * 13) % 97 < 20 ? 5.0 + l : 0.1,
+            r->guide.score_odd[(size_t)l * APPM__GUIDE_CELLS + j] = (j * 7 + l * 13) % 97 < 20 ? 5.0 + l : 0.1,
+            r->guide.score[(size_t)l * APPM__GUIDE_CELLS + j] = 2.0 * r->guide.score_odd[(size_t)l * APPM__GUIDE_CELLS + j],
             r->guide.samples[(size_t)l * APPM__GUIDE_CELLS + j] = 1e6;
     }
     for (l = 0; l < 2; ++l) { /* each light's own density (appm__guide_select may guide only one) */
@@ -268,14 +275,14 @@ static appm_renderer *glass_render(appm_scene *s, appm_emission e, unsigned thre
     return r;
 }
 
-/* Renders caustic-glass at 32x46: the image into img (32 x 46 x 3 floats) and its stats. */
+/* Renders caustic-glass at 56x80: the image into img (56 x 80 x 3 floats) and its stats. */
 static int glass(appm_scene *s, appm_emission e, unsigned threads, int passes, float *img, appm_stats *st)
 {
-    appm_renderer *r = glass_render(s, e, threads, 32, 46, passes);
+    appm_renderer *r = glass_render(s, e, threads, 56, 80, passes);
     appm_image im;
     if (!r) return 0;
     appm_renderer_image(r, &im);
-    memcpy(img, im.rgb, (size_t)32 * 46 * 3 * sizeof(float));
+    memcpy(img, im.rgb, (size_t)56 * 80 * 3 * sizeof(float));
     appm_renderer_stats(r, st);
     if (e == APPM_EMISSION_LIGHT) CHECK(r->guide.nslot == 0 && r->tag == NULL && !r->pmap.tag);
     appm_renderer_destroy(r);
@@ -295,27 +302,27 @@ static uint64_t glass_stored(appm_scene *s, appm_emission e, int passes)
 
 static void test_glass(void)
 {
-    static float a[32 * 46 * 3], b[32 * 46 * 3];
+    static float a[56 * 80 * 3], b[56 * 80 * 3];
     appm_scene *s = check_load_scene("scenes/caustic-glass.scene");
     appm_stats sa, sb;
     uint64_t stored_g = 0, stored_l = 0;
     int p;
     if (!s) return;
     /* 4: photons stored per emitted path in the 16th and the 32nd pass (56x80) */
-    for (p = 16; p <= 32; p += 16) {
+    for (p = 32; p <= 48; p += 16) {
         stored_g += glass_stored(s, APPM_EMISSION_GUIDED, p);
         stored_l += glass_stored(s, APPM_EMISSION_LIGHT, p);
     }
-    printf("caustic-glass 56x80: photons stored in passes 16 and 32: %llu guided, %llu from the lights\n",
+    printf("caustic-glass 56x80: photons stored in passes 32 and 48: %llu guided, %llu from the lights\n",
            (unsigned long long)stored_g, (unsigned long long)stored_l);
     CHECK_MSG(stored_g >= 3 * stored_l, "guided emission stores %llu photons, the lights' own %llu",
               (unsigned long long)stored_g, (unsigned long long)stored_l);
     /* 5: threads */
-    if (glass(s, APPM_EMISSION_GUIDED, 1, 64, a, &sa)) {
+    if (glass(s, APPM_EMISSION_GUIDED, 1, 40, a, &sa)) {
         unsigned t;
         CHECK(sa.emission_guided > 0.0 && sa.emission_lights == 2);
         for (t = 2; t <= 3; ++t)
-            if (glass(s, APPM_EMISSION_GUIDED, t, 64, b, &sb))
+            if (glass(s, APPM_EMISSION_GUIDED, t, 40, b, &sb))
                 CHECK_MSG(memcmp(a, b, sizeof a) == 0, "guided emission: %u threads render another image", t);
     }
     appm_scene_destroy(s);
@@ -323,7 +330,7 @@ static void test_glass(void)
 
 static void test_guide_checkpoint(void)
 {
-    static float a[32 * 46 * 3];
+    static float a[56 * 80 * 3];
     appm_scene *s = check_load_scene("scenes/caustic-glass.scene");
     appm_config cfg;
     appm_renderer *r, *q;
@@ -332,15 +339,15 @@ static void test_guide_checkpoint(void)
     appm_diag d;
     size_t size = 0;
     void *buf;
-    if (!s || !glass(s, APPM_EMISSION_GUIDED, 2, 64, a, &st)) {
+    if (!s || !glass(s, APPM_EMISSION_GUIDED, 2, 48, a, &st)) {
         appm_scene_destroy(s);
         return;
     }
     CHECK(st.emission_guided > 0.0); /* the second half draws from learned densities */
-    cfg = glass_config(APPM_EMISSION_GUIDED, 1, 32, 46);
+    cfg = glass_config(APPM_EMISSION_GUIDED, 1, 56, 80);
     r = check_renderer(s, &cfg);
     q = check_renderer(s, &cfg);
-    if (r && q && check_passes(r, 32) && appm_renderer_save(r, NULL, 0, &size, &d) == APPM_OK &&
+    if (r && q && check_passes(r, 24) && appm_renderer_save(r, NULL, 0, &size, &d) == APPM_OK &&
         (buf = malloc(size)) != NULL) {
         CHECK(appm_renderer_save(r, buf, size, &size, &d) == APPM_OK);
         {   /* into a renderer that does not guide: refused, saying why */
@@ -356,9 +363,9 @@ static void test_guide_checkpoint(void)
         CHECK(memcmp(q->guide.samples, r->guide.samples, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.paths, r->guide.paths, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.work, r->guide.work, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
-        if (check_passes(q, 32)) {
+        if (check_passes(q, 24)) {
             appm_renderer_image(q, &im);
-            CHECK_MSG(memcmp(im.rgb, a, sizeof a) == 0, "32 + 32 passes across a checkpoint differ from 64");
+            CHECK_MSG(memcmp(im.rgb, a, sizeof a) == 0, "24 + 24 passes across a checkpoint differ from 48");
         }
         free(buf);
     }
@@ -381,14 +388,14 @@ static void test_guide_checkpoint(void)
  *      V K 0.018x: guided. */
 static void select_case(double hot_cost, double T, int want)
 {
-    static double score[2 * APPM__GUIDE_CELLS], samples[2 * APPM__GUIDE_CELLS], paths[2 * APPM__GUIDE_CELLS],
-        work[2 * APPM__GUIDE_CELLS], cdf[2 * APPM__GUIDE_CDF];
+    static double score[2 * APPM__GUIDE_CELLS], odd[2 * APPM__GUIDE_CELLS], samples[2 * APPM__GUIDE_CELLS],
+        paths[2 * APPM__GUIDE_CELLS], work[2 * APPM__GUIDE_CELLS], cdf[2 * APPM__GUIDE_CDF], half[2 * APPM__GUIDE_CELLS];
     static float pdf[2 * APPM__GUIDE_CELLS];
     static appm_renderer r;
     static appm_scene sc;
     static appm__light L[2];
     uint32_t slot[2] = {0, 1}, light[2] = {0, 1};
-    uint64_t seen[2] = {APPM__GUIDE_MIN, APPM__GUIDE_MIN}, passes[2] = {1, 1};
+    uint64_t seen[2] = {APPM__GUIDE_MIN, APPM__GUIDE_MIN}, passes[2] = {2, 2};
     unsigned char active[2];
     int c;
     memset(&r, 0, sizeof r);
@@ -402,6 +409,8 @@ static void select_case(double hot_cost, double T, int want)
     r.guide.slot = slot;
     r.guide.light = light;
     r.guide.score = score;
+    r.guide.score_odd = odd;
+    r.guide.half = half;
     r.guide.samples = samples;
     r.guide.paths = paths;
     r.guide.work = work;
@@ -412,8 +421,10 @@ static void select_case(double hot_cost, double T, int want)
     r.guide.active = active;
     for (c = 0; c < APPM__GUIDE_CELLS; ++c) {
         int hot = c % 128 == 5; /* 8 cells */
-        score[c] = hot ? 128.0 : 0.0;
-        score[APPM__GUIDE_CELLS + c] = T;
+        odd[c] = hot ? 128.0 : 0.0; /* two passes that agree */
+        odd[APPM__GUIDE_CELLS + c] = T;
+        score[c] = 2.0 * odd[c];
+        score[APPM__GUIDE_CELLS + c] = 2.0 * T;
         samples[c] = samples[APPM__GUIDE_CELLS + c] = 1e12; /* no shrinkage */
         paths[c] = paths[APPM__GUIDE_CELLS + c] = 1e9;
         work[c] = 1e9 * (hot ? hot_cost : 1.0);
