@@ -278,8 +278,8 @@ typedef enum appm_sampler {
  *     not timed); elsewhere - a closed box, a light whose photons no pixel
  *     sees - it emits as LIGHT, and the image is LIGHT's bit for bit when no
  *     light ever pays.  Measured at equal time (docs/algorithm.md 5.8): 0.73x
- *     the RMSE of LIGHT on a caustic seen only through glass, 0.94x on the
- *     teapot, 1.02x on the bunny under a sky (where guiding stays off). */
+ *     the RMSE of LIGHT on a caustic seen only through glass, 0.97x on the
+ *     teapot, 1.00x on the bunny under a sky (where guiding stays off). */
 typedef enum appm_emission {
     APPM_EMISSION_GUIDED = 0, /* default; LIGHT was the default (and 0) in earlier
                                * versions: code that wants it names it */

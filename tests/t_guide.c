@@ -385,8 +385,13 @@ static void test_guide_checkpoint(void)
  *      scene): K = 1.043 -> 5.13, V K 1.97x: not guided, although its own test
  *      passes - the bunny's point light;
  *   c. as b, but light 0 holds the photon term (T = 0.5): V 254.25 -> 0.91,
- *      V K 0.018x: guided. */
-static void select_case(double hot_cost, double T, int want)
+ *      V K 0.018x: guided;
+ *   d. every path costing the same, light 1 dimmer (T = 4): guiding light 0
+ *      takes V = 263 to 9.7, guided; but if the even pass put its 8 spikes in
+ *      8 other cells, v spikes over 16 cells and its own squares would still
+ *      promise V 135 -> 9.7 (0.07x), while the halves' products are 0 there:
+ *      the density promises nothing, not guided. */
+static void select_case(double hot_cost, double T, int disagree, int want)
 {
     static double score[2 * APPM__GUIDE_CELLS], odd[2 * APPM__GUIDE_CELLS], samples[2 * APPM__GUIDE_CELLS],
         paths[2 * APPM__GUIDE_CELLS], work[2 * APPM__GUIDE_CELLS], cdf[2 * APPM__GUIDE_CDF], half[2 * APPM__GUIDE_CELLS];
@@ -424,6 +429,8 @@ static void select_case(double hot_cost, double T, int want)
         odd[c] = hot ? 128.0 : 0.0; /* two passes that agree */
         odd[APPM__GUIDE_CELLS + c] = T;
         score[c] = 2.0 * odd[c];
+        if (disagree) /* the even pass's 8 spikes in 8 other cells: noise */
+            score[c] = odd[c] + (c % 128 == 69 ? 128.0 : 0.0);
         score[APPM__GUIDE_CELLS + c] = 2.0 * T;
         samples[c] = samples[APPM__GUIDE_CELLS + c] = 1e12; /* no shrinkage */
         paths[c] = paths[APPM__GUIDE_CELLS + c] = 1e9;
@@ -431,8 +438,8 @@ static void select_case(double hot_cost, double T, int want)
         work[APPM__GUIDE_CELLS + c] = 1e9;
     }
     appm__guide_prepare(&r);
-    CHECK_MSG(active[0] == want && !active[1], "hot cells cost %g, T %g: light 0 guided %d, light 1 %d", hot_cost,
-              T, active[0], active[1]);
+    CHECK_MSG(active[0] == want && !active[1], "hot cells cost %g, T %g, halves %s: light 0 guided %d, light 1 %d",
+              hot_cost, T, disagree ? "disagree" : "agree", active[0], active[1]);
     CHECK_NEAR(r.stats.emission_guided, want ? 0.375 : 0.0, 1e-12);
     for (c = 0; c < APPM__GUIDE_CELLS; ++c) /* a light not guided draws from its own density */
         if (!want && pdf[c] != 1.0f) break;
@@ -441,9 +448,11 @@ static void select_case(double hot_cost, double T, int want)
 
 static void test_select(void)
 {
-    select_case(1.0, 14.0, 1);
-    select_case(12.0, 14.0, 0);
-    select_case(12.0, 0.5, 1);
+    select_case(1.0, 14.0, 0, 1);
+    select_case(12.0, 14.0, 0, 0);
+    select_case(12.0, 0.5, 0, 1);
+    select_case(1.0, 4.0, 0, 1);
+    select_case(1.0, 4.0, 1, 0);
 }
 
 int main(void)
