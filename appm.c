@@ -11790,11 +11790,14 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
  * sums do not depend on which worker gathered which row, and the scores are
  * updated on one thread in cell order after the pass: images stay
  * bit-identical for any thread count.  A light uses its learned density once
- * APPM__GUIDE_MIN pairs have been counted. */
+ * APPM__GUIDE_MIN pairs have been counted, if the density passes its own test
+ * (appm__guide_density) and makes the photon pass more efficient
+ * (appm__guide_select). */
 #define APPM__GUIDE_DEFENSIVE 0.25 /* the light's own density's share of the mixture */
 #define APPM__GUIDE_MIN 64u        /* pixel-photon pairs counted before a light is guided */
 #define APPM__GUIDE_PRIOR 16.0     /* paths a cell's importance is shrunk with (appm__guide_importance) */
-#define APPM__GUIDE_GAIN 0.5       /* a learned density is used if it halves the second moment */
+#define APPM__GUIDE_GAIN 0.5       /* a learned density must halve its light's second moment, and each
+                                    * light guided must halve the photon pass's variance x cost */
 #define APPM__GUIDE_CDF ((APPM__GUIDE_RES + 1) * (APPM__GUIDE_RES + 1)) /* doubles per slot */
 #define APPM__GUIDE_EVERY 4u       /* after pass 32, one pass in 4 learns (appm__guide_learns) */
 
@@ -11997,7 +12000,9 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff 
  * light's learned density cut its own second moment 150x, but its share of
  * the photon term is 7 %, and its aimed paths hit the model three times as
  * often as its own, which miss; guiding it cost 30 % of each pass and removed
- * no error (docs/algorithm.md 5.8).  V and K are of the photon pass alone. */
+ * no error (docs/algorithm.md 5.8).  V and K are of the photon pass alone,
+ * and of the candidate lights: the paths of further lights add the same to
+ * both either way. */
 static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const appm__guide_eff *e)
 {
     unsigned char take[APPM__GUIDE_LIGHTS];
@@ -12384,14 +12389,13 @@ static appm_status appm__photon_pass(appm_renderer *r)
         uint32_t t;
         int failed = 0;
         size_t ncap;
+        if (r->guide.nslot) /* guided emission's counts start from 0 (9.1), whatever an earlier try or a
+                             * pass that failed after its photon pass (and was not committed) left */
+            memset(r->guide.count, 0, APPM__GUIDE_STRIDE(r->guide.nslot) * r->threads * sizeof *r->guide.count);
         appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
         for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
         if (!failed) return APPM_OK;
         memcpy(r->dropped, dropped, sizeof dropped); /* the pass is traced again: its drops count once */
-        for (t = 0; t < r->threads && r->guide.nslot; ++t) /* and so do its paths (9.1) */
-            memset(r->guide.count + (size_t)t * APPM__GUIDE_STRIDE(r->guide.nslot) +
-                       (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1u),
-                   0, 2u * (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.count);
         /* grow every region by half and trace again (rare: the first pass, or a
          * pass that stores more photons than any before it) */
         ncap = r->cap + r->cap / 2 + 4096;
@@ -15594,7 +15598,7 @@ static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *non
         uint64_t u = appm__ckr_u(rd, 8);
         double d;
         memcpy(&d, &u, sizeof d);
-        if (i % (2 + 5 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* a score */
+        if (i % (2 + 5 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* the doubles */
     }
 }
 

@@ -71,9 +71,9 @@ est_below() {
 }
 # lacks FILE WORD: FILE does not hold WORD
 lacks() { ! grep -q -- "$2" "$1"; }
-# contains FILE WORD...: FILE holds every WORD
 # not COMMAND...: COMMAND fails
 not() { ! "$@"; }
+# contains FILE WORD...: FILE holds every WORD
 contains() {
     f=$1
     shift
@@ -470,7 +470,7 @@ run "$APPM" render "$GLASS" --size 56x80 --passes 40 -q --emission guided --aux 
 check "--emission guided exits 0" [ "$rc" -eq 0 ]
 check "--emission guided: the default's image, byte for byte" cmp -s "$T/glass-d.pfm" "$T/glass-g.pfm"
 check "--emission guided: the summary gives the guided share" contains "$T/out" "emission=guided guided="
-check "--emission guided: the spot is guided after 40 passes" not contains "$T/out" "guided=0.000"
+check "--emission guided: the spot is guided after 40 passes" lacks "$T/out" "guided=0.000"
 check "--emission guided --aux writes light 0's density" nonempty "$T/gl-emission-0.pfm" "$T/gl-emission-0.png"
 run "$APPM" render "$GLASS" --size 56x80 --passes 42 -q --emission light --resume "$T/glass.ckpt" -o "$T/never.pfm"
 check "a guided checkpoint is refused by --emission light (exit $rc)" refused_with emission

@@ -64,7 +64,7 @@ static appm_config config(appm_method m, unsigned threads)
     c.photons = 3000;
     c.threads = threads;
     c.seed = 7;
-    c.emission = APPM_EMISSION_LIGHT; /* the guided state's 32 K bytes a light: test_damage's own case */
+    c.emission = APPM_EMISSION_LIGHT; /* the guided state's 40 K bytes a light: test_damage's own case */
     return c;
 }
 

@@ -360,6 +360,7 @@ static void test_guide_checkpoint(void)
         }
         CHECK_MSG(appm_renderer_load(q, buf, size, &d) == APPM_OK, "load: %s", d.message);
         CHECK(memcmp(q->guide.score, r->guide.score, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
+        CHECK(memcmp(q->guide.score_odd, r->guide.score_odd, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.samples, r->guide.samples, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.paths, r->guide.paths, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.work, r->guide.work, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
