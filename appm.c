@@ -9568,9 +9568,9 @@ static appm__v3 appm__env_radiance(const appm_scene *s, appm__v3 d)
 
 /* ---- 6.3 Lights -------------------------------------------------------------- */
 
-/* The last of n entries of cumulative table cdf at or below u (binary search;
- * u < 1 always; the callers step past lights of probability 0, whose
- * intervals are empty). */
+/* The entry of n whose interval [cdf[i], cdf[i+1]) of cumulative table cdf
+ * holds u (binary search; u < 1 always), stepping past empty intervals
+ * (lights of probability 0). */
 static uint32_t appm__cdf_find(const double *cdf, uint32_t n, float u)
 {
     uint32_t lo = 0, hi = n;
@@ -9580,24 +9580,14 @@ static uint32_t appm__cdf_find(const double *cdf, uint32_t n, float u)
         if (cdf[mid] <= x) lo = mid;
         else hi = mid;
     }
+    while (lo + 1 < n && !(cdf[lo + 1] > cdf[lo])) lo++;
     return lo;
 }
 
 /* The light a photon starts at (picked by power, 6.4). */
 static uint32_t appm__pick_light(const appm_scene *s, float u)
 {
-    uint32_t lo = appm__cdf_find(s->light_cdf, s->nlight, u);
-    while (lo + 1 < s->nlight && s->light[lo].pick == 0.0) lo++;
-    return lo;
-}
-
-/* The light of a shadow ray's one sample from table t (6.4); the caller
- * checks that there is one (nee_cdf[t][nlight] > 0). */
-static uint32_t appm__pick_nee(const appm_scene *s, int t, float u)
-{
-    uint32_t lo = appm__cdf_find(s->nee_cdf[t], s->nlight, u);
-    while (lo + 1 < s->nlight && s->light[lo].nee[t] == 0.0) lo++;
-    return lo;
+    return appm__cdf_find(s->light_cdf, s->nlight, u);
 }
 
 /* Spot falloff of pbrt-v3: 1 inside cone-falloff, 0 outside cone, d^4 between. */
@@ -9987,7 +9977,7 @@ static int appm__sample_light(const appm_scene *s, int t, const appm__surf *sf, 
 {
     uint32_t li;
     if (!(s->nee_cdf[t][s->nlight] > 0.0)) return 0;
-    li = appm__pick_nee(s, t, u0);
+    li = appm__cdf_find(s->nee_cdf[t], s->nlight, u0);
     return appm__sample_light_k(s, li, s->light[li].nee[t], sf, n, u1, u2, ls);
 }
 
@@ -11366,11 +11356,15 @@ struct appm__estimator; /* a method's entry in the table of section 10 */
 #define APPM__GUIDE_LIGHTS 16     /* lights guided at most: the most powerful */
 /* A worker's counts per pass (appm__guide.count): shares, pairs, paths, cost. */
 #define APPM__GUIDE_STRIDE(nslot) ((size_t)(nslot) * (3u * APPM__GUIDE_CELLS + 1u))
+/* The learned state's arrays of one value per slot and cell (appm__guide.cells):
+ * score, score_odd, samples, paths, work, in the checkpoint's order. */
+#define APPM__GUIDE_ARRAYS 5
 
 typedef struct appm__guide { /* emission guided by visual importance (section 9.1) */
     uint32_t nslot;      /* guided lights (0: --emission light) */
     uint32_t *slot;      /* per scene light: its slot, or UINT32_MAX */
     uint32_t *light;     /* per slot: its scene light */
+    double *cells;       /* the APPM__GUIDE_ARRAYS arrays below, one allocation, each nslot x RES^2 */
     double *score;       /* per slot and cell: the learned importance, summed over passes */
     double *score_odd;   /* per slot and cell: its part from the odd passes that learned (the 1st,
                           * 3rd, ...): two independent halves (appm__guide_density) */
@@ -12096,10 +12090,7 @@ static void appm__guide_learn(appm_renderer *r)
     appm__guide *gd = &r->guide;
     size_t cells = (size_t)gd->nslot * APPM__GUIDE_CELLS, stride = APPM__GUIDE_STRIDE(gd->nslot), c;
     unsigned w;
-    if (!(gd->ref > 0.0)) { /* nothing gathered yet: this pass's paths and their cost teach nothing */
-        memset(gd->count, 0, stride * r->threads * sizeof *gd->count);
-        return;
-    }
+    if (!(gd->ref > 0.0)) return; /* a pass that does not learn: nothing was counted */
     for (c = 0; c < cells; ++c) /* M pick_l p_c / RES^2 paths from cell c this pass */
         gd->samples[c] += (double)r->M * r->scene->light[gd->light[c / APPM__GUIDE_CELLS]].pick * (double)gd->pdf[c] /
                           APPM__GUIDE_CELLS;
@@ -12144,20 +12135,23 @@ static int appm__guide_alloc(appm_renderer *r)
     }
     gd->nslot = n;
     k = n * APPM__GUIDE_CELLS;
-    gd->score = (double *)appm__alloc(&r->mem, k, sizeof *gd->score);
-    gd->score_odd = (double *)appm__alloc(&r->mem, k, sizeof *gd->score_odd);
+    gd->cells = (double *)appm__alloc(&r->mem, (size_t)k * APPM__GUIDE_ARRAYS, sizeof *gd->cells);
+    if (gd->cells) {
+        gd->score = gd->cells;
+        gd->score_odd = gd->cells + k;
+        gd->samples = gd->cells + 2 * (size_t)k;
+        gd->paths = gd->cells + 3 * (size_t)k;
+        gd->work = gd->cells + 4 * (size_t)k;
+    }
     gd->half = (double *)appm__alloc(&r->mem, 2u * APPM__GUIDE_CELLS, sizeof *gd->half);
     gd->seen = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->seen);
     gd->passes = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->passes);
-    gd->samples = (double *)appm__alloc(&r->mem, k, sizeof *gd->samples);
     gd->pdf = (float *)appm__alloc(&r->mem, k, sizeof *gd->pdf);
     gd->cdf = (double *)appm__alloc(&r->mem, (size_t)n * APPM__GUIDE_CDF, sizeof *gd->cdf);
     gd->active = (unsigned char *)appm__alloc(&r->mem, n, 1);
-    gd->paths = (double *)appm__alloc(&r->mem, k, sizeof *gd->paths);
-    gd->work = (double *)appm__alloc(&r->mem, k, sizeof *gd->work);
     gd->count = (uint64_t *)appm__alloc(&r->mem, APPM__GUIDE_STRIDE(n), (size_t)r->threads * sizeof *gd->count);
-    return n == 0 || (gd->score && gd->score_odd && gd->half && gd->seen && gd->passes && gd->samples &&
-                      gd->paths && gd->work && gd->pdf && gd->cdf && gd->active && gd->count);
+    return n == 0 || (gd->cells && gd->half && gd->seen && gd->passes && gd->pdf && gd->cdf && gd->active &&
+                      gd->count);
 }
 
 static void appm__guide_free(appm_renderer *r)
@@ -12165,14 +12159,10 @@ static void appm__guide_free(appm_renderer *r)
     appm__guide *gd = &r->guide;
     appm__free(&r->mem, gd->slot);
     appm__free(&r->mem, gd->light);
-    appm__free(&r->mem, gd->score);
-    appm__free(&r->mem, gd->score_odd);
+    appm__free(&r->mem, gd->cells);
     appm__free(&r->mem, gd->half);
     appm__free(&r->mem, gd->seen);
     appm__free(&r->mem, gd->passes);
-    appm__free(&r->mem, gd->samples);
-    appm__free(&r->mem, gd->paths);
-    appm__free(&r->mem, gd->work);
     appm__free(&r->mem, gd->pdf);
     appm__free(&r->mem, gd->cdf);
     appm__free(&r->mem, gd->active);
@@ -12248,7 +12238,7 @@ static unsigned appm__photon_rr_dim(const appm__material *m)
 static void appm__guide_tally(appm_renderer *r, unsigned worker, uint32_t tag, unsigned hits)
 {
     uint64_t *c;
-    if (tag == UINT32_MAX) return;
+    if (tag == UINT32_MAX || !(r->guide.ref > 0.0)) return; /* a pass that does not learn (appm__guide_learns) */
     c = r->guide.count + (size_t)worker * APPM__GUIDE_STRIDE(r->guide.nslot) +
         (size_t)r->guide.nslot * (APPM__GUIDE_CELLS + 1u) + tag;
     c[0]++;
@@ -15119,6 +15109,14 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  * input twice - first to check everything, then to apply it - so a refused
  * checkpoint leaves the renderer as it was. */
 #define APPM__CK_FORMAT 4u
+
+/* Where the c-th learned value of slot k stands in appm__guide.cells, in the
+ * checkpoint's order: the slot's RES^2 values of each array in turn. */
+static size_t appm__guide_cell_at(const appm__guide *gd, uint32_t k, unsigned c)
+{
+    return (size_t)(c / APPM__GUIDE_CELLS) * gd->nslot * APPM__GUIDE_CELLS + (size_t)k * APPM__GUIDE_CELLS +
+           c % APPM__GUIDE_CELLS;
+}
 #define APPM__CK_BLOCK 65536              /* file buffer */
 #define APPM__CK_MAXFIELDS 64
 #define APPM__FNV_BASIS 14695981039346656037ull
@@ -15488,11 +15486,8 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
         unsigned c;
         appm__ckw_u(w, r->guide.seen[k], 8);
         appm__ckw_u(w, r->guide.passes[k], 8);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.score[(size_t)k * APPM__GUIDE_CELLS + c]);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.score_odd[(size_t)k * APPM__GUIDE_CELLS + c]);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.samples[(size_t)k * APPM__GUIDE_CELLS + c]);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.paths[(size_t)k * APPM__GUIDE_CELLS + c]);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) appm__ckw_d(w, r->guide.work[(size_t)k * APPM__GUIDE_CELLS + c]);
+        for (c = 0; c < APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS; ++c)
+            appm__ckw_d(w, r->guide.cells[appm__guide_cell_at(&r->guide, k, c)]);
     }
     appm__ckw_u(w, w->sum, 8);
 }
@@ -15593,12 +15588,12 @@ static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *non
                     memcpy(&d, &u, sizeof d);
                     if (!F->f[t][k].is_u64 && !(d - d == 0.0)) *nonfinite = 1;
                 }
-    for (i = 0; i < (uint64_t)F->h.guided * (2 + 5 * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
+    for (i = 0; i < (uint64_t)F->h.guided * (2 + APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
          ++i) {
         uint64_t u = appm__ckr_u(rd, 8);
         double d;
         memcpy(&d, &u, sizeof d);
-        if (i % (2 + 5 * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* the doubles */
+        if (i % (2 + APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* the doubles */
     }
 }
 
@@ -15625,11 +15620,8 @@ static void appm__ck_load_pixels(appm__ckr *rd, appm_renderer *r, const appm__ck
         unsigned c;
         r->guide.seen[t] = appm__ckr_u(rd, 8);
         r->guide.passes[t] = appm__ckr_u(rd, 8);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.score[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.score_odd[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.samples[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.paths[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
-        for (c = 0; c < APPM__GUIDE_CELLS; ++c) r->guide.work[(size_t)t * APPM__GUIDE_CELLS + c] = appm__ckr_d(rd);
+        for (c = 0; c < APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS; ++c)
+            r->guide.cells[appm__guide_cell_at(&r->guide, t, c)] = appm__ckr_d(rd);
     }
 }
 
@@ -15757,11 +15749,8 @@ static void appm__ck_reset(appm_renderer *r)
     if (r->est->state_size) memset(r->state, 0, npix * r->est->state_size);
     if (r->chain_sum) memset(r->chain_sum, 0, npix * r->chains * sizeof *r->chain_sum);
     if (r->guide.nslot) {
-        memset(r->guide.score, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.score);
-        memset(r->guide.score_odd, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.score_odd);
-        memset(r->guide.samples, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.samples);
-        memset(r->guide.paths, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.paths);
-        memset(r->guide.work, 0, (size_t)r->guide.nslot * APPM__GUIDE_CELLS * sizeof *r->guide.work);
+        memset(r->guide.cells, 0,
+               (size_t)r->guide.nslot * APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS * sizeof *r->guide.cells);
         memset(r->guide.seen, 0, r->guide.nslot * sizeof *r->guide.seen);
         memset(r->guide.passes, 0, r->guide.nslot * sizeof *r->guide.passes);
     }
