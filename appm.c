@@ -11439,6 +11439,12 @@ struct appm_renderer {
     appm__guide guide;
     appm__pmap pmap;     /* this pass's photons, compacted and sorted (7.2) */
     uint64_t dropped[APPM__MAX_THREADS];
+    /* the photon budget (12.2): M chosen in pass 1 when the configuration left it 0 */
+    uint64_t M0;         /* width * height: the photon paths of pass 1's count */
+    int budget;          /* 1: M is the budget's (config.photons 0), until pass 1 chooses it */
+    uint32_t nchunks_max; /* chunks the chunk arrays hold: those of APPM__BUDGET_MAX M0 with a budget */
+    uint64_t work[2][APPM__MAX_THREADS]; /* per worker, the rays of this pass's eye paths [0] and
+                                          * photon paths [1] */
     /* a render split over a cluster (12.1); alone: ranks 1, all rows and chunks */
     appm_cluster cluster;
     uint32_t eye0, eye1;     /* this rank's rows of the eye pass */
@@ -11611,11 +11617,13 @@ static const appm__material *appm__eye_split(const appm__material *m, appm__mate
     return NULL;
 }
 
-/* Makes sf the pixel's visible point of this pass (m diffuse or glossy). */
-static void appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__surf *sf, const appm__material *m,
-                             appm__v3 wo, appm__v3 W, unsigned segs, float travelled, appm__v3 *ld,
-                             appm__sampler *smp, unsigned worker)
+/* Makes sf the pixel's visible point of this pass (m diffuse or glossy);
+ * returns the shadow rays it cast (the photon budget's count, 12.2). */
+static unsigned appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__surf *sf, const appm__material *m,
+                                 appm__v3 wo, appm__v3 W, unsigned segs, float travelled, appm__v3 *ld,
+                                 appm__sampler *smp, unsigned worker)
 {
+    unsigned rays = 0;
     vp->x = sf->p;
     vp->n = appm__dot(wo, sf->ng) >= 0.0f ? sf->ng : appm__neg(sf->ng);
     vp->wf = appm__scale(appm__mul(W, m->color), (float)APPM__INV_PI);
@@ -11630,15 +11638,20 @@ static void appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__surf *s
     vp->segs = (uint8_t)(segs > 255 ? 255 : segs);
     vp->tri = sf->tri;
     vp->footprint = travelled * r->pixel_angle;
-    if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth)
+    if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth) {
         *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1)));
+        rays = r->scene->nnee_delta + 1u; /* one to each point and spot light, one sample of the rest */
+    }
     if (!appm__finite3(vp->wf) || !appm__finite3(vp->wg)) {
         vp->segs = 0;
         r->dropped[worker]++;
     }
+    return rays;
 }
 
-static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
+/* Traces pixel (px, py)'s eye path of this pass to its visible point; returns
+ * the rays it cast, shadow rays included (the photon budget's count, 12.2). */
+static unsigned appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned worker)
 {
     const appm_scene *s = r->scene;
     const size_t pi = (size_t)py * r->w + px;
@@ -11647,7 +11660,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
     appm__ray ray;
     appm__v3 W = appm__v(1, 1, 1), ld = appm__v(0, 0, 0);
     uint32_t skip = UINT32_MAX;
-    unsigned segs = 0;
+    unsigned segs = 0, rays = 0;
     float travelled = 0.0f;
     appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, r->pass, pi);
     appm__camera_ray(r, &smp, px, py, &ray);
@@ -11663,6 +11676,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         float u3[4];
         unsigned dims;
         if (++segs > r->max_depth) break;
+        rays++;
         if (!appm__intersect(s, &ray, skip, &h)) {
             if (s->env >= 0) {
                 ld = appm__add(ld, appm__mul(W, appm__env_radiance(s, ray.d)));
@@ -11680,7 +11694,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         }
         if (m->kind == APPM__MAT_DIFFUSE || m->kind == APPM__MAT_GLOSSY) {
             if ((mg = appm__eye_split(m, &tmp, &smp, segs - 1, &W)) != NULL) {
-                appm__eye_vertex(r, vp, &sf, mg, wo, W, segs, travelled, &ld, &smp, worker);
+                rays += appm__eye_vertex(r, vp, &sf, mg, wo, W, segs, travelled, &ld, &smp, worker);
                 break;
             }
             m = &tmp; /* a sharp lobe: on through it */
@@ -11706,6 +11720,7 @@ static void appm__eye_pixel(appm_renderer *r, uint32_t px, uint32_t py, unsigned
         r->dropped[worker]++;
         vp->ld = appm__v(0, 0, 0);
     }
+    return rays;
 }
 
 /* The samples this renderer's workers dropped (in a cluster: this rank's). */
@@ -11722,7 +11737,9 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
     appm_renderer *r = (appm_renderer *)arg;
     const double t0 = r->eye_cost ? appm__seconds() : 0.0;
     uint32_t x;
-    for (x = 0; x < r->w; ++x) appm__eye_pixel(r, x, row, worker);
+    uint64_t rays = 0;
+    for (x = 0; x < r->w; ++x) rays += appm__eye_pixel(r, x, row, worker);
+    r->work[0][worker] += rays;
     if (r->eye_cost) r->eye_cost[row] = (float)(appm__seconds() - t0); /* a cluster's balance (12.1) */
 }
 
@@ -12246,9 +12263,10 @@ static void appm__guide_tally(appm_renderer *r, unsigned worker, uint32_t tag, u
 }
 
 /* Traces photon path `index` (cache: shared by the paths the worker traces in
- * turn, appm__sampler_photon); returns 0 if the task's region is full. */
+ * turn, appm__sampler_photon), adding the rays it casts to *rays (the photon
+ * budget's count, 12.2); returns 0 if the task's region is full. */
 static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
-                             appm__ld_cache *cache)
+                             appm__ld_cache *cache, uint64_t *rays)
 {
     const appm_scene *s = r->scene;
     appm__sampler smp;
@@ -12287,6 +12305,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         float u3[4], steer = 1.0f; /* an aimed bounce's factor (appm__focus_bounce) */
         unsigned dims;
         float q;
+        ++*rays;
         if (!appm__intersect(s, &ray, skip, &h)) break;
         hits++;
         appm__surface(s, &h, &sf);
@@ -12326,6 +12345,7 @@ static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
     appm__ld_cache cache;
+    uint64_t rays = 0;
     uint32_t c;
     cache.set = 0;
     r->task_used[task] = 0;
@@ -12336,14 +12356,15 @@ static void appm__photon_task(void *arg, uint32_t task, unsigned worker)
         if (i1 > r->M) i1 = r->M;
         r->chunk[c].start = r->task_used[task];
         for (i = i0; i < i1; ++i) {
-            if (!appm__photon_path(r, task, i, worker, &cache)) {
+            if (!appm__photon_path(r, task, i, worker, &cache, &rays)) {
                 r->task_failed[task] = 1;
-                return;
+                return; /* the pass is traced again, its counts from 0 */
             }
         }
         r->chunk[c].count = r->task_used[task] - r->chunk[c].start;
         if (r->chunk_cost) r->chunk_cost[c] = (float)(appm__seconds() - t0);
     }
+    r->work[1][worker] += rays;
 }
 
 /* New ph, dest and tag arrays of `slots` photons each (tag only with guided
@@ -12382,6 +12403,7 @@ static appm_status appm__photon_pass(appm_renderer *r)
         if (r->guide.nslot) /* guided emission's counts start from 0 (9.1), whatever an earlier try or a
                              * pass that failed after its photon pass (and was not committed) left */
             memset(r->guide.count, 0, APPM__GUIDE_STRIDE(r->guide.nslot) * r->threads * sizeof *r->guide.count);
+        memset(r->work[1], 0, sizeof r->work[1]); /* so are the budget's (12.2) */
         appm__parallel_for(r->threads, r->tasks, appm__photon_task, r);
         for (t = 0; t < r->tasks; ++t) failed |= r->task_failed[t];
         if (!failed) return APPM_OK;
@@ -14063,6 +14085,12 @@ static void appm__pt_task(void *arg, uint32_t row, unsigned worker)
  * gather (appm__photon_method_pass); the image and the diagnostic maps are
  * derived from the per-pixel state on request.
  */
+/* The photon budget (12.2): pass 1 may multiply the M0 = width * height photon
+ * paths a pass by 2 or by 4 (APPM__BUDGET_MAX), as long as the photon paths'
+ * rays stay within APPM__BUDGET_RATIO times the eye paths'. */
+#define APPM__BUDGET_MAX 4u
+#define APPM__BUDGET_RATIO 1.65
+
 APPM_API void appm_config_init(appm_config *cfg)
 {
     if (!cfg) return;
@@ -14200,6 +14228,25 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
     return APPM_OK;
 }
 
+/* The photon passes' part of a renderer: the chunks' records (as many as the
+ * photon budget may choose, 12.2), the tasks' counts, the store (a first guess
+ * of 1.5 photons a path; it grows if needed) and guided emission's state.
+ * Returns 0 when out of memory. */
+static int appm__photon_alloc(appm_renderer *r, const appm_config *c)
+{
+    r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks_max, sizeof *r->chunk);
+    r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
+    r->task_failed = (int *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_failed);
+    r->cap = appm__store_guess(r->M, r->tasks);
+    r->store_slots = r->cap * r->tasks;
+    r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
+    if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
+    if (!r->chunk || !r->task_used || !r->task_failed || !r->dest) return 0;
+    if (c->emission != APPM_EMISSION_GUIDED) return 1;
+    return appm__guide_alloc(r) &&
+           (!r->guide.nslot || (r->tag = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->tag)) != NULL);
+}
+
 /* The sampler's part of a renderer (section 2.3): which numbers the scene's
  * lights read, the Sobol' table (qmc) and the chains' sums (chains >= 2).
  * Returns 0 when out of memory. */
@@ -14243,7 +14290,6 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     appm_status st;
     size_t npix;
     appm_diag local;
-    int guided = 1; /* 0: guided emission's memory could not be had */
     if (!diag) diag = &local;
     appm__diag_clear(diag);
     if (!out) return appm__fail(diag, APPM_ERR_INVALID_ARG, NULL, 0, "no output pointer");
@@ -14265,6 +14311,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->w = c.width;
     r->h = c.height;
     r->M = c.photons;
+    r->M0 = (uint64_t)c.width * c.height;
+    r->budget = (!cfg || cfg->photons == 0) && (r->est->caps & APPM__CAP_PHOTONS) != 0;
     r->r1 = c.radius;
     r->r1_auto = c.radius == 0.0;
     r->alpha = c.alpha;
@@ -14274,6 +14322,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->pixel_angle = 2.0f * scene->cam.tan_half / (float)r->h;
     r->tasks = r->threads;
     r->nchunks = (uint32_t)((r->M + APPM__CHUNK - 1) / APPM__CHUNK);
+    r->nchunks_max = r->budget ? (uint32_t)((APPM__BUDGET_MAX * r->M0 + APPM__CHUNK - 1) / APPM__CHUNK) : r->nchunks;
     r->cluster.ranks = 1;
     r->eye1 = r->row1 = r->h;
     r->chunk1 = r->nchunks;
@@ -14282,24 +14331,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
     if (r->est->state_size) r->state = (unsigned char *)appm__alloc(&r->mem, npix, r->est->state_size);
-    if (r->est->caps & APPM__CAP_PHOTONS) {
-        r->chunk = (appm__chunk_rec *)appm__alloc(&r->mem, r->nchunks, sizeof *r->chunk);
-        r->task_used = (uint32_t *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_used);
-        r->task_failed = (int *)appm__alloc(&r->mem, r->tasks, sizeof *r->task_failed);
-        /* first guess at the store: 1.5 photons per path; it grows if needed */
-        r->cap = appm__store_guess(r->M, r->tasks);
-        r->store_slots = r->cap * r->tasks;
-        r->ph = (appm__photon *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->ph);
-        if (r->ph) r->dest = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks, sizeof *r->dest);
-        if (c.emission == APPM_EMISSION_GUIDED && r->dest)
-            guided = appm__guide_alloc(r) &&
-                     (!r->guide.nslot || (r->tag = (uint32_t *)appm__alloc(&r->mem, r->cap * r->tasks,
-                                                                            sizeof *r->tag)) != NULL);
-    }
     if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) || !appm__sampler_alloc(r, &c) ||
-        !appm__error_alloc(r) ||
-        ((r->est->caps & APPM__CAP_PHOTONS) && (!r->chunk || !r->task_used || !r->task_failed || !r->dest)) ||
-        !guided) {
+        !appm__error_alloc(r) || ((r->est->caps & APPM__CAP_PHOTONS) && !appm__photon_alloc(r, &c))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
         fm = r->mem;
@@ -14846,7 +14879,7 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
     r->cl_chunks = (uint32_t *)appm__alloc(&r->mem, (size_t)c->ranks + 1, sizeof *r->cl_chunks);
     r->eye_cost = (float *)appm__alloc(&r->mem, r->h, sizeof *r->eye_cost);
     r->row_cost = (float *)appm__alloc(&r->mem, r->h, sizeof *r->row_cost);
-    r->chunk_cost = (float *)appm__alloc(&r->mem, r->nchunks ? r->nchunks : 1, sizeof *r->chunk_cost);
+    r->chunk_cost = (float *)appm__alloc(&r->mem, r->nchunks_max ? r->nchunks_max : 1, sizeof *r->chunk_cost);
     if (counts) r->cl_count = (uint64_t *)appm__alloc(&r->mem, c->ranks, counts * sizeof *r->cl_count);
     if (!r->cl_lens || !r->cl_words || !r->cl_eye || !r->cl_rows || !r->cl_chunks || !r->eye_cost ||
         !r->row_cost || !r->chunk_cost || (counts && !r->cl_count)) {
@@ -14855,7 +14888,7 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
     }
     memset(r->eye_cost, 0, r->h * sizeof *r->eye_cost);
     memset(r->row_cost, 0, r->h * sizeof *r->row_cost);
-    memset(r->chunk_cost, 0, (r->nchunks ? r->nchunks : 1) * sizeof *r->chunk_cost);
+    memset(r->chunk_cost, 0, (r->nchunks_max ? r->nchunks_max : 1) * sizeof *r->chunk_cost);
     r->cluster = *c;
     r->dropped_seen = appm__dropped_own(r); /* known to all already: only new drops are sent */
     appm__cluster_balance(r->eye_cost, r->h, c->ranks, r->cl_eye); /* nothing measured: even */
@@ -14863,6 +14896,99 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
     appm__cluster_balance(r->chunk_cost, r->nchunks, c->ranks, r->cl_chunks);
     appm__cluster_mine(r);
     return APPM_OK;
+}
+
+/* ---- 12.2 The photon budget ----------------------------------------------------
+ *
+ * How many photon paths a pass, M, when the configuration leaves it 0.  The eye
+ * pass costs what its paths cost whatever M is; the photon pass, the map and
+ * the gather grow with M.  Which side's error the time should buy was measured
+ * rather than modelled (docs/algorithm.md 5.12): at equal time, with guided
+ * emission, more photons a pass won on the scenes whose eye paths are dear
+ * against their photon paths - caustic-glass, where every eye path that sees
+ * the caustic crosses the glass and the spot's photons mostly end on the floor
+ * (0.78-0.87x the error with 4 M0 paths a pass, from 1 s to 30 s at 56x80),
+ * the bunny (0.88-0.96x with 4 M0 at 8 s) - and lost where both sides cost
+ * alike (the Cornell boxes: 1.2-1.6x with 4 M0) or where the eye paths make
+ * the error (the studio: 1.10x with 2 M0; the sphere box).
+ * The rule follows the cost: pass 1 counts the rays its eye paths cast (shadow
+ * rays included), E, and those of its M0 = width * height photon paths, P, and
+ * takes
+ *      M = k M0,   k the largest of 1, 2, 4 with k P <= APPM__BUDGET_RATIO E,
+ * then traces pass 1's photons again with k M0 paths (pass 1's first M0 paths
+ * are the same whatever M: the sampler's index is (j - 1) M + i).  The rays are
+ * counted, not timed: the counts are integers, summed over the workers and the
+ * ranks, so the same scene, options and seed make the same choice on any
+ * machine, thread count or cluster, and the image is the one `--photons k M0`
+ * renders, byte for byte.  M is then fixed: every estimator keeps one M per
+ * render.  The gather's cost, which also grows with M, is not counted.  The
+ * ratio 1.65 is set on the scenes measured: the studio (E / P 1.13-1.15, 1.10x
+ * the error with 2 M0) and caustic-glass (2.5-2.7, 0.78-0.87x with 4 M0) bound
+ * it to 1.55-1.74, and 1.65 keeps both 4-10 % from a threshold. */
+
+/* Sets M, and the chunks it takes: alone all of them, in a cluster each rank's
+ * share, even (a pass measures the next shares, 12.1). */
+static void appm__set_photons(appm_renderer *r, uint64_t M)
+{
+    r->M = M;
+    r->nchunks = (uint32_t)((M + APPM__CHUNK - 1) / APPM__CHUNK);
+    if (r->cluster.ranks > 1) {
+        memset(r->chunk_cost, 0, (r->nchunks_max ? r->nchunks_max : 1) * sizeof *r->chunk_cost);
+        appm__cluster_balance(r->chunk_cost, r->nchunks, r->cluster.ranks, r->cl_chunks);
+        appm__cluster_mine(r);
+    } else {
+        r->chunk1 = r->nchunks;
+    }
+}
+
+/* The rays of side `side` (0: eye, 1: photon) of this pass: this rank's
+ * workers', then every rank's (the same sum, so the same choice, on all). */
+static appm_status appm__budget_rays(appm_renderer *r, int side, uint64_t *out)
+{
+    uint64_t n = 0;
+    unsigned k;
+    appm_status st;
+    for (k = 0; k < r->threads; ++k) n += r->work[side][k];
+    if (r->cluster.ranks > 1) {
+        if ((st = appm__cluster_words(r, n)) != APPM_OK) return st;
+        for (n = 0, k = 0; k < r->cluster.ranks; ++k) n += r->cl_words[k];
+    }
+    *out = n;
+    return APPM_OK;
+}
+
+/* Pass 1 of a render whose M is the budget's, after its photon pass of M0
+ * paths: k (the rule above), and the photon pass again with k M0 paths. */
+static appm_status appm__budget(appm_renderer *r)
+{
+    uint64_t E, P, k = 1;
+    size_t need = 0;
+    uint32_t t;
+    appm_status st;
+    if ((st = appm__budget_rays(r, 0, &E)) != APPM_OK || (st = appm__budget_rays(r, 1, &P)) != APPM_OK) return st;
+    while (2 * k <= APPM__BUDGET_MAX && (double)(2 * k) * (double)P <= APPM__BUDGET_RATIO * (double)E) k *= 2;
+    if (r->cluster.ranks > 1) { /* the same sums give the same k; a rank of another build might not */
+        if ((st = appm__cluster_words(r, k)) != APPM_OK) return st;
+        for (t = 0; t < r->cluster.ranks; ++t)
+            if (r->cl_words[t] != k)
+                return appm__fail(&r->diag, APPM_ERR_IO, NULL, 0,
+                                  "rank %u chose %llu times width * height photon paths a pass, rank %u %llu: "
+                                  "are all ranks the same build?",
+                                  (unsigned)t, (unsigned long long)r->cl_words[t], r->cluster.rank,
+                                  (unsigned long long)k);
+    }
+    r->stats.budget_rays = P > 0 ? (double)E / (double)P : 0.0;
+    r->budget = 2;
+    if (k == 1) return APPM_OK;
+    appm__set_photons(r, k * r->M0);
+    for (t = 0; t < r->tasks; ++t) /* room for k times the photons, not found by tracing again and again */
+        if (r->task_used[t] > need) need = r->task_used[t];
+    need = need * k + need * k / 4 + 4096;
+    if (need > r->cap && need <= (size_t)0xFFFFFFF0u / r->tasks) {
+        if (appm__store_realloc(r, need * r->tasks, 0) != APPM_OK) return appm__cluster_agree(r, APPM_ERR_NOMEM, "the photon store");
+        r->cap = need;
+    }
+    return appm__cluster_agree(r, appm__photon_pass(r), "the photon pass");
 }
 
 /* The photon part of the image's mean luminance after the passes so far: the
@@ -14889,6 +15015,7 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
     appm_status st;
     size_t n;
     float cell;
+    memset(r->work[0], 0, sizeof r->work[0]);
     appm__parallel_range(r->threads, r->eye0, r->eye1 - r->eye0, appm__eye_task, r);
     if (!alone && (st = appm__cluster_share(r, r->vp, r->cl_eye, (size_t)r->w * sizeof *r->vp)) != APPM_OK)
         return st;
@@ -14908,6 +15035,7 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
     }
     t[0] = appm__seconds();
     st = appm__cluster_agree(r, appm__photon_pass(r), "the photon pass");
+    if (st == APPM_OK && r->pass == 1 && r->budget == 1) st = appm__budget(r);
     if (st != APPM_OK) return st;
     n = appm__store_compact(r);
     if (!alone && (st = appm__cluster_photons(r, &n)) != APPM_OK) return st;
@@ -14921,6 +15049,7 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
     if (r->guide.nslot) appm__guide_learn(r);
     if (est->pass_end) est->pass_end(r);
     r->stats.photons_emitted += r->M;
+    r->stats.photons_per_pass = r->M;
     r->stats.photons_stored = r->pmap.n;
     return APPM_OK;
 }
@@ -15781,6 +15910,8 @@ static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck
     if (tr == -1) return appm__fail(d, APPM_ERR_PARSE, name, 0, "truncated checkpoint");
     if (tr == -2) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (bytes after its end)");
     if (tr == 0) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (checksum mismatch)");
+    if (r->budget && (F.h.M == r->M0 || F.h.M == 2 * r->M0 || F.h.M == 4 * r->M0))
+        want.M = F.h.M; /* the budget's choice (12.2), which this render would make again */
     if ((st = appm__ck_compare(&F, &want, L, name, d)) != APPM_OK) return st;
     if (nonfinite || !appm__ck_glob_ok(&F.g, &F.h, (r->est->caps & APPM__CAP_PHOTONS) != 0))
         return appm__fail(d, APPM_ERR_PARSE, name, 0,
@@ -15795,6 +15926,10 @@ static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck
         return appm__fail(d, APPM_ERR_IO, name, 0, "the checkpoint changed while it was read");
     }
     appm__ck_apply(r, &F.g);
+    if (r->budget) { /* after pass 1 the checkpoint's M is the budget's choice; before it, M0 */
+        appm__set_photons(r, F.g.pass ? F.h.M : r->M0);
+        r->budget = F.g.pass ? 2 : 1;
+    }
     return APPM_OK;
 }
 

@@ -159,7 +159,9 @@ static const char *const RENDER_HELP =
     "  --until-error E       stop when the estimated relative error falls below E (appm,\n"
     "                        appm-paper, pt; not pt with a mirror or glass and a point,\n"
     "                        spot or tiny light)\n"
-    "  --photons N           photon paths emitted per pass [width * height]\n"
+    "  --photons N           photon paths emitted per pass [chosen in pass 1: 1, 2 or 4\n"
+    "                        times width * height, as the eye and photon paths' rays\n"
+    "                        compare]\n"
     "  --radius R            initial radius in scene units [2 pixel widths at the visible points]\n"
     "  --alpha A             radius shrinkage for ppm/sppm, 0 < A <= 1 (1: fixed radius) [2/3]\n"
     "  --threads N           worker threads [all cores]\n"
@@ -910,6 +912,11 @@ static void render_summary(render_run *R)
            (unsigned long long)st->dropped_samples);
     printf(" eye_s=%.3f photon_s=%.3f grid_s=%.3f gather_s=%.3f photons_stored=%llu", st->seconds_eye,
            st->seconds_photons, st->seconds_grid, st->seconds_gather, (unsigned long long)st->photons_stored);
+    if (st->photons_per_pass) {
+        printf(" photons_per_pass=%llu budget=%s", (unsigned long long)st->photons_per_pass,
+               o->cfg.photons ? "fixed" : "auto");
+        if (st->budget_rays > 0.0) printf(" budget_rays=%.3f", st->budget_rays);
+    }
     if (st->est_relerr >= 0) printf(" est_relerr=%.4g", st->est_relerr);
     if (st->clamped >= 0) printf(" clamped=%.4f", st->clamped);
     if (o->cfg.emission == APPM_EMISSION_GUIDED) printf(" emission=guided guided=%.3f", st->emission_guided);

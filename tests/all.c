@@ -22,6 +22,10 @@
 #include "t_appm.c"
 #undef main
 #undef GROUP
+#define main t_budget_main
+#include "t_budget.c"
+#undef main
+#undef GROUP
 #define main t_bvh_main
 #include "t_bvh.c"
 #undef main
@@ -96,7 +100,8 @@ static const struct {
     int (*run)(void);
 } all_tests[] = {
     {"t_alloc", t_alloc_main},       {"t_appm", t_appm_main},
-    {"t_bvh", t_bvh_main},           {"t_checkpoint", t_checkpoint_main},
+    {"t_budget", t_budget_main},     {"t_bvh", t_bvh_main},
+    {"t_checkpoint", t_checkpoint_main},
     {"t_cluster", t_cluster_main},   {"t_decode", t_decode_main},
     {"t_estimator", t_estimator_main}, {"t_extremes", t_extremes_main},
     {"t_fuzz_regress", t_fuzz_regress_main}, {"t_guide", t_guide_main},

@@ -477,6 +477,19 @@ check "a guided checkpoint is refused by --emission light (exit $rc)" refused_wi
 run "$APPM" render "$GLASS" --size 8x8 --passes 1 -q --emission both -o "$T/never.png"
 check "--emission both is a usage error" [ "$rc" -eq 1 ]
 
+# ---- the photon budget -------------------------------------------------------------
+# without --photons, pass 1 chooses 1, 2 or 4 times width * height photon paths a pass
+# and says so; the image is that of the same count given; --photons keeps its count.
+run "$APPM" render "$GLASS" --size 56x80 --passes 3 -q -o "$T/budget-a.pfm"
+check "no --photons: the summary gives the budget's choice" contains "$T/out" "photons_per_pass=17920 budget=auto budget_rays="
+run "$APPM" render "$GLASS" --size 56x80 --passes 3 -q --photons 17920 -o "$T/budget-f.pfm"
+check "--photons 17920: the summary says fixed" contains "$T/out" "photons_per_pass=17920 budget=fixed"
+check "--photons 17920: the budget's image, byte for byte" cmp -s "$T/budget-a.pfm" "$T/budget-f.pfm"
+run "$APPM" render scenes/cornell-original.scene --size 32x32 --passes 2 -q -o "$T/budget-o.pfm"
+check "CornellBox-Original keeps width * height photon paths a pass" contains "$T/out" "photons_per_pass=1024 budget=auto"
+run "$APPM" render scenes/cornell-original.scene --size 32x32 --passes 2 -q --method pt -o "$T/budget-p.pfm"
+check "the path tracer has no photon budget" lacks "$T/out" "budget="
+
 if [ -n "$EMBED" ]; then
     run "$EMBED" "$SCENE" "$T/embed.png"
     check "embed exits 0" [ "$rc" -eq 0 ]

@@ -12,7 +12,8 @@
  *      samples and a checkpoint (the renderer's whole state), byte for byte.
  *   2. Resume across sizes: a checkpoint saved after 2 passes by a job of 3
  *      ranks, loaded by a job of 2 that runs 2 more, gives the image of 4
- *      passes alone.
+ *      passes alone.  Both cases also with the photon budget (appm.c 12.2),
+ *      whose choice sums the rays every rank counted.
  *   3. Bytes: each rank's parts and what it received add up over the ranks
  *      (every byte one rank gives, the others receive).
  *   4. Failure: a rank whose allocator runs dry in the first pass fails it
@@ -236,6 +237,20 @@ static void alone(const appm_scene *s, const appm_config *cfg, unsigned passes, 
     if (appm_renderer_save(r, NULL, 0, ck_len, NULL) == APPM_OK && (*ck = (unsigned char *)malloc(*ck_len)) != NULL)
         appm_renderer_save(r, *ck, *ck_len, ck_len, NULL);
     appm_renderer_destroy(r);
+}
+
+/* The stats of `passes` passes alone (zeros if the render fails). */
+static appm_stats alone_stats(const appm_scene *s, const appm_config *cfg, unsigned passes)
+{
+    float *img = NULL;
+    unsigned char *ck = NULL;
+    size_t ck_len = 0;
+    appm_stats st;
+    memset(&st, 0, sizeof st);
+    alone(s, cfg, passes, &img, &ck, &ck_len, &st);
+    free(img);
+    free(ck);
+    return st;
 }
 
 /* Two checkpoints of the same state: every byte but the five seconds of
@@ -522,17 +537,20 @@ int main(void)
         cfg.photons = 9000;
         cfg.emission = APPM_EMISSION_GUIDED; /* learned densities: counts summed over ranks */
         {   /* by pass 20 the spot draws from its learned density (the warp, on every rank) */
-            float *img = NULL;
-            unsigned char *ck = NULL;
-            size_t ck_len = 0;
-            appm_stats st;
-            memset(&st, 0, sizeof st);
-            alone(glass, &cfg, 20, &img, &ck, &ck_len, &st);
+            appm_stats st = alone_stats(glass, &cfg, 20);
             CHECK_MSG(st.emission_guided > 0.0, "caustic-glass 24x19, 20 passes: guided share %g", st.emission_guided);
-            free(img);
-            free(ck);
         }
         check_identity("appm guided", glass, &cfg, 20);
+        cfg.photons = 0; /* the photon budget (12.2): each rank counts the rays of its own rows and chunks,
+                          * all sum every rank's, and all choose the same M */
+        {
+            appm_stats st = alone_stats(glass, &cfg, 2);
+            CHECK_MSG(st.photons_per_pass == 4u * 24u * 19u, "caustic-glass 24x19: %llu photon paths a pass",
+                      (unsigned long long)st.photons_per_pass);
+        }
+        check_identity("appm, the photon budget", glass, &cfg, passes);
+        check_resume(glass, &cfg); /* the budget's M from a checkpoint of 3 ranks, on 2 */
+        cfg.photons = 9000;
         cfg.emission = APPM_EMISSION_LIGHT;
         cfg.chains = 2;
         check_identity("appm 2 chains", glass, &cfg, passes);

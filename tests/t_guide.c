@@ -391,8 +391,13 @@ static void test_guide_checkpoint(void)
  *      takes V = 263 to 9.7, guided; but if the even pass put its 8 spikes in
  *      8 other cells, v spikes over 16 cells and its own squares would still
  *      promise V 135 -> 9.7 (0.07x), while the halves' products are 0 there:
- *      the density promises nothing, not guided. */
-static void select_case(double hot_cost, double T, int disagree, int want)
+ *      the density promises nothing, not guided;
+ *   e. every path costing the same, T = 3, and the odd pass alone with 8
+ *      spikes of 1280 in 8 more cells: light 0's own test passes (its
+ *      halves agree where both have light: 128 -> 7.9, 0.06x), V = 2 (128 +
+ *      9) - (11 + 3)(1 + 3) = 218, but guided V = 2 (7.9 + 9) - 56 = -22:
+ *      the halves' means disagree too much for a variance, not guided. */
+static void select_case(double hot_cost, double T, int disagree, double odd_spike, int want)
 {
     static double score[2 * APPM__GUIDE_CELLS], odd[2 * APPM__GUIDE_CELLS], samples[2 * APPM__GUIDE_CELLS],
         paths[2 * APPM__GUIDE_CELLS], work[2 * APPM__GUIDE_CELLS], cdf[2 * APPM__GUIDE_CDF], half[2 * APPM__GUIDE_CELLS];
@@ -430,6 +435,7 @@ static void select_case(double hot_cost, double T, int disagree, int want)
         odd[c] = hot ? 128.0 : 0.0; /* two passes that agree */
         odd[APPM__GUIDE_CELLS + c] = T;
         score[c] = 2.0 * odd[c];
+        if (c % 128 == 37) score[c] = odd[c] = odd_spike; /* in the odd pass alone */
         if (disagree) /* the even pass's 8 spikes in 8 other cells: noise */
             score[c] = odd[c] + (c % 128 == 69 ? 128.0 : 0.0);
         score[APPM__GUIDE_CELLS + c] = 2.0 * T;
@@ -438,9 +444,16 @@ static void select_case(double hot_cost, double T, int disagree, int want)
         work[c] = 1e9 * (hot ? hot_cost : 1.0);
         work[APPM__GUIDE_CELLS + c] = 1e9;
     }
+    if (odd_spike > 0.0) { /* light 0 passes its own test: the choice between lights decides */
+        appm__guide_eff e;
+        appm__guide_density(&r.guide, 0, &e);
+        CHECK_MSG(active[0] && e.m_with <= 0.5 * e.m_own, "own test: active %d, %g against %g", active[0], e.m_with,
+                  e.m_own);
+    }
     appm__guide_prepare(&r);
-    CHECK_MSG(active[0] == want && !active[1], "hot cells cost %g, T %g, halves %s: light 0 guided %d, light 1 %d",
-              hot_cost, T, disagree ? "disagree" : "agree", active[0], active[1]);
+    CHECK_MSG(active[0] == want && !active[1],
+              "hot cells cost %g, T %g, halves %s, odd spikes %g: light 0 guided %d, light 1 %d", hot_cost, T,
+              disagree ? "disagree" : "agree", odd_spike, active[0], active[1]);
     CHECK_NEAR(r.stats.emission_guided, want ? 0.375 : 0.0, 1e-12);
     for (c = 0; c < APPM__GUIDE_CELLS; ++c) /* a light not guided draws from its own density */
         if (!want && pdf[c] != 1.0f) break;
@@ -449,11 +462,12 @@ static void select_case(double hot_cost, double T, int disagree, int want)
 
 static void test_select(void)
 {
-    select_case(1.0, 14.0, 0, 1);
-    select_case(12.0, 14.0, 0, 0);
-    select_case(12.0, 0.5, 0, 1);
-    select_case(1.0, 4.0, 0, 1);
-    select_case(1.0, 4.0, 1, 0);
+    select_case(1.0, 14.0, 0, 0.0, 1);
+    select_case(12.0, 14.0, 0, 0.0, 0);
+    select_case(12.0, 0.5, 0, 0.0, 1);
+    select_case(1.0, 4.0, 0, 0.0, 1);
+    select_case(1.0, 4.0, 1, 0.0, 0);
+    select_case(1.0, 3.0, 0, 1280.0, 0);
 }
 
 int main(void)
