@@ -14343,6 +14343,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->stats.est_relerr = -1.0;
     r->var_scale = 1.0;
     r->stats.clamped = -1.0;
+    r->stats.memory_bytes = r->mem.live; /* what appm info reports before any pass */
+    r->stats.peak_bytes = r->mem.peak;
     r->mem.diag = &r->diag;
     *out = r;
     return APPM_OK;

@@ -1076,10 +1076,10 @@ static int cmd_info(int argc, char **argv)
     cfg.threads = 1;
     if (appm_renderer_create(scene, &cfg, &r, &d) == APPM_OK) {
         appm_renderer_stats(r, &st);
-        printf("            renderer %.1f MiB at %ux%u with %llu photon paths per pass "
-               "(the photon store grows to fit in the first pass)\n",
+        printf("            renderer %.1f MiB at %ux%u with %llu, %llu or %llu photon paths per pass (the "
+               "photon budget chooses, and the photon store grows to fit, in the first pass)\n",
                (double)st.memory_bytes / (1024.0 * 1024.0), in.width, in.height,
-               (unsigned long long)in.width * in.height);
+               (unsigned long long)in.width * in.height, 2ull * in.width * in.height, 4ull * in.width * in.height);
         appm_renderer_destroy(r);
     }
     appm_scene_destroy(scene);

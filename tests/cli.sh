@@ -137,6 +137,8 @@ check "info: the teapot's shadow rays" contains "$T/out" \
 run "$APPM" info scenes/cornell-original.scene
 check "info: the Cornell box's shadow ray" contains "$T/out" \
     'shadow rays 1 a shading point: one to a light picked by power among 2 lights'
+check "info: the photon budget's three counts" contains "$T/out" 'with 262144, 524288 or 1048576 photon paths per pass'
+check "info: the renderer's memory before any pass" lacks "$T/out" 'renderer 0.0 MiB'
 
 # ---- render: every method to every format -------------------------------------
 
