@@ -11640,7 +11640,8 @@ static unsigned appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__sur
     vp->footprint = travelled * r->pixel_angle;
     if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth) {
         *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1)));
-        rays = r->scene->nnee_delta + 1u; /* one to each point and spot light, one sample of the rest */
+        /* one to each point and spot light, and one sample of the rest if there is a rest */
+        rays = r->scene->nnee_delta + (r->scene->nee_cdf[0][r->scene->nlight] > 0.0);
     }
     if (!appm__finite3(vp->wf) || !appm__finite3(vp->wg)) {
         vp->segs = 0;
@@ -14087,9 +14088,10 @@ static void appm__pt_task(void *arg, uint32_t row, unsigned worker)
  */
 /* The photon budget (12.2): pass 1 may multiply the M0 = width * height photon
  * paths a pass by 2 or by 4 (APPM__BUDGET_MAX), as long as the photon paths'
- * rays stay within APPM__BUDGET_RATIO times the eye paths'. */
+ * rays stay within 1.65 times the eye paths'. */
 #define APPM__BUDGET_MAX 4u
-#define APPM__BUDGET_RATIO 1.65
+#define APPM__BUDGET_NUM 33u /* the ratio, 1.65 = 33 / 20: compared in integers, the same on */
+#define APPM__BUDGET_DEN 20u /* every build (an x87 double might round the boundary otherwise) */
 
 APPM_API void appm_config_init(appm_config *cfg)
 {
@@ -14916,7 +14918,7 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
  * The rule follows the cost: pass 1 counts the rays its eye paths cast (shadow
  * rays included), E, and those of its M0 = width * height photon paths, P, and
  * takes
- *      M = k M0,   k the largest of 1, 2, 4 with k P <= APPM__BUDGET_RATIO E,
+ *      M = k M0,   k the largest of 1, 2, 4 with k P <= 1.65 E,
  * then traces pass 1's photons again with k M0 paths (pass 1's first M0 paths
  * are the same whatever M: the sampler's index is (j - 1) M + i).  The rays are
  * counted, not timed: the counts are integers, summed over the workers and the
@@ -14926,7 +14928,7 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
  * render.  The gather's cost, which also grows with M, is not counted.  The
  * ratio 1.65 is set on the scenes measured: the studio (E / P 1.13-1.15, 1.10x
  * the error with 2 M0) and caustic-glass (2.5-2.7, 0.78-0.87x with 4 M0) bound
- * it to 1.55-1.74, and 1.65 keeps both 4-10 % from a threshold. */
+ * it to 1.6-1.74, and 1.65 keeps both 3-10 % from a threshold. */
 
 /* Sets M, and the chunks it takes: alone all of them, in a cluster each rank's
  * share, even (a pass measures the next shares, 12.1). */
@@ -14960,15 +14962,17 @@ static appm_status appm__budget_rays(appm_renderer *r, int side, uint64_t *out)
 }
 
 /* Pass 1 of a render whose M is the budget's, after its photon pass of M0
- * paths: k (the rule above), and the photon pass again with k M0 paths. */
-static appm_status appm__budget(appm_renderer *r)
+ * paths: k (the rule above), and the photon pass again with k M0 paths, whose
+ * dropped samples count from `dropped` (the workers' counts before the first
+ * try, whose M0 paths are traced again). */
+static appm_status appm__budget(appm_renderer *r, const uint64_t *dropped)
 {
     uint64_t E, P, k = 1;
     size_t need = 0;
     uint32_t t;
     appm_status st;
     if ((st = appm__budget_rays(r, 0, &E)) != APPM_OK || (st = appm__budget_rays(r, 1, &P)) != APPM_OK) return st;
-    while (2 * k <= APPM__BUDGET_MAX && (double)(2 * k) * (double)P <= APPM__BUDGET_RATIO * (double)E) k *= 2;
+    while (2 * k <= APPM__BUDGET_MAX && APPM__BUDGET_DEN * 2 * k * P <= APPM__BUDGET_NUM * E) k *= 2;
     if (r->cluster.ranks > 1) { /* the same sums give the same k; a rank of another build might not */
         if ((st = appm__cluster_words(r, k)) != APPM_OK) return st;
         for (t = 0; t < r->cluster.ranks; ++t)
@@ -14983,6 +14987,7 @@ static appm_status appm__budget(appm_renderer *r)
     r->budget = 2;
     if (k == 1) return APPM_OK;
     appm__set_photons(r, k * r->M0);
+    memcpy(r->dropped, dropped, sizeof r->dropped);
     for (t = 0; t < r->tasks; ++t) /* room for k times the photons, not found by tracing again and again */
         if (r->task_used[t] > need) need = r->task_used[t];
     need = need * k + need * k / 4 + 4096;
@@ -15014,6 +15019,7 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
 {
     const appm__estimator *est = r->est;
     const int alone = r->cluster.ranks <= 1;
+    uint64_t dropped[APPM__MAX_THREADS];
     appm_status st;
     size_t n;
     float cell;
@@ -15036,8 +15042,9 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
         r->guide.ref = appm__guide_learns(r->pass) ? appm__guide_ref(r) : 0.0;
     }
     t[0] = appm__seconds();
+    memcpy(dropped, r->dropped, sizeof dropped);
     st = appm__cluster_agree(r, appm__photon_pass(r), "the photon pass");
-    if (st == APPM_OK && r->pass == 1 && r->budget == 1) st = appm__budget(r);
+    if (st == APPM_OK && r->pass == 1 && r->budget == 1) st = appm__budget(r, dropped);
     if (st != APPM_OK) return st;
     n = appm__store_compact(r);
     if (!alone && (st = appm__cluster_photons(r, &n)) != APPM_OK) return st;
@@ -15227,19 +15234,21 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  *   RES^2 learned scores, f64 x RES^2 their part from the odd passes, f64 x
  *   RES^2 paths per cell (expected), f64 x RES^2 paths per cell (counted) and
  *   f64 x RES^2 their cost;
+ *   u32 1 if the photon budget chose M (12.2), 0 if it was given, and f64 its
+ *   reading E / P (0 before pass 1 or without a budget);
  *   u64 FNV-1a hash of all bytes before it.
  * The format version changes with this layout and with what the scene hashes
  * cover, so that a checkpoint of an older build is refused as such, never
  * misread nor taken for one of another scene (version 2: the hashes in five
  * parts, with the glossy lobe, the normals and the statements as written;
  * version 3: the guided emission's lights and scores; version 4: the cost of
- * its paths and the scores' odd half).
+ * its paths and the scores' odd half; version 5: the photon budget's flag).
  * A checkpoint of another format or library version, scene, method, option set,
  * image size or field list is refused (APPM_ERR_INVALID_ARG, saying which); a
  * truncated, altered or impossible one is APPM_ERR_PARSE.  Loading reads the
  * input twice - first to check everything, then to apply it - so a refused
  * checkpoint leaves the renderer as it was. */
-#define APPM__CK_FORMAT 4u
+#define APPM__CK_FORMAT 5u
 
 /* Where the c-th learned value of slot k stands in appm__guide.cells, in the
  * checkpoint's order: the slot's RES^2 values of each array in turn. */
@@ -15620,6 +15629,8 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
         for (c = 0; c < APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS; ++c)
             appm__ckw_d(w, r->guide.cells[appm__guide_cell_at(&r->guide, k, c)]);
     }
+    appm__ckw_u(w, r->budget != 0, 4);
+    appm__ckw_d(w, r->stats.budget_rays);
     appm__ckw_u(w, w->sum, 8);
 }
 
@@ -15635,6 +15646,8 @@ typedef struct appm__ck_file {
         uint32_t count, is_u64;
     } f[APPM__CK_TABLES][APPM__CK_MAXFIELDS];
     int magic, layout_ok;
+    uint32_t budget;     /* after the pixels: the photon budget's flag and reading (12.2) */
+    double budget_rays;
 } appm__ck_file;
 
 static void appm__ck_read_layout(appm__ckr *rd, appm__ck_file *F)
@@ -15705,8 +15718,9 @@ static void appm__ck_read_front(appm__ckr *rd, appm__ck_file *F)
 }
 
 /* First reading of the pixels: only their length and whether every double is
- * finite (the renderer never stores a NaN or an infinity in its statistics). */
-static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *nonfinite)
+ * finite (the renderer never stores a NaN or an infinity in its statistics);
+ * then the photon budget's flag and reading into F. */
+static void appm__ck_scan_pixels(appm__ckr *rd, appm__ck_file *F, int *nonfinite)
 {
     uint64_t i, npix = (uint64_t)F->h.w * F->h.h;
     unsigned t, k, c;
@@ -15726,6 +15740,9 @@ static void appm__ck_scan_pixels(appm__ckr *rd, const appm__ck_file *F, int *non
         memcpy(&d, &u, sizeof d);
         if (i % (2 + APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* the doubles */
     }
+    F->budget = (uint32_t)appm__ckr_u(rd, 4);
+    F->budget_rays = appm__ckr_d(rd);
+    if (F->budget > 1 || !(F->budget_rays >= 0.0 && F->budget_rays < HUGE_VAL)) *nonfinite = 1;
 }
 
 /* Second reading: the values into the renderer, at the offsets of its own
@@ -15754,6 +15771,8 @@ static void appm__ck_load_pixels(appm__ckr *rd, appm_renderer *r, const appm__ck
         for (c = 0; c < APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS; ++c)
             r->guide.cells[appm__guide_cell_at(&r->guide, t, c)] = appm__ckr_d(rd);
     }
+    (void)appm__ckr_u(rd, 4); /* the budget's flag and reading: applied by appm__ck_load */
+    (void)appm__ckr_d(rd);
 }
 
 /* The stored hash after the pixels: 1 it matches and the input ends there,
@@ -15886,6 +15905,12 @@ static void appm__ck_reset(appm_renderer *r)
         memset(r->guide.passes, 0, r->guide.nslot * sizeof *r->guide.passes);
     }
     appm__ck_apply(r, &g);
+    if (r->budget) { /* as created: the budget chooses again in pass 1 */
+        appm__set_photons(r, r->M0);
+        r->budget = 1;
+    }
+    r->stats.budget_rays = 0.0;
+    r->stats.photons_per_pass = 0;
 }
 
 /* Checks all of rd, then (a second reading) applies it to r. */
@@ -15896,7 +15921,8 @@ static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck
     appm__ck_head want;
     appm__ck_glob g;
     appm_status st;
-    int nonfinite = 0, tr;
+    int nonfinite = 0, tr, budget_differs;
+    double budget_rays;
     appm__ck_head_of(r, &want);
     appm__ck_read_front(rd, &F);
     if (!F.magic) return appm__fail(d, APPM_ERR_PARSE, name, 0, "not an appm checkpoint");
@@ -15912,9 +15938,17 @@ static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck
     if (tr == -1) return appm__fail(d, APPM_ERR_PARSE, name, 0, "truncated checkpoint");
     if (tr == -2) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (bytes after its end)");
     if (tr == 0) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (checksum mismatch)");
-    if (r->budget && (F.h.M == r->M0 || F.h.M == 2 * r->M0 || F.h.M == 4 * r->M0))
-        want.M = F.h.M; /* the budget's choice (12.2), which this render would make again */
+    budget_differs = (r->est->caps & APPM__CAP_PHOTONS) && F.budget != (r->budget != 0);
+    budget_rays = F.budget_rays; /* the second reading below reads F's head again, not this */
+    if (budget_differs || (F.budget == 1 && r->budget && (F.h.M == r->M0 || F.h.M == 2 * r->M0 || F.h.M == 4 * r->M0)))
+        want.M = F.h.M; /* the budget's choice (12.2), which this render makes again; or refused below */
     if ((st = appm__ck_compare(&F, &want, L, name, d)) != APPM_OK) return st;
+    if (!nonfinite && budget_differs)
+        return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,
+                          "a checkpoint of %s; this render %s (--photons)",
+                          F.budget ? "a render whose photon budget chose its photon paths a pass"
+                                   : "a render told its photon paths a pass",
+                          r->budget ? "leaves them to the photon budget" : "is told them");
     if (nonfinite || !appm__ck_glob_ok(&F.g, &F.h, (r->est->caps & APPM__CAP_PHOTONS) != 0))
         return appm__fail(d, APPM_ERR_PARSE, name, 0,
                           "corrupted checkpoint (a value no render produces: non-finite statistics, radii or "
@@ -15931,7 +15965,9 @@ static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck
     if (r->budget) { /* after pass 1 the checkpoint's M is the budget's choice; before it, M0 */
         appm__set_photons(r, F.g.pass ? F.h.M : r->M0);
         r->budget = F.g.pass ? 2 : 1;
+        r->stats.budget_rays = budget_rays;
     }
+    r->stats.photons_per_pass = F.g.pass && (r->est->caps & APPM__CAP_PHOTONS) ? r->M : 0;
     return APPM_OK;
 }
 

@@ -640,7 +640,7 @@ APPM_API const float *appm_renderer_emission_map(appm_renderer *r, unsigned k, u
  * format version changes with the layout and with what the scene hash covers;
  * a checkpoint of another format version is refused as such (compatibility is
  * exact: same format and library version, or nothing).  The layout is
- * described in appm.c, section 12.2.
+ * described in appm.c, section 13.
  *
  * appm_renderer_save writes into buf (cap bytes) and sets *size to the bytes
  * the checkpoint takes; buf NULL only measures.  APPM_ERR_INVALID_ARG when cap

@@ -6,9 +6,10 @@
  *
  * What is checked, and against what:
  *   1. The counts, on a scene where every ray is known: a camera looking
- *      straight down at a floor 200 m wide from 1 m, a point light 0.5 m
+ *      straight down at a floor 200 m wide from 1 m, two point lights 0.5 m
  *      above it.  Each eye path casts one ray to the floor and, with shadow
- *      rays, one to the point light and one sample of the rest: E = 3 w h.
+ *      rays, one to each point light (there is no other light to sample):
+ *      E = 3 w h.
  *      On a black floor each photon path casts one ray (up into nothing, or
  *      down to the floor, where the black surface ends it): P = w h.  So
  *      E / P = 3 exactly and k = 4.  With --direct photons (no shadow rays)
@@ -16,13 +17,14 @@
  *      bounces up and leaves: P is about 1.5 w h, so E / P is about 2 with
  *      shadow rays (k = 2) and about 2/3 without (k = 1).
  *   2. The choice changes M and nothing else: the image is the image of a
- *      render told photons = k w h, byte for byte, with 1 and 3 threads, for
- *      appm and ppm; the path tracer has no budget; a configuration that
+ *      render told photons = k w h, byte for byte, each with 1 and 3 threads,
+ *      for appm and ppm; the path tracer has no budget; a configuration that
  *      gives photons keeps them.
  *   3. Checkpoints: 2 passes saved, loaded into a fresh renderer of the same
  *      options and run 2 more, give the image of 4 passes; a checkpoint of
  *      pass 0 chooses again in the pass after the load; a renderer told
- *      another photon count refuses the checkpoint, naming the photons.
+ *      photons refuses it, and a budget's renderer refuses the checkpoint of
+ *      a render told the same M, each naming the photons.
  *   4. The committed scenes the rule was set on (docs/algorithm.md 5.12):
  *      caustic-glass takes 4 w h, the bunny 2 w h, CornellBox-Original and
  *      the studio (a bare OBJ, whose error is its eye paths') w h.
@@ -38,7 +40,8 @@ static const char BUDGET_WHITE_MTL[] = "newmtl floor\nKd 1 1 1\n";
 static const char BUDGET_FLOOR_SCENE[] = "mesh floor.obj\n"
                                          "camera eye 0 1 0  target 0 0 0  up 0 0 -1  fov 60\n"
                                          "image 16 12\n"
-                                         "light point position 0 0.5 0 intensity 1 1 1\n";
+                                         "light point position 0 0.5 0 intensity 1 1 1\n"
+                                         "light point position 0.3 0.5 0.2 intensity 1 1 1\n";
 
 static appm_scene *budget_floor(const char *mtl, size_t mtl_len)
 {
@@ -99,13 +102,20 @@ static void budget_case(const appm_scene *s, appm_method m, appm_direct direct, 
               "%s, direct %d: E / P = %.6f (want %g..%g), M = %llu (want %u w h)", appm_method_name(m), (int)direct,
               sa.budget_rays, lo, hi, (unsigned long long)sa.photons_per_pass, k);
     CHECK(sa.photons_emitted == 3 * k * M0);
-    for (t = 1; t <= 3; t += 2) { /* the same M given, 1 and 3 threads: the same bytes */
-        c = budget_config(m, direct, t, k * M0);
+    for (t = 1; t <= 3; t += 2) { /* the budget with 3 threads, the same M given with 1 and 3: the same bytes */
+        c = budget_config(m, direct, t, 0);
+        if (t > 1 && budget_render(s, &c, 3, b, &sb))
+            CHECK_MSG(memcmp(a, b, (size_t)M0 * 3 * sizeof(float)) == 0 && sb.budget_rays == sa.budget_rays &&
+                          sb.photons_per_pass == sa.photons_per_pass,
+                      "%s: the budget's choice or image with %u threads differs from 1 thread's",
+                      appm_method_name(m), t);
+        c.photons = k * M0;
         if (budget_render(s, &c, 3, b, &sb)) {
             CHECK_MSG(memcmp(a, b, (size_t)M0 * 3 * sizeof(float)) == 0,
                       "%s: the budget's image is not that of photons = %u w h given (%u threads)",
                       appm_method_name(m), k, t);
-            CHECK(sb.budget_rays == 0.0 && sb.photons_per_pass == k * M0);
+            CHECK(sb.budget_rays == 0.0 && sb.photons_per_pass == k * M0 &&
+                  sb.dropped_samples == sa.dropped_samples);
         }
     }
 }
@@ -136,7 +146,9 @@ static void budget_checkpoint(const appm_scene *s)
         appm_renderer_image(q, &im);
         CHECK_MSG(memcmp(im.rgb, a, sizeof a) == 0, "2 + 2 passes across a checkpoint differ from 4");
         appm_renderer_stats(q, &st);
-        CHECK(st.photons_per_pass == 4u * 16u * 12u);
+        CHECK_MSG(st.photons_per_pass == 4u * 16u * 12u && st.budget_rays == 3.0,
+                  "after the load: %llu photon paths a pass, the reading %g", (unsigned long long)st.photons_per_pass,
+                  st.budget_rays);
     }
     z = check_renderer(s, &c); /* pass 0 saved: the budget chooses in the pass after the load */
     CHECK_MSG(z && appm_renderer_load(z, buf0, size0, &d) == APPM_OK, "load of pass 0: %s", d.message);
@@ -145,9 +157,22 @@ static void budget_checkpoint(const appm_scene *s)
         CHECK(memcmp(im.rgb, a, sizeof a) == 0);
     }
     appm_renderer_destroy(z);
-    c.photons = 16u * 12u; /* told another M: refused, saying which option */
+    c.photons = 4u * 16u * 12u; /* told photons, even the M chosen: refused, saying which option */
     z = check_renderer(s, &c);
     CHECK(z && appm_renderer_load(z, buf, size, &d) == APPM_ERR_INVALID_ARG && strstr(d.message, "photons") != NULL);
+    if (z && check_passes(z, 2)) { /* and its checkpoint by a budget's renderer */
+        free(buf);
+        buf = NULL;
+        if (appm_renderer_save(z, NULL, 0, &size, &d) == APPM_OK && (buf = malloc(size)) != NULL &&
+            appm_renderer_save(z, buf, size, &size, &d) == APPM_OK) {
+            appm_renderer_destroy(q);
+            c.photons = 0;
+            q = check_renderer(s, &c);
+            CHECK_MSG(q && appm_renderer_load(q, buf, size, &d) == APPM_ERR_INVALID_ARG &&
+                          strstr(d.message, "photon budget") != NULL,
+                      "load: %s", d.message);
+        }
+    }
 done:
     free(buf);
     free(buf0);

@@ -595,11 +595,14 @@ static void test_hostile(const appm_scene *s)
     memcpy(&u, &inf, sizeof u);
     hostile(r, buf, n, OFF_SECONDS, u, 8, "infinite seconds");
     hostile(r, buf, n, OFF_R1, 0, 8, "r1 = 0 after two passes");
-    /* the first value of pixel 0 (ld[0]) follows the field lists; then the last (sppm's R) */
-    pix0 = n - 8 - (size_t)r->w * r->h * 8 * (5 + 5);
+    /* the first value of pixel 0 (ld[0]) follows the field lists; then the last (sppm's R), the
+     * photon budget's flag (u32) and reading (f64), the hash */
+    pix0 = n - 8 - 12 - (size_t)r->w * r->h * 8 * (5 + 5);
     memcpy(&u, &nan, sizeof u);
     hostile(r, buf, n, pix0, u, 8, "NaN in a pixel");
-    hostile(r, buf, n, n - 16, u, 8, "NaN radius in the last pixel");
+    hostile(r, buf, n, n - 28, u, 8, "NaN radius in the last pixel");
+    hostile(r, buf, n, n - 16, u, 8, "a NaN reading of the photon budget");
+    hostile(r, buf, n, n - 20, 2, 4, "a photon budget's flag of 2");
     free(buf);
 out:
     appm_renderer_destroy(a);
@@ -629,8 +632,10 @@ static void test_byte_order(const appm_scene *s)
     u = get_le(buf + OFF_R1, 8);
     memcpy(&r1, &u, sizeof r1);
     CHECK(r1 == a->r1 && r1 > 0.0);
-    /* ppm: 7 pixel values and lit + I[3]; then per guided light 2 counts and 2 x RES^2 doubles */
-    pix0 = n - 8 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (8 + 3);
+    /* ppm: 7 pixel values and lit + I[3]; then per guided light 2 counts and 2 x RES^2 doubles; the
+     * photon budget's flag and reading (12 bytes) */
+    pix0 = n - 8 - 12 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (8 + 3);
+    CHECK(get_le(buf + n - 20, 4) == 0); /* photons given: no budget */
     u = get_le(buf + pix0, 8);
     memcpy(&ld0, &u, sizeof ld0);
     CHECK(ld0 == a->pix[0].ld[0]);
