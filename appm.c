@@ -14992,7 +14992,8 @@ static appm_status appm__budget(appm_renderer *r, const uint64_t *dropped)
         if (r->task_used[t] > need) need = r->task_used[t];
     need = need * k + need * k / 4 + 4096;
     if (need > r->cap && need <= (size_t)0xFFFFFFF0u / r->tasks) {
-        if (appm__store_realloc(r, need * r->tasks, 0) != APPM_OK) return appm__cluster_agree(r, APPM_ERR_NOMEM, "the photon store");
+        if (appm__store_realloc(r, need * r->tasks, 0) != APPM_OK)
+            return appm__cluster_agree(r, APPM_ERR_NOMEM, "the photon store");
         r->cap = need;
     }
     return appm__cluster_agree(r, appm__photon_pass(r), "the photon pass");
@@ -15722,7 +15723,7 @@ static void appm__ck_read_front(appm__ckr *rd, appm__ck_file *F)
  * then the photon budget's flag and reading into F. */
 static void appm__ck_scan_pixels(appm__ckr *rd, appm__ck_file *F, int *nonfinite)
 {
-    uint64_t i, npix = (uint64_t)F->h.w * F->h.h;
+    uint64_t i, bits, npix = (uint64_t)F->h.w * F->h.h;
     unsigned t, k, c;
     for (i = 0; i < npix && rd->ok; ++i)
         for (t = 0; t < APPM__CK_TABLES; ++t)
@@ -15741,8 +15742,12 @@ static void appm__ck_scan_pixels(appm__ckr *rd, appm__ck_file *F, int *nonfinite
         if (i % (2 + APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* the doubles */
     }
     F->budget = (uint32_t)appm__ckr_u(rd, 4);
-    F->budget_rays = appm__ckr_d(rd);
-    if (F->budget > 1 || !(F->budget_rays >= 0.0 && F->budget_rays < HUGE_VAL)) *nonfinite = 1;
+    bits = appm__ckr_u(rd, 8);
+    memcpy(&F->budget_rays, &bits, sizeof bits);
+    /* a flag of 0 or 1; the reading finite and not negative (not -0 either: every value saved as
+     * read), and 0 where no budget has read (photons given, or pass 0) */
+    if (F->budget > 1 || (bits >> 63) || !(F->budget_rays < HUGE_VAL) || ((F->budget == 0 || F->g.pass == 0) && bits))
+        *nonfinite = 1;
 }
 
 /* Second reading: the values into the renderer, at the offsets of its own
@@ -15938,10 +15943,11 @@ static appm_status appm__ck_load(appm_renderer *r, appm__ckr *rd, const appm__ck
     if (tr == -1) return appm__fail(d, APPM_ERR_PARSE, name, 0, "truncated checkpoint");
     if (tr == -2) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (bytes after its end)");
     if (tr == 0) return appm__fail(d, APPM_ERR_PARSE, name, 0, "corrupted checkpoint (checksum mismatch)");
-    budget_differs = (r->est->caps & APPM__CAP_PHOTONS) && F.budget != (r->budget != 0);
+    budget_differs = F.budget != (r->budget != 0); /* the path tracer has none: 0 */
     budget_rays = F.budget_rays; /* the second reading below reads F's head again, not this */
-    if (budget_differs || (F.budget == 1 && r->budget && (F.h.M == r->M0 || F.h.M == 2 * r->M0 || F.h.M == 4 * r->M0)))
-        want.M = F.h.M; /* the budget's choice (12.2), which this render makes again; or refused below */
+    if (budget_differs || (F.budget == 1 && r->budget &&
+                           (F.g.pass ? F.h.M == r->M0 || F.h.M == 2 * r->M0 || F.h.M == 4 * r->M0 : F.h.M == r->M0)))
+        want.M = F.h.M; /* the budget's choice (12.2; M0 before pass 1), which this render makes again; or refused below */
     if ((st = appm__ck_compare(&F, &want, L, name, d)) != APPM_OK) return st;
     if (!nonfinite && budget_differs)
         return appm__fail(d, APPM_ERR_INVALID_ARG, name, 0,

@@ -603,6 +603,8 @@ static void test_hostile(const appm_scene *s)
     hostile(r, buf, n, n - 28, u, 8, "NaN radius in the last pixel");
     hostile(r, buf, n, n - 16, u, 8, "a NaN reading of the photon budget");
     hostile(r, buf, n, n - 20, 2, 4, "a photon budget's flag of 2");
+    hostile(r, buf, n, n - 16, (uint64_t)1 << 63, 8, "a reading of -0 (saved again, it would be +0)");
+    hostile(r, buf, n, n - 16, 0x3FF0000000000000ull, 8, "a reading of 1 where photons were given");
     free(buf);
 out:
     appm_renderer_destroy(a);
