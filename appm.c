@@ -12275,7 +12275,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
     appm__ray ray;
     appm__v3 gamma;
     uint32_t skip;
-    unsigned segs = 0, hits = 0, comp = APPM__COMP_DIFFUSE; /* comp: the component of a photon stored next */
+    unsigned segs = 0, hits = 0, casts = 0, comp = APPM__COMP_DIFFUSE; /* comp: the component of a photon stored next */
     unsigned first = r->direct == APPM_DIRECT_PHOTONS ? 1u : 2u;
     float ue[5], w = 1.0f;
     uint32_t tag = UINT32_MAX, li;
@@ -12306,7 +12306,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         float u3[4], steer = 1.0f; /* an aimed bounce's factor (appm__focus_bounce) */
         unsigned dims;
         float q;
-        ++*rays;
+        casts++;
         if (!appm__intersect(s, &ray, skip, &h)) break;
         hits++;
         appm__surface(s, &h, &sf);
@@ -12339,6 +12339,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         skip = sf.tri;
     }
     appm__guide_tally(r, worker, tag, hits);
+    *rays += casts;
     return 1;
 }
 
@@ -14154,6 +14155,12 @@ static void appm__renderer_free_parts(appm_renderer *r)
     appm__cluster_free(r);
 }
 
+/* The chunks of APPM__CHUNK paths that `paths` photon paths take. */
+static uint64_t appm__chunks_of(uint64_t paths)
+{
+    return (paths + APPM__CHUNK - 1) / APPM__CHUNK;
+}
+
 /* Photons per task region of the first store, 1.5 per path plus slack, in
  * double and clamped before the conversion: 1.5 x 2^32 paths exceed a 32-bit
  * size_t (wasm32), and cap * tasks must fit the store's uint32 indices, the
@@ -14165,7 +14172,7 @@ static void appm__renderer_free_parts(appm_renderer *r)
 static size_t appm__store_guess(uint64_t paths, unsigned tasks)
 {
     /* the busiest task's paths: chunks of APPM__CHUNK go to the tasks in turn */
-    const uint64_t chunks = (paths + APPM__CHUNK - 1) / APPM__CHUNK;
+    const uint64_t chunks = appm__chunks_of(paths);
     const uint64_t busiest = (chunks + tasks - 1) / tasks * APPM__CHUNK;
     const double per_task = (double)(busiest < paths ? busiest : paths);
     const double guess = per_task * 1.5 + (per_task + 256.0 < 4096.0 ? per_task + 256.0 : 4096.0);
@@ -14323,8 +14330,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->seed = c.seed;
     r->pixel_angle = 2.0f * scene->cam.tan_half / (float)r->h;
     r->tasks = r->threads;
-    r->nchunks = (uint32_t)((r->M + APPM__CHUNK - 1) / APPM__CHUNK);
-    r->nchunks_max = r->budget ? (uint32_t)((APPM__BUDGET_MAX * r->M0 + APPM__CHUNK - 1) / APPM__CHUNK) : r->nchunks;
+    r->nchunks = (uint32_t)appm__chunks_of(r->M);
+    r->nchunks_max = r->budget ? (uint32_t)appm__chunks_of(APPM__BUDGET_MAX * r->M0) : r->nchunks;
     r->cluster.ranks = 1;
     r->eye1 = r->row1 = r->h;
     r->chunk1 = r->nchunks;
@@ -14935,7 +14942,7 @@ APPM_API appm_status appm_renderer_set_cluster(appm_renderer *r, const appm_clus
 static void appm__set_photons(appm_renderer *r, uint64_t M)
 {
     r->M = M;
-    r->nchunks = (uint32_t)((M + APPM__CHUNK - 1) / APPM__CHUNK);
+    r->nchunks = (uint32_t)appm__chunks_of(M);
     if (r->cluster.ranks > 1) {
         memset(r->chunk_cost, 0, (r->nchunks_max ? r->nchunks_max : 1) * sizeof *r->chunk_cost);
         appm__cluster_balance(r->chunk_cost, r->nchunks, r->cluster.ranks, r->cl_chunks);
@@ -15043,7 +15050,7 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
         r->guide.ref = appm__guide_learns(r->pass) ? appm__guide_ref(r) : 0.0;
     }
     t[0] = appm__seconds();
-    memcpy(dropped, r->dropped, sizeof dropped);
+    if (r->pass == 1 && r->budget == 1) memcpy(dropped, r->dropped, sizeof dropped); /* for appm__budget */
     st = appm__cluster_agree(r, appm__photon_pass(r), "the photon pass");
     if (st == APPM_OK && r->pass == 1 && r->budget == 1) st = appm__budget(r, dropped);
     if (st != APPM_OK) return st;
