@@ -5972,7 +5972,9 @@ static void appm__mtl_finish(appm__loader *L, appm__material *m, int illum, int 
         appm__warn(L, (uint64_t)1 << 62, line, "MTL statement 'Ns' is not modelled without Ks > 0, ignored");
 }
 
-/* The Phong exponent: (0, 1e5] (interface contract, section 2). */
+/* The Phong exponent: (0, 1e5] (interface contract, section 2).  A positive
+ * exponent below the smallest normal float (Ns 1e-301) would round to 0 or to a
+ * subnormal; it is kept as FLT_MIN, a lobe no render can tell from its own. */
 static appm_status appm__mtl_ns(appm__loader *L, const char **s, const char *e, unsigned line, appm__material *m)
 {
     double v;
@@ -5980,7 +5982,7 @@ static appm_status appm__mtl_ns(appm__loader *L, const char **s, const char *e, 
     if (st != APPM_OK) return st;
     if (!(v > 0.0) || v > APPM__NS_MAX)
         return appm__fail(L->diag, APPM_ERR_PARSE, L->file, line, "Phong exponent Ns %g is not in (0, 1e5]", v);
-    m->ns = (float)v;
+    m->ns = v < FLT_MIN ? FLT_MIN : (float)v;
     return APPM_OK;
 }
 
