@@ -12502,6 +12502,7 @@ static size_t appm__store_compact(appm_renderer *r)
 /* appm's steps (10.4) */
 #define APPM__CF_SPLIT (APPM__CF / 2.0)          /* step 1: c_f of each of two components */
 #define APPM__LAP_EVERY 8                        /* step 2: after warm-up, dI on every 8th pass */
+#define APPM__KAPPA_CAUSTIC 1.0                  /* step 2: the caustic component's kappa (diffuse: KAPPA) */
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* step 3: keep >= 1/64 of dI^2 (r at most 2x) */
 #define APPM__POOL 1                             /* step 3: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__RHI_DIFFUSE 3.0                    /* step 5: the diffuse component's upper bound */
@@ -12536,6 +12537,9 @@ typedef struct appm__gather {
     int glossy;
     float R;             /* kernel radius */
     float h;             /* Laplacian bandwidth (0: none this pass) */
+    float hc;            /* the caustic component's bandwidth (with Rc > 0; appm__caustic_bandwidth) */
+    double ihc;          /* 1 / hc (0: none), set by the query */
+    double lwc[5];       /* lw (below) for the bandwidth hc, set by the query */
     float R2, Rg2;       /* R^2 and max(R, 2h)^2, set by the query */
     double ih;           /* 1 / h (0: no Laplacian), set by the query */
     double qw[3];        /* off glossy points: the luminance weights times W f, so lum(Psi) =
@@ -12617,8 +12621,8 @@ static int appm__mass_pass(uint64_t j)
  * with k_R = K(|d|/R)/R^2 and the kernel constants 1/pi (uniform) or 3/pi
  * (biweight) applied here, once, instead of per photon; divided by the kernel's
  * mass on the surface where the gather has cut lines (10.4, step 6). */
-static void appm__sums_finish(const appm__gather *g, double R, const appm__sums *sum, double invM, double *e,
-                              double *s, double *dl)
+static void appm__sums_finish(const appm__gather *g, double R, double h, const appm__sums *sum, double invM,
+                              double *e, double *s, double *dl)
 {
     double mass = appm__cut_mass(g, R), norm;
     norm = (g->biweight ? 3.0 : 1.0) / (APPM__PI * R * R * mass);
@@ -12634,14 +12638,28 @@ static void appm__sums_finish(const appm__gather *g, double R, const appm__sums 
         }
         *s = sum->s * norm * invM / mass;
     }
-    if (g->h > 0.0f) *dl = sum->dl * (3.0 / APPM__PI) / ((double)g->h * g->h * g->h * g->h) * invM;
+    if (h > 0.0) *dl = sum->dl * (3.0 / APPM__PI) / (h * h * h * h) * invM;
 }
 
 /* The estimates of component c (APPM__COMP_DIFFUSE: of every photon with one
- * component) from a gather: the sums of appm__sums_finish with the radius of c. */
+ * component) from a gather: the sums of appm__sums_finish with the radius and
+ * the bandwidth of c. */
 static void appm__gather_finish(const appm__gather *g, int c, double invM, double *e, double *s, double *dl)
 {
-    appm__sums_finish(g, c == APPM__COMP_CAUSTIC ? g->Rc : g->R, &g->sum[c], invM, e, s, dl);
+    int caustic = c == APPM__COMP_CAUSTIC;
+    appm__sums_finish(g, caustic ? g->Rc : g->R, caustic ? g->hc : g->h, &g->sum[c], invM, e, s, dl);
+}
+
+/* The caustic component's Laplacian bandwidth (10.4, step 2), given the
+ * diffuse one h and the caustic radius Rc (0: one component, which takes h).
+ * A caustic's features are sharper than the diffuse light's (the filaments of
+ * light through a glass or a wave), and a wide h flattens them (|dI| falls like
+ * h^-4), so its radius stayed at the upper bound: kappa_c = 1 against 1.5.
+ * The diffuse component keeps 1.5, where a narrower h only adds noise
+ * (docs/algorithm.md 5.2, docs/experiments.md). */
+static float appm__caustic_bandwidth(float h, float Rc)
+{
+    return Rc > 0.0f ? (float)(h * (APPM__KAPPA_CAUSTIC / APPM__KAPPA)) : h;
 }
 
 
@@ -13592,6 +13610,7 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     int ls[APPM__CUT_CAND], nl = 0, k;              /* and how many neighbours give each */
     g->ncut = 0;
     if (APPM__CUT_LAP && 2.0f * g->h > Rm) Rm = 2.0f * g->h; /* the Laplacian's kernels reach 2h */
+    if (APPM__CUT_LAP && 2.0f * g->hc > Rm) Rm = 2.0f * g->hc; /* and 2 hc */
     if (!(Rm > 0.0f)) return;
     W = fp > 0.0f && Rm / fp < (float)APPM__CUT_WIN ? (int64_t)(Rm / fp) + 1 : APPM__CUT_WIN;
     pw = fp > 0.0f ? fp : Rm;
@@ -13704,9 +13723,10 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
  * algorithm.md 4.6, per photon. */
 
 /* One photon's share of one component's sums (lobe: the glossy lobe's value at
- * the photon's direction). */
+ * the photon's direction; ih and lw: 1 / the component's bandwidth, 0 for none,
+ * and its kernels' masses). */
 static inline void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
-                                     double q, float lobe, appm__sums *sum)
+                                     const double *lw, double q, float lobe, appm__sums *sum)
 {
     if (d2 < R2) {
         double k = 1.0;
@@ -13725,7 +13745,7 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
         }
         sum->count++;
     }
-    if (g->h > 0.0f) {
+    if (ih > 0.0) {
         /* algorithm.md 4.6:  D_h(d) h^4 / (3/pi): the biweight at x +- h t, x +- h b minus 4 times
          * at x.  With a = |d|^2 / h^2 and d = x - y, |d +- h t|^2 / h^2 = a + 1 +- 2 (d.t)/h.
          * Beyond 2h (a >= 4) every term is 0, since a + 1 - 2 |d.t| / h >= (sqrt(a) - 1)^2 >= 1:
@@ -13743,8 +13763,8 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             c[2] = a + 1.0 + 2.0 * db;
             c[3] = a + 1.0 - 2.0 * db;
             for (k = 0; k < 4; ++k)
-                if (c[k] < 1.0) stencil += g->lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
-            if (a < 1.0) stencil -= 4.0 * g->lw[4] * (1.0 - a) * (1.0 - a);
+                if (c[k] < 1.0) stencil += lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
+            if (a < 1.0) stencil -= 4.0 * lw[4] * (1.0 - a) * (1.0 - a);
             sum->dl += stencil * q;
         }
     }
@@ -13779,25 +13799,37 @@ static void appm__gather_near(appm__gather *g, const appm__photon *p, float d2, 
         int c = p->comp == APPM__COMP_CAUSTIC && g->Rc > 0.0f;
         if (g->gcount && tag != UINT32_MAX && d2 < (c ? g->Rc2 : R2)) /* 9.1: this pair's share of the image */
             appm__guide_count(g->gcount, g->gpairs, tag, d2, c ? g->Rc2 : R2, g->biweight, q, g->gunit);
-        appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, ih, q, lobe, &g->sum[c ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE]);
+        appm__gather_sums(g, p, d2, c ? g->Rc2 : R2, c ? g->ihc : ih, c ? g->lwc : g->lw, q, lobe,
+                          &g->sum[c ? APPM__COMP_CAUSTIC : APPM__COMP_DIFFUSE]);
     }
 }
 
-/* The per-pixel constants of the visit: 1/h and the luminance weights of
- * lum(Psi), whose first factor is (0.2126 W f_x) gamma_x, as before. */
-static void appm__gather_consts(appm__gather *g)
+/* lw[k] = 1 / the mass on the surface of the Laplacian's five kernels of
+ * bandwidth h (at x + h t, x - h t, x + h b, x - h b and x; step 6), 1 where
+ * the gather has no cut lines. */
+static void appm__lap_masses(const appm__gather *g, double h, double *lw)
 {
     int k;
-    g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
-    for (k = 0; k < 5; ++k) g->lw[k] = 1.0;
-    if (APPM__CUT_LAP && g->ncut > 0 && g->h > 0.0f) { /* the stencil's kernels, each renormalised by its own mass */
-        double h = g->h;
-        g->lw[0] = 1.0 / appm__cut_mass_at(g, h, h, 0.0);
-        g->lw[1] = 1.0 / appm__cut_mass_at(g, h, -h, 0.0);
-        g->lw[2] = 1.0 / appm__cut_mass_at(g, h, 0.0, h);
-        g->lw[3] = 1.0 / appm__cut_mass_at(g, h, 0.0, -h);
-        g->lw[4] = 1.0 / appm__cut_mass_at(g, h, 0.0, 0.0);
+    for (k = 0; k < 5; ++k) lw[k] = 1.0;
+    if (APPM__CUT_LAP && g->ncut > 0 && h > 0.0) { /* the stencil's kernels, each renormalised by its own mass */
+        lw[0] = 1.0 / appm__cut_mass_at(g, h, h, 0.0);
+        lw[1] = 1.0 / appm__cut_mass_at(g, h, -h, 0.0);
+        lw[2] = 1.0 / appm__cut_mass_at(g, h, 0.0, h);
+        lw[3] = 1.0 / appm__cut_mass_at(g, h, 0.0, -h);
+        lw[4] = 1.0 / appm__cut_mass_at(g, h, 0.0, 0.0);
     }
+}
+
+/* The per-pixel constants of the visit: 1/h, 1/hc, the kernels' masses and
+ * the luminance weights of lum(Psi), whose first factor is (0.2126 W f_x) gamma_x,
+ * as before. */
+static void appm__gather_consts(appm__gather *g)
+{
+    g->ih = g->h > 0.0f ? 1.0 / g->h : 0.0;
+    g->ihc = g->hc > 0.0f ? 1.0 / g->hc : 0.0;
+    appm__lap_masses(g, g->h, g->lw);
+    if (g->hc == g->h) memcpy(g->lwc, g->lw, sizeof g->lw);
+    else appm__lap_masses(g, g->hc, g->lwc);
     g->qw[0] = 0.2126 * g->wf.x;
     g->qw[1] = 0.7152 * g->wf.y;
     g->qw[2] = 0.0722 * g->wf.z;
@@ -13828,6 +13860,7 @@ static void appm__gather_query(const appm__pmap *m, appm__gather *g)
 {
     float Rg = g->R > 2.0f * g->h ? g->R : 2.0f * g->h;
     if (g->Rc > Rg) Rg = g->Rc;
+    if (2.0f * g->hc > Rg) Rg = 2.0f * g->hc;
     g->Rc2 = g->Rc * g->Rc;
     g->R2 = g->R * g->R;
     g->Rg2 = Rg * Rg;
@@ -13841,12 +13874,13 @@ static void appm__gather_query(const appm__pmap *m, appm__gather *g)
  * kernels are not measured), and g left without lines. */
 static double appm__seam_mass(const appm_renderer *r, size_t i, appm__gather *g)
 {
-    const float h = g->h;
+    const float h = g->h, hc = g->hc;
     double m;
-    g->h = 0.0f;
+    g->h = g->hc = 0.0f;
     appm__cut_lines(r, i, g);
     m = appm__cut_mass(g, g->R);
     g->h = h;
+    g->hc = hc;
     g->ncut = 0;
     return m;
 }
@@ -13879,6 +13913,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.R = vp->R;
             g.Rc = vp->Rc;
             g.h = (float)r->lap_h;
+            g.hc = appm__caustic_bandwidth(g.h, g.Rc);
             if (r->cut) appm__cut_lines(r, pi, &g);
             else if (r->edges && appm__mass_pass(r->pass)) g.mass = appm__seam_mass(r, pi, &g);
             if (r->guide.nslot && r->guide.ref > 0.0) {

@@ -41,7 +41,7 @@ static void toy_gather_init(appm__gather *g, float R, float h, int biweight)
     appm__basis(g->n, &g->t, &g->b);
     g->wf = appm__v(1, 1, 1);
     g->R = R;
-    g->h = h;
+    g->h = g->hc = h;
     g->max_p = 255;
     g->biweight = biweight;
 }
@@ -113,6 +113,47 @@ static void test_laplacian_mean(void)
                   predicted);
     }
     /* the second moment estimate s_j averages to S = 1/3 (up to O(r^2) smoothing) */
+}
+
+/* With two components, the caustic photons' Laplacian is taken with their own
+ * bandwidth hc (appm__caustic_bandwidth: kappa_c / kappa times the diffuse h)
+ * and normalised by hc^4: on the quadratic field its mean is Delta L = 50
+ * whatever h is (with h's stencil or h's normalisation it reads 253 or 9.9),
+ * and the diffuse sums see none of the caustic photons. */
+static void test_caustic_bandwidth(void)
+{
+    const float h = 0.15f, R = 0.05f, hc = appm__caustic_bandwidth(h, R), reach = 2.0f * (h > hc ? h : hc);
+    const unsigned M = 10000;
+    int t, T = check_quick() ? 1000 : 3000, leaks = 0;
+    double sum = 0, sum2 = 0, mean, se;
+    appm__rng rng;
+    CHECK_MSG(appm__caustic_bandwidth(h, 0.0f) == h, "one component: its bandwidth is h");
+    CHECK_MSG(fabs(hc - h * (APPM__KAPPA_CAUSTIC / APPM__KAPPA)) < 1e-6 && hc != h, "caustic bandwidth %g", hc);
+    appm__rng_seed(&rng, 13, 0, APPM__DOMAIN_TEST, 0);
+    for (t = 0; t < T; ++t) {
+        appm__gather g;
+        double e[3], s, dl;
+        unsigned i;
+        toy_gather_init(&g, R, h, 1);
+        g.Rc = R;
+        g.Rc2 = R * R;
+        g.hc = hc;
+        for (i = 0; i < M; ++i) {
+            appm__photon p = toy_photon(&rng, 0);
+            p.comp = APPM__COMP_CAUSTIC;
+            appm__gather_photon(&g, &p, R * R, reach * reach);
+        }
+        appm__gather_finish(&g, APPM__COMP_DIFFUSE, 1.0 / M, e, &s, &dl);
+        leaks += g.sum[APPM__COMP_DIFFUSE].count != 0 || dl != 0.0;
+        appm__gather_finish(&g, APPM__COMP_CAUSTIC, 1.0 / M, e, &s, &dl);
+        sum += dl;
+        sum2 += dl * dl;
+    }
+    mean = sum / T;
+    se = sqrt((sum2 / T - mean * mean) / (T - 1));
+    CHECK_MSG(leaks == 0, "%d of %d gathers put caustic photons into the diffuse sums", leaks, T);
+    CHECK_MSG(fabs(mean - TOY_LAPLACIAN) < 0.02 * TOY_LAPLACIAN + 2.0 * se,
+              "caustic Laplacian mean %.3f vs %.1f (se %.3f)", mean, TOY_LAPLACIAN, se);
 }
 
 /* On a glossy surface the gathered field includes the lobe evaluated at each
@@ -560,6 +601,7 @@ static double toy2_progressive(int split, int passes, int runs, uint64_t seed, d
             toy_gather_init(&g, vp.R, h, 1);
             g.Rc = vp.Rc;
             g.Rc2 = vp.Rc * vp.Rc;
+            g.hc = appm__caustic_bandwidth(h, vp.Rc);
             reach = vp.R > vp.Rc ? vp.R : vp.Rc;
             reach = reach > 2.0f * h ? reach : 2.0f * h;
             for (i = 0; i < 1000; ++i) {
@@ -1197,6 +1239,7 @@ int main(void)
 {
     test_kernel_normalisation();
     test_laplacian_mean();
+    test_caustic_bandwidth();
     test_glossy_laplacian();
     test_optimal_radius();
     test_selector_guards();
