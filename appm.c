@@ -12502,7 +12502,7 @@ static size_t appm__store_compact(appm_renderer *r)
 /* appm's steps (10.4) */
 #define APPM__CF_SPLIT (APPM__CF / 2.0)          /* step 1: c_f of each of two components */
 #define APPM__LAP_EVERY 8                        /* step 2: after warm-up, dI on every 8th pass */
-#define APPM__KAPPA_CAUSTIC 1.0                  /* step 2: the caustic component's kappa (diffuse: KAPPA) */
+#define APPM__KAPPA_CAUSTIC 1.25                 /* step 2: the caustic component's kappa (diffuse: KAPPA) */
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* step 3: keep >= 1/64 of dI^2 (r at most 2x) */
 #define APPM__POOL 1                             /* step 3: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__RHI_DIFFUSE 3.0                    /* step 5: the diffuse component's upper bound */
@@ -12540,7 +12540,7 @@ typedef struct appm__gather {
     float hc;            /* the caustic component's bandwidth (with Rc > 0; appm__caustic_bandwidth) */
     double ihc;          /* 1 / hc (0: none), set by the query */
     double lwc[5];       /* lw (below) for the bandwidth hc, set by the query */
-    float R2, Rg2;       /* R^2 and max(R, 2h)^2, set by the query */
+    float R2, Rg2;       /* R^2 and max(R, Rc, 2h, 2hc)^2, set by the query */
     double ih;           /* 1 / h (0: no Laplacian), set by the query */
     double qw[3];        /* off glossy points: the luminance weights times W f, so lum(Psi) =
                           * qw . gamma; set by the query */
@@ -12654,9 +12654,11 @@ static void appm__gather_finish(const appm__gather *g, int c, double invM, doubl
  * diffuse one h and the caustic radius Rc (0: one component, which takes h).
  * A caustic's features are sharper than the diffuse light's (the filaments of
  * light through a glass or a wave), and a wide h flattens them (|dI| falls like
- * h^-4), so its radius stayed at the upper bound: kappa_c = 1 against 1.5.
- * The diffuse component keeps 1.5, where a narrower h only adds noise
- * (docs/algorithm.md 5.2, docs/experiments.md). */
+ * h^-4), so its radius stayed at the upper bound: kappa_c = 1.25 against 1.5.
+ * Narrower still (1.0) sharpens the caustic more but makes the Laplacian noisy
+ * wherever caustic photons are sparse, and the floors around it and smooth
+ * caustics (a plane mirror's) lose more than the caustic gains; the diffuse
+ * component keeps 1.5 (docs/algorithm.md 5.2, docs/experiments.md). */
 static float appm__caustic_bandwidth(float h, float Rc)
 {
     return Rc > 0.0f ? (float)(h * (APPM__KAPPA_CAUSTIC / APPM__KAPPA)) : h;
@@ -13770,7 +13772,7 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
     }
 }
 
-/* Photon p at squared distance d2 (< the query's reach, max(R, Rc, 2h)^2)
+/* Photon p at squared distance d2 (< the query's reach, max(R, Rc, 2h, 2hc)^2)
  * into g's sums; R2 = R^2, ih = 1/h.  The cheap rejections come first (path
  * length, one byte; then the normal), and lum(Psi), which only the second
  * moment and the Laplacian read, is not formed for the uniform kernel. */
@@ -13854,7 +13856,7 @@ static void appm__gather_visit(void *ctx, const appm__photon *p, float d2)
     appm__gather_near(g, p, d2, g->R2, g->ih, g->map->side + 4 * i, g->map->tag ? g->map->tag[i] : UINT32_MAX);
 }
 
-/* Visits every photon within max(R, Rc, 2h) of g->x (7.2's query), with
+/* Visits every photon within max(R, Rc, 2h, 2hc) of g->x (7.2's query), with
  * the per-pixel constants of the visit computed once. */
 static void appm__gather_query(const appm__pmap *m, appm__gather *g)
 {

@@ -118,7 +118,7 @@ static void test_laplacian_mean(void)
 /* With two components, the caustic photons' Laplacian is taken with their own
  * bandwidth hc (appm__caustic_bandwidth: kappa_c / kappa times the diffuse h)
  * and normalised by hc^4: on the quadratic field its mean is Delta L = 50
- * whatever h is (with h's stencil or h's normalisation it reads 253 or 9.9),
+ * whatever h is (with h's stencil or h's normalisation it reads 104 or 24),
  * and the diffuse sums see none of the caustic photons. */
 static void test_caustic_bandwidth(void)
 {
@@ -154,6 +154,57 @@ static void test_caustic_bandwidth(void)
     CHECK_MSG(leaks == 0, "%d of %d gathers put caustic photons into the diffuse sums", leaks, T);
     CHECK_MSG(fabs(mean - TOY_LAPLACIAN) < 0.02 * TOY_LAPLACIAN + 2.0 * se,
               "caustic Laplacian mean %.3f vs %.1f (se %.3f)", mean, TOY_LAPLACIAN, se);
+}
+
+/* Where the surface ends inside the kernels (a cut line, 5.6), each of the
+ * caustic stencil's five kernels is renormalised by its own mass at the caustic
+ * bandwidth hc, not at h: the caustic Laplacian sum against one formed here
+ * photon by photon with masses at hc (and the masses at hc must differ from
+ * those at h, or the check could not tell them apart). */
+static void test_caustic_bandwidth_cut(void)
+{
+    const float h = 0.15f, R = 0.05f, hc = appm__caustic_bandwidth(h, R), reach = 2.0f * (h > hc ? h : hc);
+    const double off[5][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}, {0, 0}};
+    double lw[5], lwh0, want = 0.0;
+    appm__gather g;
+    appm__rng rng;
+    int i, k;
+    toy_gather_init(&g, R, h, 1);
+    g.Rc = R;
+    g.Rc2 = R * R;
+    g.hc = hc;
+    g.ncut = 1; /* the surface ends 0.2 away along t */
+    g.cut_u[0][0] = 1.0f;
+    g.cut_u[0][1] = 0.0f;
+    g.cut_d[0] = 0.2f;
+    for (k = 0; k < 5; ++k) lw[k] = 1.0 / appm__cut_mass_at(&g, hc, off[k][0] * hc, off[k][1] * hc);
+    lwh0 = 1.0 / appm__cut_mass_at(&g, h, h, 0.0);
+    CHECK_MSG(fabs(lw[0] - lwh0) > 0.05 * lw[0], "masses at hc (%g) and h (%g) alike", lw[0], lwh0);
+    appm__rng_seed(&rng, 14, 0, APPM__DOMAIN_TEST, 0);
+    for (i = 0; i < 4000; ++i) {
+        appm__photon p = toy_photon(&rng, 0);
+        double dx, dy, a, dt, db, c[4], st = 0.0;
+        p.x *= 0.3f;
+        p.y *= 0.3f;
+        p.comp = APPM__COMP_CAUSTIC;
+        appm__gather_photon(&g, &p, R * R, reach * reach);
+        dx = (double)(g.x.x - p.x);
+        dy = (double)(g.x.y - p.y);
+        a = (double)((g.x.x - p.x) * (g.x.x - p.x) + (g.x.y - p.y) * (g.x.y - p.y)) / ((double)hc * hc);
+        if (!(a < 4.0)) continue;
+        dt = (dx * g.t.x + dy * g.t.y) / hc;
+        db = (dx * g.b.x + dy * g.b.y) / hc;
+        c[0] = a + 1.0 + 2.0 * dt;
+        c[1] = a + 1.0 - 2.0 * dt;
+        c[2] = a + 1.0 + 2.0 * db;
+        c[3] = a + 1.0 - 2.0 * db;
+        for (k = 0; k < 4; ++k)
+            if (c[k] < 1.0) st += lw[k] * (1.0 - c[k]) * (1.0 - c[k]);
+        if (a < 1.0) st -= 4.0 * lw[4] * (1.0 - a) * (1.0 - a);
+        want += st * p.power[1];
+    }
+    CHECK_MSG(fabs(g.sum[APPM__COMP_CAUSTIC].dl - want) <= 1e-6 * (fabs(want) + 1.0),
+              "caustic stencil sum %.9g, formed with the masses at hc %.9g", g.sum[APPM__COMP_CAUSTIC].dl, want);
 }
 
 /* On a glossy surface the gathered field includes the lobe evaluated at each
@@ -1240,6 +1291,7 @@ int main(void)
     test_kernel_normalisation();
     test_laplacian_mean();
     test_caustic_bandwidth();
+    test_caustic_bandwidth_cut();
     test_glossy_laplacian();
     test_optimal_radius();
     test_selector_guards();
