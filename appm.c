@@ -12506,6 +12506,7 @@ static size_t appm__store_compact(appm_renderer *r)
 #define APPM__DI_FLOOR (1.0 / 64.0)              /* step 3: keep >= 1/64 of dI^2 (r at most 2x) */
 #define APPM__POOL 1                             /* step 3: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__RHI_DIFFUSE 3.0                    /* step 5: the diffuse component's upper bound */
+#define APPM__RSTART 2.0                         /* step 4: the automatic start radius, times r_auto */
 #define APPM__CUT_MMIN 0.2                       /* step 6: the least kernel mass divided by */
 #define APPM__CUT_LINES 4                        /* step 6: lines kept per gather (its cut_u, cut_d) */
 #define APPM__CUT_WIN 4                          /* step 6: the widest window, (2 W + 1)^2 pixels */
@@ -13315,13 +13316,15 @@ static void appm__adaptive_bounds(double r1, double r_auto, double shrink, doubl
 
 /* Radius for pass j from one component's statistics after j-1 passes: 10.3's
  * radius with steps 3 - 5.  r1 is the initial radius, r_auto the automatic
- * one, cf the constant of the radius formula, di2 the dI^2 to use (< 0 or NaN:
- * the component's own, appm__di2), rhi the upper bound's factor.  Never NaN, 0
- * or inf: every path ends inside the bounds of appm__adaptive_bounds. */
-static double appm__adaptive_radius(double r1, double r_auto, uint64_t M, uint64_t j, double shrink, double rhi,
-                                    const appm__adaptive_stats *p, double cf, double di2)
+ * one, r0 the radius before the formula has data (the warm-up passes, or no
+ * Laplacian yet; r0 j^(-1/6)), cf the constant of the radius formula, di2 the
+ * dI^2 to use (< 0 or NaN: the component's own, appm__di2), rhi the upper
+ * bound's factor.  Never NaN, 0 or inf: every path ends inside the bounds of
+ * appm__adaptive_bounds. */
+static double appm__adaptive_radius(double r1, double r_auto, double r0, uint64_t M, uint64_t j, double shrink,
+                                    double rhi, const appm__adaptive_stats *p, double cf, double di2)
 {
-    double lo, hi, rad = r1 * shrink;
+    double lo, hi, rad = r0 * shrink;
     appm__adaptive_bounds(r1, r_auto, shrink, rhi, &lo, &hi);
     if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* step 4: too few photons seen to estimate anything: widen, as a k-nearest-
@@ -13348,7 +13351,20 @@ static double appm__adaptive_radius(double r1, double r_auto, uint64_t M, uint64
 APPM__UNUSED static double appm__adaptive_radius_at(double r1, double r_auto, uint64_t M, uint64_t j,
                                                     const appm__adaptive_stats *p, double cf, double di2)
 {
-    return appm__adaptive_radius(r1, r_auto, M, j, pow((double)j, -1.0 / 6.0), APPM__RHI, p, cf, di2);
+    return appm__adaptive_radius(r1, r_auto, r1, M, j, pow((double)j, -1.0 / 6.0), APPM__RHI, p, cf, di2);
+}
+
+/* Step 4: the radius before the formula has data.  A radius the user told
+ * (--radius) is the start, as promised; the automatic start is APPM__RSTART
+ * r_auto.  The warm-up passes stay in the mean, and a few wide ones cost little
+ * bias and much noise: after 8 passes caustic-glass's RMSE is 0.86x, water-
+ * caustic's 0.82x and the white box's 0.88x that of a start at r_auto, the same
+ * after 128 (docs/algorithm.md 5.4).  Not for a told radius: t_appm's toy, whose
+ * appm must not depend on r1, doubled its error at r1 = 3 r_auto started twice
+ * as wide. */
+static double appm__adaptive_start(const appm_renderer *r)
+{
+    return r->r1_auto ? APPM__RSTART * r->r_auto : r->r1;
 }
 
 /* Step 5: each component's upper bound, APPM__RHI_DIFFUSE or APPM__RHI. */
@@ -13357,8 +13373,8 @@ static double appm__comp_rhi(int c) { return c == APPM__COMP_DIFFUSE ? APPM__RHI
 static double appm__adaptive_comp_radius(const appm_renderer *r, const appm__adaptive_px *a, int c)
 {
     const appm__adaptive_stats *p = &a->comp[c];
-    return appm__adaptive_radius(r->r1, r->r_auto, r->M, r->pass, appm__pass_shrink(r), appm__comp_rhi(c), p,
-                                 APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
+    return appm__adaptive_radius(r->r1, r->r_auto, appm__adaptive_start(r), r->M, r->pass, appm__pass_shrink(r),
+                                 appm__comp_rhi(c), p, APPM__CF_SPLIT, p->dI2p > 0.0 ? p->dI2p : -1.0);
 }
 
 static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *state)

@@ -261,6 +261,41 @@ static void set_bias(appm_renderer *r, double j, int what, double b)
     }
 }
 
+/* appm's start (10.4, step 4): on pass 1, before the formula has any data, every
+ * gathering pixel's radius is APPM__RSTART r_auto when the radius is automatic,
+ * and the told radius r1 when the user gave one (--radius is the initial
+ * radius). */
+static void test_appm_start(appm_scene *s)
+{
+    int told;
+    for (told = 0; told < 2; ++told) {
+        appm_config cfg;
+        appm_renderer *r;
+        size_t i, n, seen = 0, wrong = 0;
+        double want;
+        appm_config_init(&cfg);
+        cfg.width = 24;
+        cfg.height = 16;
+        cfg.photons = 4000;
+        cfg.threads = 2;
+        cfg.radius = told ? 0.05 : 0.0;
+        r = check_renderer(s, &cfg);
+        if (!r) continue;
+        if (check_passes(r, 1)) {
+            want = told ? 0.05 : APPM__RSTART * r->r_auto;
+            n = (size_t)r->w * r->h;
+            for (i = 0; i < n; ++i) {
+                if (!r->vp[i].segs) continue;
+                seen++;
+                wrong += fabs(r->vp[i].R - want) > 1e-6 * want;
+            }
+            CHECK_MSG(seen > n / 2 && wrong == 0, "%s radius: %lu of %lu pixels' pass-1 radius is not %g (r_auto %g)",
+                      told ? "a told" : "the automatic", (unsigned long)wrong, (unsigned long)seen, want, r->r_auto);
+        }
+        appm_renderer_destroy(r);
+    }
+}
+
 static void test_bias2(appm_scene *s)
 {
     appm_renderer *r = render(s, APPM_METHOD_APPM_PAPER, 2);
@@ -779,6 +814,7 @@ int main(void)
         test_aux(s);
         test_seam(s);
         test_paper_render(s);
+        test_appm_start(s);
         test_bias2(s);
         test_bias2_noise(s);
         test_seam_bias(s);
