@@ -213,10 +213,11 @@ typedef struct appm_file_reader {
  * the recursive finite-difference Laplacian on every pass, the closed-form
  * radius and its safeguards), for teaching and comparison.  appm, the default,
  * is that selector with six measured steps on top (docs/algorithm.md 5): two
- * photon components (caustic and diffuse) with their own radii, a Laplacian
- * on fewer passes with a wider bandwidth, its square corrected for noise and
- * pooled over neighbouring pixels, a k-nearest-neighbour widening where photons
- * are sparse, per-component bounds, and the kernel renormalised where the
+ * photon components (caustic and diffuse) with their own radii and Laplacian
+ * bandwidths, a Laplacian on fewer passes with a wider bandwidth, its square
+ * corrected for noise and pooled over neighbouring pixels, a start at twice the
+ * automatic radius (a told radius is the start) and a k-nearest-neighbour
+ * widening where photons are sparse, per-component bounds, and the kernel renormalised where the
  * surface ends inside it (a wall meeting the floor, a box's edge, a mesh's
  * open edge where the surface ends against nothing: without it every seam and
  * rim is dark by the kernel's missing part).  ppm and sppm keep their
