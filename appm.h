@@ -134,8 +134,8 @@
 
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
-#define APPM_VERSION_PATCH 0
-#define APPM_VERSION "0.1.0"
+#define APPM_VERSION_PATCH 1
+#define APPM_VERSION "0.1.1"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,8 +165,10 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.0": the version of the implementation that was compiled (APPM_VERSION is
- * the version of the header). */
+/* "0.1.1": the version of the implementation that was compiled (APPM_VERSION is
+ * the version of the header).  The patch number changes with every change to
+ * what a pass computes (an estimator's constant, the sampler, the emission),
+ * so a checkpoint never resumes under passes other than those that wrote it. */
 APPM_API const char *appm_version(void);
 
 /* Detail of the first error of a call.  `file` is the input file at fault (empty
@@ -640,7 +642,8 @@ APPM_API const float *appm_renderer_emission_map(appm_renderer *r, unsigned k, u
  * it differs; another machine reading the same files has the same scene.  The
  * format version changes with the layout and with what the scene hash covers;
  * a checkpoint of another format version is refused as such (compatibility is
- * exact: same format and library version, or nothing).  The layout is
+ * exact: same format and library version, or nothing; the library version
+ * changes whenever a pass would compute something else).  The layout is
  * described in appm.c, section 13.
  *
  * appm_renderer_save writes into buf (cap bytes) and sets *size to the bytes
