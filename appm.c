@@ -12507,7 +12507,6 @@ static size_t appm__store_compact(appm_renderer *r)
 #define APPM__POOL 1                             /* step 3: dI^2 pooled over (2 POOL + 1)^2 pixels */
 #define APPM__RHI_DIFFUSE 3.0                    /* step 5: the diffuse component's upper bound */
 #define APPM__RSTART 2.0                         /* step 4: the automatic start radius, times r_auto */
-#define APPM__KMIN_APPM 32.0                     /* step 4: photons a component sees before it adapts */
 #define APPM__CUT_MMIN 0.2                       /* step 6: the least kernel mass divided by */
 #define APPM__CUT_LINES 4                        /* step 6: lines kept per gather (its cut_u, cut_d) */
 #define APPM__CUT_WIN 4                          /* step 6: the widest window, (2 W + 1)^2 pixels */
@@ -13250,7 +13249,7 @@ static double appm__di2(const appm__adaptive_stats *p, uint64_t n)
 /* dI^2 of each component of pixel i (into out) pooled over the pixels of the
  * (2 APPM__POOL + 1)^2 window whose visible points this pass lie within h of
  * its own on the same surface (normals within 25 degrees) and that have seen
- * APPM__KMIN_APPM photons of the component: the mean of their unbiased estimates
+ * APPM__KMIN photons of the component: the mean of their unbiased estimates
  * dI_q^2 - Var(dI_q), floored at APPM__DI_FLOOR times the mean dI_q^2. */
 static void appm__pool_di2(const appm_renderer *r, size_t i, uint64_t n, double h, double *out)
 {
@@ -13273,7 +13272,7 @@ static void appm__pool_di2(const appm_renderer *r, size_t i, uint64_t n, double 
                 continue;
             for (c = 0; c < APPM__NCOMP; ++c) {
                 const appm__adaptive_stats *p = &a->comp[c];
-                if (q != i && p->N < APPM__KMIN_APPM) continue;
+                if (q != i && p->N < APPM__KMIN) continue;
                 sum[c] += appm__di2_unbiased(p, n);
                 sq[c] += p->dI * p->dI;
                 m[c] += 1.0;
@@ -13300,7 +13299,7 @@ static void appm__pool_task(void *arg, uint32_t row, unsigned worker)
         size_t i = (size_t)row * r->w + x;
         appm__adaptive_px *a = (appm__adaptive_px *)appm__state(r, i);
         int c;
-        if (!r->vp[i].segs || (a->comp[0].N < APPM__KMIN_APPM && a->comp[1].N < APPM__KMIN_APPM)) continue;
+        if (!r->vp[i].segs || (a->comp[0].N < APPM__KMIN && a->comp[1].N < APPM__KMIN)) continue;
         appm__pool_di2(r, i, n, h, out);
         for (c = 0; c < APPM__NCOMP; ++c) a->comp[c].dI2p = out[c];
     }
@@ -13327,18 +13326,14 @@ static double appm__adaptive_radius(double r1, double r_auto, double r0, uint64_
 {
     double lo, hi, rad = r0 * shrink;
     appm__adaptive_bounds(r1, r_auto, shrink, rhi, &lo, &hi);
-    if (j > 1 && p->N < APPM__KMIN_APPM && p->R > 0.0) {
+    if (j > 1 && p->N < APPM__KMIN && p->R > 0.0) {
         /* step 4: too few photons seen to estimate anything: widen, as a k-nearest-
          * neighbour radius would, instead of waiting at a radius that may be
-         * the reason so few photons arrive.  32, not appm-paper's 8: S and the
-         * Laplacian of a handful of photons are mostly noise, and the formula
-         * read from them shrank sparse pixels too early (caustic-glass after 8
-         * passes 0.93-0.95x the RMSE, textured after 256 0.90-0.92x; the same
-         * at equal time; docs/algorithm.md 5.4) */
+         * the reason so few photons arrive */
         rad = 2.0 * p->R;
         return rad > hi ? hi : (rad >= lo ? rad : lo);
     }
-    if (j > APPM__WARMUP && p->N >= APPM__KMIN_APPM && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
+    if (j > APPM__WARMUP && p->N >= APPM__KMIN && p->S > 0.0 && p->dI == p->dI && p->dI != 0.0) {
         if (!(di2 >= 0.0)) di2 = appm__di2(p, appm__lap_count(j - 1));
         rad = appm__r_opt(p->S, di2, (double)M * (double)j, cf);
         if (rad == 0.0) rad = hi; /* dI^2 so small the formula overflows: flat */
@@ -13387,14 +13382,14 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
     return (float)appm__adaptive_comp_radius(r, (const appm__adaptive_px *)state, APPM__COMP_DIFFUSE);
 }
 
-/* Step 4: the caustic radius; until the pixel has seen APPM__KMIN_APPM caustic
+/* Step 4: the caustic radius; until the pixel has seen APPM__KMIN caustic
  * photons it is the diffuse one (returned as -1: "the same"): widening in
  * search of caustic light that may not exist would widen every gather of a
  * scene without any. */
 static float appm__adaptive_radius_caustic(const appm_renderer *r, const void *state)
 {
     const appm__adaptive_px *a = (const appm__adaptive_px *)state;
-    if (a->comp[APPM__COMP_CAUSTIC].N < APPM__KMIN_APPM) return -1.0f;
+    if (a->comp[APPM__COMP_CAUSTIC].N < APPM__KMIN) return -1.0f;
     return (float)appm__adaptive_comp_radius(r, a, APPM__COMP_CAUSTIC);
 }
 
