@@ -390,6 +390,29 @@ static void test_selector_guards(void)
     }
 }
 
+/* appm's step 4 (docs/algorithm.md 5.4): a component that has seen fewer than
+ * 32 photons widens (twice its last radius, within the bounds) whatever its
+ * statistics say; from 32 on the formula decides.  appm-paper adapts from 8
+ * (4.7; test_paper_radius in t_estimator). */
+static void test_appm_kmin(void)
+{
+    const double r1 = 0.01, sh = pow(10.0, -1.0 / 6.0), lo = APPM__RLO * r1 * sh, hi = APPM__RHI * r1 * sh;
+    appm__adaptive_stats p;
+    double di2 = 1.35e5 * 1.35e5, ropt = appm__r_opt(1.0, di2, 1000.0 * 10.0, APPM__CF), formula;
+    memset(&p, 0, sizeof p);
+    p.S = 1.0;
+    p.dI = 1.35e5;
+    p.R = 0.3 * hi;
+    formula = ropt < 0.5 * p.R ? 0.5 * p.R : (ropt > 2.0 * p.R ? 2.0 * p.R : ropt);
+    formula = formula < lo ? lo : (formula > hi ? hi : formula);
+    CHECK_MSG(fabs(formula - 0.6 * hi) > 0.01 * hi, "the case needs the formula (%g) away from 2 R (%g)", formula,
+              0.6 * hi);
+    p.N = 31;
+    CHECK_NEAR(appm__adaptive_radius_at(r1, r1, 1000, 10, &p, APPM__CF, di2), 0.6 * hi, 1e-15);
+    p.N = 32;
+    CHECK_NEAR(appm__adaptive_radius_at(r1, r1, 1000, 10, &p, APPM__CF, di2), formula, 1e-15);
+}
+
 /* The same for the two-component hooks of the renderer (10.3, 10.4): every
  * degenerate diffuse statistic of the test above beside a degenerate caustic
  * one, with degenerate pooled dI^2; both radii finite, positive and inside
@@ -485,7 +508,7 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
             toy_pass(&rng, 1000, (float)p.R, h, adaptive, 0, &ev, &s, &dl, &count);
             e[0] = e[1] = e[2] = ev;
             if (adaptive)
-                appm__adaptive_update(&p, (uint64_t)j, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0, count);
+                appm__adaptive_update(&p, (uint64_t)j, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0, count, HUGE_VAL);
             else
                 appm__mean_update(kz.I, (uint64_t)j, e);
         }
@@ -1291,6 +1314,7 @@ int main(void)
     test_glossy_laplacian();
     test_optimal_radius();
     test_selector_guards();
+    test_appm_kmin();
     test_component_guards();
     test_progressive_toy();
     test_paper_toy();
