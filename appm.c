@@ -13203,12 +13203,13 @@ static double appm__adaptive_bandwidth(const appm_renderer *r)
  * weighted mean over the passes that estimate the Laplacian (weight dl_weight,
  * 0 on the others); the photon count and the sum of r_j^2 of the bias estimate,
  * each r_j taken at most at rcap, the component's upper bound.  Only the
- * caustic component ever exceeds its own (2 r_auto j^(-1/6)): it gathers at the
- * diffuse radius (bound 3) until it has seen 32 photons, and there the
- * quadratic model (mu2/2) r^2 dI, with dI measured at the narrower h_c, grows
- * past anything a filament of light can lose to the blur: on caustic-glass it
- * read 1.86x the true squared bias, capped 0.57x, while the true one of the
- * capped images was that of these within 2 % (docs/algorithm.md 7.3). */
+ * caustic component ever exceeds its own (2 max(r1, r_auto) j^(-1/6)): it
+ * gathers at the diffuse radius (bound 3) until it has seen 32 photons, and
+ * there the quadratic model (mu2/2) r^2 dI, with dI measured at the narrower
+ * h_c, grows past anything a filament of light can lose to the blur: on
+ * caustic-glass it read 1.86x the true squared bias, capped 0.57x, while the
+ * true one of the capped images was that of these within 2 %
+ * (docs/algorithm.md 7.3). */
 static void appm__adaptive_update(appm__adaptive_stats *p, uint64_t pass, const double *e, double s, double dl,
                                   double dl_weight, uint64_t count, double rcap)
 {

@@ -392,8 +392,9 @@ static void test_selector_guards(void)
 
 /* appm's step 4 (docs/algorithm.md 5.4): a component that has seen fewer than
  * 32 photons widens (twice its last radius, within the bounds) whatever its
- * statistics say; from 32 on the formula decides.  appm-paper adapts from 8
- * (4.7; test_paper_radius in t_estimator). */
+ * statistics say, and the caustic one follows the diffuse radius; from 32 on
+ * the formula decides.  appm-paper adapts from 8 (4.7; test_paper_radius in
+ * t_estimator).  The pooling's threshold (appm__pool_di2) is not pinned here. */
 static void test_appm_kmin(void)
 {
     const double r1 = 0.01, sh = pow(10.0, -1.0 / 6.0), lo = APPM__RLO * r1 * sh, hi = APPM__RHI * r1 * sh;
@@ -411,6 +412,21 @@ static void test_appm_kmin(void)
     CHECK_NEAR(appm__adaptive_radius_at(r1, r1, 1000, 10, &p, APPM__CF, di2), 0.6 * hi, 1e-15);
     p.N = 32;
     CHECK_NEAR(appm__adaptive_radius_at(r1, r1, 1000, 10, &p, APPM__CF, di2), formula, 1e-15);
+    {
+        /* the caustic radius follows the diffuse one (-1) until 32 caustic photons */
+        static appm_renderer rr;
+        appm__adaptive_px a;
+        memset(&a, 0, sizeof a);
+        rr.r1 = rr.r_auto = r1;
+        rr.r1_auto = 1;
+        rr.M = 1000;
+        rr.pass = 10;
+        a.comp[APPM__COMP_CAUSTIC] = p;
+        a.comp[APPM__COMP_CAUSTIC].N = 31;
+        CHECK(appm__adaptive_radius_caustic(&rr, &a) == -1.0f);
+        a.comp[APPM__COMP_CAUSTIC].N = 32;
+        CHECK(appm__adaptive_radius_caustic(&rr, &a) > 0.0f);
+    }
 }
 
 /* The same for the two-component hooks of the renderer (10.3, 10.4): every

@@ -40,7 +40,7 @@
 #define NPASS 6 /* appm: past the warm-up of 4, and 2N = 12 estimates the Laplacian */
 /* The omission test saves at the end of appm's warm-up, where its radius
  * limits bind, with so few photons that some pixels still widen their radius
- * (fewer than 8 photons seen): then its last radius R is state too. */
+ * (fewer than APPM__KMIN_APPM, 32, photons seen; appm-paper: 8): then its last radius R is state too. */
 #define NSAVE 4
 #define SPARSE 300
 #define DENSE 20000 /* enough caustic photons for appm's caustic component */

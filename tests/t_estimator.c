@@ -261,10 +261,6 @@ static void set_bias(appm_renderer *r, double j, int what, double b)
     }
 }
 
-/* appm's start (10.4, step 4): on pass 1, before the formula has any data, every
- * gathering pixel's radius is APPM__RSTART r_auto when the radius is automatic,
- * and the told radius r1 when the user gave one (--radius is the initial
- * radius). */
 /* appm at 24x16, 4000 photons a pass, two threads; radius 0: automatic. */
 static appm_renderer *appm_small(appm_scene *s, double radius)
 {
@@ -278,6 +274,10 @@ static appm_renderer *appm_small(appm_scene *s, double radius)
     return check_renderer(s, &cfg);
 }
 
+/* appm's start (10.4, step 4): on pass 1, before the formula has any data, every
+ * gathering pixel's radius is APPM__RSTART r_auto when the radius is automatic,
+ * and the told radius r1 when the user gave one (--radius is the initial
+ * radius). */
 static void test_appm_start(appm_scene *s)
 {
     int told;
