@@ -394,7 +394,7 @@ static void test_selector_guards(void)
  * 32 photons widens (twice its last radius, within the bounds) whatever its
  * statistics say, and the caustic one follows the diffuse radius; from 32 on
  * the formula decides.  appm-paper adapts from 8 (4.7; test_paper_radius in
- * t_estimator).  The pooling's threshold (appm__pool_di2) is not pinned here. */
+ * t_estimator); the pooling's, test_appm_pool_kmin in t_estimator. */
 static void test_appm_kmin(void)
 {
     const double r1 = 0.01, sh = pow(10.0, -1.0 / 6.0), lo = APPM__RLO * r1 * sh, hi = APPM__RHI * r1 * sh;

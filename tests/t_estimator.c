@@ -332,6 +332,39 @@ static void test_appm_bias_cap(appm_scene *s)
     appm_renderer_destroy(r);
 }
 
+/* appm's pooled dI^2 (5.3) takes a neighbour's estimate only once that
+ * neighbour has seen 32 photons of the component (APPM__KMIN_APPM): the same
+ * neighbour, given a Laplacian 100 times its pixel's, moves the pooled value
+ * with 32 photons and not with 31. */
+static void test_appm_pool_kmin(appm_scene *s)
+{
+    appm_renderer *r = appm_small(s, 0.0);
+    size_t i, q;
+    double h, at31[APPM__NCOMP], at32[APPM__NCOMP];
+    appm__adaptive_stats *p;
+    uint64_t n;
+    if (!r) return;
+    if (check_passes(r, 8)) {
+        i = (size_t)(r->h / 2) * r->w + r->w / 2; /* the back wall's middle */
+        q = i + 1;
+        h = appm__lap_h(r->r_auto, r->pass);
+        n = appm__lap_count(r->pass);
+        CHECK_MSG(r->vp[i].segs && r->vp[q].segs && appm__dot(r->vp[q].n, r->vp[i].n) > 0.99f,
+                  "the case needs two neighbours on one surface");
+        p = &((appm__adaptive_px *)appm__state(r, q))->comp[APPM__COMP_DIFFUSE];
+        p->dI = 100.0 * ((appm__adaptive_px *)appm__state(r, i))->comp[APPM__COMP_DIFFUSE].dI + 1.0;
+        p->dI_m2 = 0.0;
+        p->N = 31;
+        appm__pool_di2(r, i, n, h, at31);
+        p->N = 32;
+        appm__pool_di2(r, i, n, h, at32);
+        CHECK_MSG(at32[APPM__COMP_DIFFUSE] > 2.0 * at31[APPM__COMP_DIFFUSE],
+                  "pooled dI^2 with the neighbour at 32 photons %g, at 31 %g", at32[APPM__COMP_DIFFUSE],
+                  at31[APPM__COMP_DIFFUSE]);
+    }
+    appm_renderer_destroy(r);
+}
+
 static void test_bias2(appm_scene *s)
 {
     appm_renderer *r = render(s, APPM_METHOD_APPM_PAPER, 2);
@@ -852,6 +885,7 @@ int main(void)
         test_paper_render(s);
         test_appm_start(s);
         test_appm_bias_cap(s);
+        test_appm_pool_kmin(s);
         test_bias2(s);
         test_bias2_noise(s);
         test_seam_bias(s);
