@@ -13342,8 +13342,8 @@ static double appm__adaptive_radius(double r1, double r_auto, double r0, uint64_
          * the reason so few photons arrive.  32, not appm-paper's 8: S and the
          * Laplacian of a handful of photons are mostly noise, and the formula
          * read from them shrank sparse pixels too early (caustic-glass after 8
-         * passes 0.93-0.95x the RMSE, textured after 256 0.90-0.92x; the same
-         * at equal time; docs/algorithm.md 5.4) */
+         * passes 0.93-0.95x the RMSE, textured after 256 0.90-0.92x; at equal
+         * time, thousands of passes, within noise; docs/algorithm.md 5.4) */
         rad = 2.0 * p->R;
         return rad > hi ? hi : (rad >= lo ? rad : lo);
     }

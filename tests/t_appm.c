@@ -524,7 +524,8 @@ static double toy_progressive(double r1, int adaptive, int passes, int runs, uin
             toy_pass(&rng, 1000, (float)p.R, h, adaptive, 0, &ev, &s, &dl, &count);
             e[0] = e[1] = e[2] = ev;
             if (adaptive)
-                appm__adaptive_update(&p, (uint64_t)j, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0, count, HUGE_VAL);
+                appm__adaptive_update(&p, (uint64_t)j, e, s, dl, h > 0.0f ? pow(h / TOY_RB, 6.0) : 0.0, count,
+                                      HUGE_VAL);
             else
                 appm__mean_update(kz.I, (uint64_t)j, e);
         }
