@@ -11356,8 +11356,9 @@ struct appm__estimator; /* a method's entry in the table of section 10 */
 #define APPM__GUIDE_RES 32        /* cells per side of a light's learned emission density (9.1) */
 #define APPM__GUIDE_CELLS (APPM__GUIDE_RES * APPM__GUIDE_RES)
 #define APPM__GUIDE_LIGHTS 16     /* lights guided at most: the most powerful */
-/* A worker's counts per pass (appm__guide.count): shares, pairs, paths, cost. */
-#define APPM__GUIDE_STRIDE(nslot) ((size_t)(nslot) * (3u * APPM__GUIDE_CELLS + 1u))
+/* A worker's counts per pass (appm__guide.count): shares, pairs, paths, cost,
+ * squared shares. */
+#define APPM__GUIDE_STRIDE(nslot) ((size_t)(nslot) * (3u * APPM__GUIDE_CELLS + 2u))
 /* The learned state's arrays of one value per slot and cell (appm__guide.cells):
  * score, score_odd, samples, paths, work, in the checkpoint's order. */
 #define APPM__GUIDE_ARRAYS 5
@@ -11381,9 +11382,15 @@ typedef struct appm__guide { /* emission guided by visual importance (section 9.
     unsigned char *active; /* per slot: whether pdf is learned (else 1 everywhere) */
     uint64_t *count;     /* per worker, APPM__GUIDE_STRIDE(nslot) words: per slot and cell the
                           * contributions gathered this pass, in units of ref / 2^16; per slot the
-                          * pixel-photon pairs; per slot and cell the paths traced, then their cost */
+                          * pixel-photon pairs; per slot and cell the paths traced, then their cost;
+                          * per slot the pairs' squared shares, in units of (ref / 2^16)^2 */
     float *map;          /* appm_renderer_emission_map's picture */
     double *half;        /* scratch: the two halves' importance of one slot (appm__guide_halves) */
+    double *sq;          /* per slot: its pixel-photon pairs' squared shares, times its pick, summed
+                          * over the passes that learned: B_l, the choice between lights' measure */
+    double *pick;        /* per scene light: the probability that a photon path starts there this
+                          * pass (appm__guide_picks; the light's own pick while not chosen) */
+    double *pcdf;        /* pick's CDF, nlight + 1 entries */
 } appm__guide;
 
 struct appm_renderer {
@@ -11806,12 +11813,27 @@ static void appm__eye_task(void *arg, uint32_t row, unsigned worker)
  * bit-identical for any thread count.  A light uses its learned density once
  * APPM__GUIDE_MIN pairs have been counted, if the density passes its own test
  * (appm__guide_density) and makes the photon pass more efficient
- * (appm__guide_select). */
+ * (appm__guide_select).
+ *
+ * Which light a path starts at is learned too (appm__guide_picks).  Lights are
+ * picked by power, pick_l; a path picked with probability pi_l instead carries
+ * pick_l / pi_l in its weight.  A pixel's photon term is a sum over the pass's
+ * paths, so its variance is about the sum of the squares of their shares, and
+ * light l's part of the image's summed variance is B_l / pi_l, B_l the sum of
+ * its pairs' squared shares times pi_l (which does not depend on pi).  With
+ * k_l a path's cost, the pass's variance x cost, (sum B_l / pi_l)(sum pi_l k_l),
+ * is least at pi_l proportional to sqrt(B_l / k_l) (Cauchy-Schwarz): a light
+ * gets paths by the variance its photons leave in the pixels, not by its
+ * contribution, which would starve a sky whose photons each light a few pixels
+ * (docs/experiments.md).  As with densities, the choice is a mixture with the
+ * power's, a = 1/4, and is used only where it pays (APPM__GUIDE_PICK_GAIN). */
 #define APPM__GUIDE_DEFENSIVE 0.25 /* the light's own density's share of the mixture */
 #define APPM__GUIDE_MIN 64u        /* pixel-photon pairs counted before a light is guided */
 #define APPM__GUIDE_PRIOR 16.0     /* paths a cell's importance is shrunk with (appm__guide_importance) */
 #define APPM__GUIDE_GAIN 0.5       /* a learned density must halve its light's second moment, and each
                                     * light guided must halve the photon pass's variance x cost */
+#define APPM__GUIDE_PICK_GAIN 0.95 /* a learned choice of light must cut the photon pass's variance x
+                                    * cost by 5 % (the boxes' light triangles: under 0.3 %) */
 #define APPM__GUIDE_CDF ((APPM__GUIDE_RES + 1) * (APPM__GUIDE_RES + 1)) /* doubles per slot */
 #define APPM__GUIDE_EVERY 4u       /* after pass 32, one pass in 4 learns (appm__guide_learns) */
 
@@ -11835,17 +11857,17 @@ static uint32_t appm__guide_cell(float u1, float u2)
     return (uint32_t)(i * APPM__GUIDE_RES + k);
 }
 
-/* The light of a photon path (by power, as appm__emit picks it, from u[0]) and
+/* The light of a photon path (from u[0], by this pass's choice, gd->pick) and
  * its first emission sample u[1], u[2], drawn from the light's slot's density
  * if it is active.  Returns the path's tag, slot * RES^2 + cell (UINT32_MAX: an
  * unguided light), the light in *li, and in *w the factor of the photon
- * weight, 1 / p(u). */
+ * weight, pick_l / (pi_l p(u)) (appm__emit_light divides by pick_l). */
 static uint32_t appm__guide_warp(const appm__guide *gd, const appm_scene *s, float *u, uint32_t *li, float *w)
 {
     uint32_t slot;
     int i, k;
-    *w = 1.0f;
-    *li = appm__pick_light(s, u[0]);
+    *li = appm__cdf_find(gd->pcdf, s->nlight, u[0]);
+    *w = (float)(s->light[*li].pick / gd->pick[*li]); /* 1 exactly while pi_l = pick_l */
     if ((slot = gd->slot[*li]) == UINT32_MAX) return UINT32_MAX;
     if (!gd->active[slot]) return slot * APPM__GUIDE_CELLS + appm__guide_cell(u[1], u[2]);
     {   /* the weight from the CDFs' own steps: exactly the probability the cell was drawn with */
@@ -11853,7 +11875,7 @@ static uint32_t appm__guide_warp(const appm__guide *gd, const appm_scene *s, flo
         u[1] = appm__cdf_invert(c, APPM__GUIDE_RES, u[1], &i);
         cr = c + (size_t)(i + 1) * (APPM__GUIDE_RES + 1);
         u[2] = appm__cdf_invert(cr, APPM__GUIDE_RES, u[2], &k);
-        *w = (float)(1.0 / ((c[i + 1] - c[i]) * (cr[k + 1] - cr[k]) * APPM__GUIDE_CELLS));
+        *w = (float)(*w / ((c[i + 1] - c[i]) * (cr[k + 1] - cr[k]) * APPM__GUIDE_CELLS));
     }
     return slot * APPM__GUIDE_CELLS + (uint32_t)(i * APPM__GUIDE_RES + k);
 }
@@ -12017,14 +12039,14 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff 
  * no error (docs/algorithm.md 5.8).  V and K are of the photon pass alone,
  * and of the candidate lights: the paths of further lights add the same to
  * both either way. */
-static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const appm__guide_eff *e)
+static void appm__guide_select(appm__guide *gd, const appm__guide_eff *e)
 {
     unsigned char take[APPM__GUIDE_LIGHTS];
     double V = 0.0, K = 0.0, mu_o = 0.0, mu_e = 0.0;
     uint32_t s;
     int c;
     for (s = 0; s < gd->nslot; ++s) {
-        const double pi = r->scene->light[gd->light[s]].pick;
+        const double pi = gd->pick[gd->light[s]];
         take[s] = gd->active[s];
         gd->active[s] = 0;
         V += e[s].m_own / pi;
@@ -12037,7 +12059,7 @@ static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const ap
         double best_vk = HUGE_VAL, bv = 0.0, bk = 0.0;
         uint32_t best = UINT32_MAX;
         for (s = 0; s < gd->nslot; ++s) {
-            const double pi = r->scene->light[gd->light[s]].pick;
+            const double pi = gd->pick[gd->light[s]];
             double v, k;
             if (!take[s] || gd->active[s]) continue;
             v = V + (e[s].m_with - e[s].m_own) / pi;
@@ -12062,6 +12084,52 @@ static void appm__guide_select(const appm_renderer *r, appm__guide *gd, const ap
         }
 }
 
+/* Every light picked by power (pi_l = pick_l), and the CDF of that. */
+static void appm__guide_picks_own(const appm_scene *sc, appm__guide *gd)
+{
+    uint32_t i;
+    for (i = 0; i < sc->nlight; ++i) gd->pick[i] = sc->light[i].pick;
+    memcpy(gd->pcdf, sc->light_cdf, ((size_t)sc->nlight + 1u) * sizeof *gd->pcdf);
+}
+
+/* The choice between lights for the next pass (9.1): the guided lights share
+ * their power's total P = sum pick_l as
+ *      pi_l = a pick_l + (1 - a) P sqrt(B_l / k_l) / sum_m sqrt(B_m / k_m),
+ * k_l a path's mean cost under the density the pass draws from (e), if all
+ * lights together have counted APPM__GUIDE_MIN pairs and if it cuts the
+ * photon pass's variance x cost, (sum B_l / pi_l)(sum pi_l k_l), to at most
+ * APPM__GUIDE_PICK_GAIN of what the power's choice gives; else pi = pick.
+ * Lights beyond the guided 16 keep their own pick. */
+static void appm__guide_picks(const appm_scene *sc, appm__guide *gd, const appm__guide_eff *e)
+{
+    const double a = APPM__GUIDE_DEFENSIVE;
+    double o[APPM__GUIDE_LIGHTS], k[APPM__GUIDE_LIGHTS], P = 0.0, tot = 0.0, v0 = 0.0, k0 = 0.0, v1 = 0.0, k1 = 0.0;
+    uint64_t seen = 0;
+    uint32_t s, i;
+    appm__guide_picks_own(sc, gd);
+    for (s = 0; s < gd->nslot; ++s) {
+        k[s] = gd->active[s] ? e[s].k_with : e[s].k_own;
+        o[s] = gd->sq[s] > 0.0 && k[s] > 0.0 ? sqrt(gd->sq[s] / k[s]) : 0.0;
+        P += sc->light[gd->light[s]].pick;
+        tot += o[s];
+        seen += gd->seen[s];
+    }
+    if (seen < APPM__GUIDE_MIN || !(tot > 0.0 && tot < HUGE_VAL)) return;
+    for (s = 0; s < gd->nslot; ++s) {
+        const double own = sc->light[gd->light[s]].pick, pi = a * own + (1.0 - a) * P * o[s] / tot;
+        v0 += gd->sq[s] / own;
+        k0 += own * k[s];
+        v1 += gd->sq[s] / pi;
+        k1 += pi * k[s];
+    }
+    if (!(v1 * k1 <= APPM__GUIDE_PICK_GAIN * v0 * k0)) return; /* does not pay (or NaN: a state not to trust) */
+    for (s = 0; s < gd->nslot; ++s)
+        gd->pick[gd->light[s]] = a * sc->light[gd->light[s]].pick + (1.0 - a) * P * o[s] / tot;
+    gd->pcdf[0] = 0.0;
+    for (i = 0; i < sc->nlight; ++i) gd->pcdf[i + 1] = gd->pcdf[i] + gd->pick[i];
+    gd->pcdf[sc->nlight] = 1.0;
+}
+
 /* Every slot's density and CDFs for the next pass: a function of the learned
  * state alone (so a resumed render draws the same). */
 static void appm__guide_densities(const appm_renderer *r, appm__guide *gd)
@@ -12069,7 +12137,8 @@ static void appm__guide_densities(const appm_renderer *r, appm__guide *gd)
     appm__guide_eff e[APPM__GUIDE_LIGHTS];
     uint32_t s;
     for (s = 0; s < gd->nslot; ++s) appm__guide_density(gd, s, &e[s]);
-    appm__guide_select(r, gd, e);
+    appm__guide_select(gd, e);
+    appm__guide_picks(r->scene, gd, e);
 }
 
 /* Before a pass: every slot's density and the share of the paths drawn from
@@ -12082,22 +12151,32 @@ static void appm__guide_prepare(appm_renderer *r)
     double share = 0.0;
     appm__guide_densities(r, gd);
     for (s = 0; s < gd->nslot; ++s)
-        if (gd->active[s]) share += (1.0 - APPM__GUIDE_DEFENSIVE) * r->scene->light[gd->light[s]].pick;
+        if (gd->active[s]) share += (1.0 - APPM__GUIDE_DEFENSIVE) * gd->pick[gd->light[s]];
     r->stats.emission_guided = share;
     r->stats.emission_lights = gd->nslot;
 }
 
+/* A count that saturates. */
+static void appm__count_add(uint64_t *c, uint64_t add)
+{
+    *c = *c > UINT64_MAX - add ? UINT64_MAX : *c + add;
+}
+
 /* One pixel-photon pair into a worker's counts (a gather inside the kernel of
- * radius^2 R2): the pair's share of the pixel, k_R(d) lum(Psi) / M, in units
- * of ref / 2^16 (unit = 2^16 / (pi M ref); the biweight's 3 / pi, the uniform
- * kernel's 1 / pi), rounded, and one pair. */
+ * radius^2 R2): the pair's share of the pixel, n = k_R(d) lum(Psi) / M, in
+ * units of ref / 2^16 (unit = 2^16 / (pi M ref); the biweight's 3 / pi, the
+ * uniform kernel's 1 / pi), rounded; one pair; and n^2.  `pairs` is where the
+ * pairs per slot start, nslot x RES^2 words in; the squares start 2 x pairs
+ * + nslot words after them. */
 static void appm__guide_count(uint64_t *count, size_t pairs, uint32_t tag, float d2, float R2, int biweight,
                               double q, double unit)
 {
     double u = 1.0 - (double)d2 / R2, k = biweight ? 3.0 * u * u : 1.0, n = k * q / R2 * unit;
-    uint64_t add = n > 0.0 ? (n < 1e15 ? (uint64_t)(n + 0.5) : (uint64_t)1e15) : 0u;
-    count[tag] = count[tag] > UINT64_MAX - add ? UINT64_MAX : count[tag] + add; /* saturates */
-    count[pairs + tag / APPM__GUIDE_CELLS]++;
+    const size_t slot = tag / APPM__GUIDE_CELLS;
+    if (!(n > 0.0)) n = 0.0;
+    appm__count_add(&count[tag], n < 1e15 ? (uint64_t)(n + 0.5) : (uint64_t)1e15);
+    count[pairs + slot]++;
+    appm__count_add(&count[3 * pairs + pairs / APPM__GUIDE_CELLS + slot], n < 1e9 ? (uint64_t)(n * n + 0.5) : (uint64_t)1e18);
 }
 
 /* After the gather: the workers' counts (integers: the same sums in any
@@ -12112,7 +12191,7 @@ static void appm__guide_learn(appm_renderer *r)
     unsigned w;
     if (!(gd->ref > 0.0)) return; /* a pass that does not learn: nothing was counted */
     for (c = 0; c < cells; ++c) /* M pick_l p_c / RES^2 paths from cell c this pass */
-        gd->samples[c] += (double)r->M * r->scene->light[gd->light[c / APPM__GUIDE_CELLS]].pick * (double)gd->pdf[c] /
+        gd->samples[c] += (double)r->M * gd->pick[gd->light[c / APPM__GUIDE_CELLS]] * (double)gd->pdf[c] /
                           APPM__GUIDE_CELLS;
     for (w = 0; w < gd->nslot; ++w) gd->passes[w]++;
     for (c = 0; c < stride; ++c) {
@@ -12121,7 +12200,10 @@ static void appm__guide_learn(appm_renderer *r)
             n += gd->count[w * stride + c];
             gd->count[w * stride + c] = 0;
         }
-        if (c >= 2 * cells + gd->nslot) gd->work[c - 2 * cells - gd->nslot] += (double)n;
+        if (c >= 3 * cells + gd->nslot) { /* B_l += pi_l x the squared shares (appm__guide_picks) */
+            const size_t l = c - 3 * cells - gd->nslot;
+            gd->sq[l] += (double)n * (gd->ref / 65536.0) * (gd->ref / 65536.0) * gd->pick[gd->light[l]];
+        } else if (c >= 2 * cells + gd->nslot) gd->work[c - 2 * cells - gd->nslot] += (double)n;
         else if (c >= cells + gd->nslot) gd->paths[c - cells - gd->nslot] += (double)n;
         else if (c >= cells) gd->seen[c - cells] += n;
         else if (n) {
@@ -12164,13 +12246,17 @@ static int appm__guide_alloc(appm_renderer *r)
         gd->work = gd->cells + 4 * (size_t)k;
     }
     gd->half = (double *)appm__alloc(&r->mem, 2u * APPM__GUIDE_CELLS, sizeof *gd->half);
+    gd->sq = (double *)appm__alloc(&r->mem, n ? n : 1u, sizeof *gd->sq);
+    gd->pick = (double *)appm__alloc(&r->mem, s->nlight ? s->nlight : 1u, sizeof *gd->pick);
+    gd->pcdf = (double *)appm__alloc(&r->mem, (size_t)s->nlight + 1u, sizeof *gd->pcdf);
+    if (gd->pick && gd->pcdf) appm__guide_picks_own(s, gd);
     gd->seen = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->seen);
     gd->passes = (uint64_t *)appm__alloc(&r->mem, n, sizeof *gd->passes);
     gd->pdf = (float *)appm__alloc(&r->mem, k, sizeof *gd->pdf);
     gd->cdf = (double *)appm__alloc(&r->mem, (size_t)n * APPM__GUIDE_CDF, sizeof *gd->cdf);
     gd->active = (unsigned char *)appm__alloc(&r->mem, n, 1);
     gd->count = (uint64_t *)appm__alloc(&r->mem, APPM__GUIDE_STRIDE(n), (size_t)r->threads * sizeof *gd->count);
-    return n == 0 || (gd->cells && gd->half && gd->seen && gd->passes && gd->pdf && gd->cdf && gd->active &&
+    return n == 0 || (gd->cells && gd->half && gd->sq && gd->pick && gd->pcdf && gd->seen && gd->passes && gd->pdf && gd->cdf && gd->active &&
                       gd->count);
 }
 
@@ -12181,6 +12267,9 @@ static void appm__guide_free(appm_renderer *r)
     appm__free(&r->mem, gd->light);
     appm__free(&r->mem, gd->cells);
     appm__free(&r->mem, gd->half);
+    appm__free(&r->mem, gd->sq);
+    appm__free(&r->mem, gd->pick);
+    appm__free(&r->mem, gd->pcdf);
     appm__free(&r->mem, gd->seen);
     appm__free(&r->mem, gd->passes);
     appm__free(&r->mem, gd->pdf);
@@ -15310,7 +15399,8 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  *   sums (one field of `chains` values with chains >= 2, else none) (u32
  *   count, then per field u32 name length, name, u32 count, u32 is_u64);
  *   per pixel, in reading order, those fields' values (8 bytes each);
- *   per guided light (9.1), u64 pairs counted, u64 passes that counted, f64 x
+ *   per guided light (9.1), u64 pairs counted, u64 passes that counted, f64
+ *   its pairs' squared shares (B_l of the choice between lights), f64 x
  *   RES^2 learned scores, f64 x RES^2 their part from the odd passes, f64 x
  *   RES^2 paths per cell (expected), f64 x RES^2 paths per cell (counted) and
  *   f64 x RES^2 their cost;
@@ -15322,13 +15412,15 @@ APPM_API appm_status appm_method_parse(const char *name, appm_method *out)
  * misread nor taken for one of another scene (version 2: the hashes in five
  * parts, with the glossy lobe, the normals and the statements as written;
  * version 3: the guided emission's lights and scores; version 4: the cost of
- * its paths and the scores' odd half; version 5: the photon budget's flag).
+ * its paths and the scores' odd half; version 5: the photon budget's flag;
+ * version 6: the squared shares of the choice between lights).
  * A checkpoint of another format or library version, scene, method, option set,
  * image size or field list is refused (APPM_ERR_INVALID_ARG, saying which); a
  * truncated, altered or impossible one is APPM_ERR_PARSE.  Loading reads the
  * input twice - first to check everything, then to apply it - so a refused
  * checkpoint leaves the renderer as it was. */
-#define APPM__CK_FORMAT 5u
+#define APPM__CK_FORMAT 6u
+#define APPM__CK_GUIDE_WORDS (3u + APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS) /* 8-byte words a guided light */
 
 /* Where the c-th learned value of slot k stands in appm__guide.cells, in the
  * checkpoint's order: the slot's RES^2 values of each array in turn. */
@@ -15706,6 +15798,7 @@ static void appm__ck_write(appm__ckw *w, const appm_renderer *r, const appm__ck_
         unsigned c;
         appm__ckw_u(w, r->guide.seen[k], 8);
         appm__ckw_u(w, r->guide.passes[k], 8);
+        appm__ckw_d(w, r->guide.sq[k]);
         for (c = 0; c < APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS; ++c)
             appm__ckw_d(w, r->guide.cells[appm__guide_cell_at(&r->guide, k, c)]);
     }
@@ -15813,12 +15906,11 @@ static void appm__ck_scan_pixels(appm__ckr *rd, appm__ck_file *F, int *nonfinite
                     memcpy(&d, &u, sizeof d);
                     if (!F->f[t][k].is_u64 && !(d - d == 0.0)) *nonfinite = 1;
                 }
-    for (i = 0; i < (uint64_t)F->h.guided * (2 + APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS) && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok;
-         ++i) {
+    for (i = 0; i < (uint64_t)F->h.guided * APPM__CK_GUIDE_WORDS && F->h.guided <= APPM__GUIDE_LIGHTS && rd->ok; ++i) {
         uint64_t u = appm__ckr_u(rd, 8);
         double d;
         memcpy(&d, &u, sizeof d);
-        if (i % (2 + APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS) >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* the doubles */
+        if (i % APPM__CK_GUIDE_WORDS >= 2 && !(d >= 0.0 && d < HUGE_VAL)) *nonfinite = 1; /* the doubles */
     }
     F->budget = (uint32_t)appm__ckr_u(rd, 4);
     bits = appm__ckr_u(rd, 8);
@@ -15852,6 +15944,7 @@ static void appm__ck_load_pixels(appm__ckr *rd, appm_renderer *r, const appm__ck
         unsigned c;
         r->guide.seen[t] = appm__ckr_u(rd, 8);
         r->guide.passes[t] = appm__ckr_u(rd, 8);
+        r->guide.sq[t] = appm__ckr_d(rd);
         for (c = 0; c < APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS; ++c)
             r->guide.cells[appm__guide_cell_at(&r->guide, t, c)] = appm__ckr_d(rd);
     }
@@ -15987,6 +16080,8 @@ static void appm__ck_reset(appm_renderer *r)
                (size_t)r->guide.nslot * APPM__GUIDE_ARRAYS * APPM__GUIDE_CELLS * sizeof *r->guide.cells);
         memset(r->guide.seen, 0, r->guide.nslot * sizeof *r->guide.seen);
         memset(r->guide.passes, 0, r->guide.nslot * sizeof *r->guide.passes);
+        memset(r->guide.sq, 0, r->guide.nslot * sizeof *r->guide.sq);
+        appm__guide_picks_own(r->scene, &r->guide);
     }
     appm__ck_apply(r, &g);
     if (r->budget) { /* as created: the budget chooses again in pass 1 */

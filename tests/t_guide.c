@@ -23,6 +23,12 @@
  *      --emission light has no guide at all; the default is guided.
  *   6. The choice between lights by the photon pass's efficiency, against
  *      sums done by hand (test_select).
+ *   7. The learned choice of light (pi_l from the squared shares B_l and the
+ *      costs k_l), against picks worked by hand: taken where it cuts the
+ *      pass's variance x cost by 5 %, not where the lights' B are alike
+ *      (test_picks); with it, weights still add up to each light's power (2);
+ *      on caustic-glass it moves paths from the sky to the spot; checkpoints
+ *      carry B_l.
  */
 #include "../appm.c"
 #include "check.h"
@@ -91,6 +97,8 @@ static void test_warp_chi2(void)
     s.nlight = 1;
     s.light_cdf = lcdf;
     fake_guide(&gd, slot, light, score, seen, pdf, cdf, active, peaks);
+    gd.pick = &l.pick; /* the light's own pick: weights carry only 1 / p */
+    gd.pcdf = lcdf;
     CHECK(active[0] == 1);
     for (j = 0; j < APPM__GUIDE_CELLS; ++j) pmin = pdf[j] < pmin ? pdf[j] : pmin;
     CHECK_NEAR(pmin, APPM__GUIDE_DEFENSIVE, 1e-6); /* the defensive share where nothing was learned */
@@ -148,11 +156,17 @@ static void test_weights_power(void)
             r->guide.score[(size_t)l * APPM__GUIDE_CELLS + j] = 2.0 * r->guide.score_odd[(size_t)l * APPM__GUIDE_CELLS + j],
             r->guide.samples[(size_t)l * APPM__GUIDE_CELLS + j] = 1e6;
     }
-    for (l = 0; l < 2; ++l) { /* each light's own density (appm__guide_select may guide only one) */
-        appm__guide_eff e;
-        appm__guide_density(&r->guide, (uint32_t)l, &e);
+    {   /* each light's own density (appm__guide_select may guide only one), and a choice of
+         * light that moves paths: B = 1 and 50 (7) */
+        appm__guide_eff e[2];
+        for (l = 0; l < 2; ++l) appm__guide_density(&r->guide, (uint32_t)l, &e[l]);
+        r->guide.sq[0] = 1.0;
+        r->guide.sq[1] = 50.0;
+        appm__guide_picks(s, &r->guide, e);
     }
     CHECK(r->guide.active[0] && r->guide.active[1]);
+    CHECK_MSG(fabs(r->guide.pick[0] - s->light[0].pick) > 0.05, "the choice of light did not move: %g, power's %g",
+              r->guide.pick[0], s->light[0].pick);
     appm_scene_get_info(s, &info);
     for (l = 0; l < 2; ++l) {
         const double *p = s->light[l].kind == APPM__LIGHT_SPOT ? info.power_spot : info.power_environment;
@@ -317,6 +331,19 @@ static void test_glass(void)
            (unsigned long long)stored_g, (unsigned long long)stored_l);
     CHECK_MSG(stored_g >= 3 * stored_l, "guided emission stores %llu photons, the lights' own %llu",
               (unsigned long long)stored_g, (unsigned long long)stored_l);
+    {   /* 7: after 48 passes the sky's photons, each lighting a few pixels of the floor, and the
+         * spot's, aimed through the glass, leave B_sky / B_spot about 3 at k_spot / k_sky about
+         * 4.5: the choice gives the spot about 0.19 of the paths, its power 0.123 */
+        appm_renderer *r = glass_render(s, APPM_EMISSION_GUIDED, 2, 56, 80, 48);
+        if (r) {
+            const uint32_t spot = s->light[0].kind == APPM__LIGHT_SPOT ? 0u : 1u;
+            printf("caustic-glass 56x80, pass 49: the spot's paths %.3f (its power's %.3f)\n", r->guide.pick[spot],
+                   s->light[spot].pick);
+            CHECK_MSG(r->guide.pick[spot] > 1.3 * s->light[spot].pick, "the spot's pick %.3f, its power's %.3f",
+                      r->guide.pick[spot], s->light[spot].pick);
+            appm_renderer_destroy(r);
+        }
+    }
     /* 5: threads */
     if (glass(s, APPM_EMISSION_GUIDED, 1, 40, a, &sa)) {
         unsigned t;
@@ -364,6 +391,7 @@ static void test_guide_checkpoint(void)
         CHECK(memcmp(q->guide.samples, r->guide.samples, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.paths, r->guide.paths, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
         CHECK(memcmp(q->guide.work, r->guide.work, (size_t)2 * APPM__GUIDE_CELLS * sizeof(double)) == 0);
+        CHECK(r->guide.sq[0] > 0.0 && r->guide.sq[1] > 0.0 && memcmp(q->guide.sq, r->guide.sq, 2 * sizeof(double)) == 0);
         if (check_passes(q, 24)) {
             appm_renderer_image(q, &im);
             CHECK_MSG(memcmp(im.rgb, a, sizeof a) == 0, "24 + 24 passes across a checkpoint differ from 48");
@@ -407,6 +435,7 @@ static void select_case(double hot_cost, double T, int disagree, double odd_spik
     static appm__light L[2];
     uint32_t slot[2] = {0, 1}, light[2] = {0, 1};
     uint64_t seen[2] = {APPM__GUIDE_MIN, APPM__GUIDE_MIN}, passes[2] = {2, 2};
+    double lcdf[3] = {0.0, 0.5, 1.0}, pick[2] = {0.5, 0.5}, pcdf[3], sq[2] = {0.0, 0.0}; /* no B: picked by power */
     unsigned char active[2];
     int c;
     memset(&r, 0, sizeof r);
@@ -415,7 +444,11 @@ static void select_case(double hot_cost, double T, int disagree, double odd_spik
     L[0].pick = L[1].pick = 0.5;
     sc.light = L;
     sc.nlight = 2;
+    sc.light_cdf = lcdf;
     r.scene = &sc;
+    r.guide.pick = pick;
+    r.guide.pcdf = pcdf;
+    r.guide.sq = sq;
     r.guide.nslot = 2;
     r.guide.slot = slot;
     r.guide.light = light;
@@ -455,6 +488,7 @@ static void select_case(double hot_cost, double T, int disagree, double odd_spik
               "hot cells cost %g, T %g, halves %s, odd spikes %g: light 0 guided %d, light 1 %d", hot_cost, T,
               disagree ? "disagree" : "agree", odd_spike, active[0], active[1]);
     CHECK_NEAR(r.stats.emission_guided, want ? 0.375 : 0.0, 1e-12);
+    CHECK(pick[0] == 0.5 && pick[1] == 0.5 && pcdf[1] == 0.5);
     for (c = 0; c < APPM__GUIDE_CELLS; ++c) /* a light not guided draws from its own density */
         if (!want && pdf[c] != 1.0f) break;
     CHECK(want || c == APPM__GUIDE_CELLS);
@@ -470,6 +504,79 @@ static void test_select(void)
     select_case(1.0, 3.0, 0, 1280.0, 0);
 }
 
+/* 7. The learned choice of light (appm__guide_picks) against picks worked by
+ * hand.  Three lights picked by power 0.6, 0.15 and 0.25; the first two are
+ * guided (P = 0.75), their densities not active, so k_l is k_own.
+ *   a. B = 1 and 16, every path costing 1: sqrt(B / k) = 1 and 4, so
+ *      pi = 0.25 x 0.6 + 0.75 x 0.75 x 1/5 = 0.2625 and 0.25 x 0.15 + 0.75 x
+ *      0.75 x 4/5 = 0.4875, the third light's 0.25 kept; V 108.33 -> 36.63
+ *      at the same K: taken.  A path of light 1 weighs 0.15 / 0.4875.
+ *   b. light 1's paths costing 16: sqrt(B / k) = 1 and 1, pi = 0.43125 and
+ *      0.31875; V K 325 -> 290.5 (0.894x): taken.
+ *   c. the two guided lights of equal power (0.375 each), B = 1 and 1.1,
+ *      costs equal: the choice would cut V K to 0.9995x, not the 0.95x that
+ *      pays: not taken, every light keeps its power's pick.
+ *   d. fewer than APPM__GUIDE_MIN pairs: not taken. */
+static void picks_case(const double *own, const double *B, const double *k, uint64_t pairs, const double *want)
+{
+    static appm__light L[3];
+    appm_scene sc;
+    appm__guide gd;
+    appm__guide_eff e[2];
+    uint32_t slot[3] = {0, 1, UINT32_MAX}, light[2] = {0, 1}, li;
+    uint64_t seen[2];
+    double lcdf[4], pick[3], pcdf[4], sq[2];
+    unsigned char active[2] = {0, 0};
+    float u[5] = {0.0f, 0.5f, 0.5f, 0.5f, 0.5f}, w;
+    int i;
+    memset(&sc, 0, sizeof sc);
+    memset(&gd, 0, sizeof gd);
+    memset(e, 0, sizeof e);
+    lcdf[0] = 0.0;
+    for (i = 0; i < 3; ++i) {
+        L[i].pick = own[i];
+        lcdf[i + 1] = lcdf[i] + own[i];
+    }
+    lcdf[3] = 1.0;
+    sc.light = L;
+    sc.nlight = 3;
+    sc.light_cdf = lcdf;
+    gd.nslot = 2;
+    gd.slot = slot;
+    gd.light = light;
+    gd.seen = seen;
+    gd.active = active;
+    gd.sq = sq;
+    gd.pick = pick;
+    gd.pcdf = pcdf;
+    for (i = 0; i < 2; ++i) {
+        sq[i] = B[i];
+        seen[i] = pairs / 2;
+        e[i].k_own = e[i].k_with = k[i];
+    }
+    appm__guide_picks(&sc, &gd, e);
+    for (i = 0; i < 3; ++i)
+        CHECK_MSG(fabs(pick[i] - want[i]) < 1e-12, "light %d: picked with %.6g, want %.6g", i, pick[i], want[i]);
+    CHECK_NEAR(pcdf[1], want[0], 1e-12);
+    CHECK_NEAR(pcdf[2], want[0] + want[1], 1e-12);
+    CHECK(pcdf[3] == 1.0);
+    u[0] = (float)(want[0] + 0.5 * want[1]); /* inside light 1's interval: its weight carries pick / pi */
+    (void)appm__guide_warp(&gd, &sc, u, &li, &w);
+    CHECK_MSG(li == 1 && fabs(w - own[1] / want[1]) < 1e-6, "light %u, weight factor %g (want light 1, %g)", li, w,
+              own[1] / want[1]);
+}
+
+static void test_picks(void)
+{
+    const double own[3] = {0.6, 0.15, 0.25}, even[3] = {0.375, 0.375, 0.25};
+    const double Ba[2] = {1.0, 16.0}, Bc[2] = {1.0, 1.1}, k1[2] = {1.0, 1.0}, kb[2] = {1.0, 16.0};
+    const double wa[3] = {0.2625, 0.4875, 0.25}, wb[3] = {0.43125, 0.31875, 0.25};
+    picks_case(own, Ba, k1, APPM__GUIDE_MIN, wa);
+    picks_case(own, Ba, kb, APPM__GUIDE_MIN, wb);
+    picks_case(even, Bc, k1, APPM__GUIDE_MIN, even);
+    picks_case(own, Ba, k1, APPM__GUIDE_MIN - 2, own);
+}
+
 int main(void)
 {
     {   /* guided is the default, and a zeroed configuration is the default */
@@ -479,6 +586,7 @@ int main(void)
         CHECK(c.emission == APPM_EMISSION_GUIDED && zero.emission == APPM_EMISSION_GUIDED);
     }
     test_select();
+    test_picks();
     test_warp_chi2();
     test_weights_power();
     test_closed_box();
