@@ -9527,6 +9527,55 @@ static void appm__env_integral(const appm__envmap *e, double *out)
     }
 }
 
+/* The share of the map's power (the mean of its RGB integral) that its
+ * brightest texels hold within a solid angle of `omega` steradians: a sun's
+ * share, if the sun is smaller than omega.  The texels' mean radiances are
+ * binned by their logarithm (APPM__ENV_PIN_BINS bins a stop, down to 2^-40
+ * of the brightest; dimmer ones cannot make a pinpoint), the bins are taken
+ * from the brightest down while their solid angle fits, and the bin that
+ * overflows counts in proportion.  O(texels), no allocation. */
+#define APPM__ENV_PIN_STOPS 40
+#define APPM__ENV_PIN_BINS 16
+static double appm__env_pinpoint(const appm__envmap *e, double omega)
+{
+    enum { NB = APPM__ENV_PIN_STOPS * APPM__ENV_PIN_BINS };
+    double bw[NB], bp[NB], lmax = 0.0, total = 0.0, got = 0.0, left = omega;
+    uint32_t x, y;
+    int b;
+    for (y = 0; y < e->h; ++y)
+        for (x = 0; x < e->w; ++x) {
+            const float *t = appm__env_texel(e, x, y);
+            const double l = ((double)t[0] + t[1] + t[2]) / 3.0;
+            lmax = l > lmax ? l : lmax;
+        }
+    if (!(lmax > 0.0 && lmax < HUGE_VAL)) return 0.0;
+    memset(bw, 0, sizeof bw);
+    memset(bp, 0, sizeof bp);
+    for (y = 0; y < e->h; ++y) {
+        const double dw = 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
+        for (x = 0; x < e->w; ++x) {
+            const float *t = appm__env_texel(e, x, y);
+            const double l = ((double)t[0] + t[1] + t[2]) / 3.0, f = l > 0.0 ? -log2(l / lmax) * APPM__ENV_PIN_BINS : NB;
+            total += dw * l;
+            if (f < (double)NB) { /* f >= 0: lmax is the brightest */
+                b = (int)f;
+                bw[b] += dw;
+                bp[b] += dw * l;
+            }
+        }
+    }
+    for (b = 0; b < NB && left > 0.0; ++b) {
+        if (bw[b] <= left) {
+            got += bp[b];
+            left -= bw[b];
+        } else {
+            got += bp[b] * left / bw[b];
+            left = 0.0;
+        }
+    }
+    return total > 0.0 ? got / total : 0.0;
+}
+
 /* bench/envmap.sh builds appm with APPM_ENV_UNIFORM=1 to measure what the
  * map's density buys: shadow rays then take the cosine alone and photons
  * uniform directions, as for a constant environment. */
@@ -14119,9 +14168,16 @@ static appm__v3 appm__pt_direct(const appm_scene *s, const appm__surf *sf, const
  * does, rather than a number that says 1 % where the truth is 25 %.  An
  * emitter is the triangles of one emissive material, counted if they carry at
  * least APPM__PT_TINY_POWER of the photons (an indicator lamp beside the room's
- * light does not count).  The scene's materials count as appm_scene_get_info
- * counts them (one that the MTL defines and no face uses too: the check cannot
- * know which surfaces the lights reach). */
+ * light does not count).  An environment map's sun is the same: the power of
+ * its brightest texels within APPM__PT_TINY x pi steradians (the solid angle
+ * of such an area light seen from the scene; a 1-degree sun is 0.76 of it) is
+ * counted alike (appm__env_pinpoint).  On the textured scene, a glass sphere
+ * under a sun of 1 degree, the estimate read 0.93, 2.01 and 2.46 of the true
+ * error at 256 passes (seeds 1-3) and 0.41 at 16 (seed 1): the fireflies of
+ * the sun's caustic decide the error, and one render's spread of them is as
+ * heavy-tailed.  The scene's materials count as appm_scene_get_info counts
+ * them (one that the MTL defines and no face uses too: the check cannot know
+ * which surfaces the lights reach). */
 #define APPM__PT_TINY 1e-4
 #define APPM__PT_TINY_POWER 0.01
 static int appm__pt_blind(const appm_scene *s)
@@ -14136,6 +14192,8 @@ static int appm__pt_blind(const appm_scene *s)
         const appm__light *l = &s->light[k];
         if (l->kind == APPM__LIGHT_AREA && s->mat[s->info[l->tri].mat].emit_area < APPM__PT_TINY * disk)
             tiny += l->pick;
+        else if (l->kind == APPM__LIGHT_ENV && s->envmap.rgb)
+            tiny += l->pick * appm__env_pinpoint(&s->envmap, APPM__PT_TINY * APPM__PI);
     }
     return tiny >= APPM__PT_TINY_POWER;
 }

@@ -585,12 +585,14 @@ APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
  * but not pt on a scene with a mirror or glass and a point or spot light, or
  * an area light too small to be met by chance (an emissive material whose
  * triangles cover less than 1e-4 of pi R^2, R half the diagonal of the scene's
- * bounding box, and that carries at least 1 % of the power).  A point or spot
- * light reaches a surface only by shadow rays, which no mirror or glass lets
- * through, and a diffuse bounce meets such a small light about once in 10^4,
- * so the light they send through a mirror or glass (a caustic) is missing from
- * the path tracer's image, and the spread of its passes cannot measure light
- * they never found.  Its VARIANCE and ERROR maps still show the noise of what
+ * bounding box, and that carries at least 1 % of the power), or an
+ * environment map whose brightest texels within 1e-4 pi steradians (a sun
+ * 1.15 degrees across) carry 1 % of the power.  A point or spot light reaches a
+ * surface only by shadow rays, which no mirror or glass lets through, and a
+ * diffuse bounce meets such a small light or sun about once in 10^4, so the
+ * light they send through a mirror or glass (a caustic) is missing from the
+ * path tracer's image or shows as rare fireflies, and the spread of its
+ * passes cannot measure light they never or seldom found.  Its VARIANCE and ERROR maps still show the noise of what
  * it renders. */
 APPM_API int appm_renderer_keeps_error(const appm_renderer *r);
 

@@ -699,8 +699,9 @@ static void warn_pt_caustics(const render_opts *o, const appm_renderer *r)
     if (o->cfg.method != APPM_METHOD_PT || !o->cfg.log || appm_renderer_keeps_error(r)) return;
     o->cfg.log(o->cfg.log_user, o->scene, 0,
                "pt does not render the light that reaches a surface through a mirror or glass from a point or "
-               "spot light, or from an area light too small to be met by chance (caustics): its image leaves "
-               "it out, and it reports no error estimate (--method appm renders it)");
+               "spot light, or from an area light or a sun in the environment map too small to be met by "
+               "chance (caustics): its image leaves it out or shows it as rare bright speckles, and it reports "
+               "no error estimate (--method appm renders it)");
 }
 
 /* --until-error needs an error estimate: ppm and sppm keep none, nor does the
