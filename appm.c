@@ -12087,15 +12087,19 @@ static void appm__guide_density(appm__guide *gd, uint32_t slot, appm__guide_eff 
  * often as its own, which miss; guiding it cost 30 % of each pass and removed
  * no error (docs/algorithm.md 5.8).  V and K are of the photon pass alone,
  * and of the candidate lights: the paths of further lights add the same to
- * both either way. */
-static void appm__guide_select(appm__guide *gd, const appm__guide_eff *e)
+ * both either way.  pi_l here is the light's power's pick_l: the learned
+ * choice (appm__guide_picks) follows from the densities chosen here, and the
+ * choice of densities must be a function of the learned state alone, not of
+ * the last pass's picks, so that a resumed render chooses as the
+ * uninterrupted one did. */
+static void appm__guide_select(const appm_scene *sc, appm__guide *gd, const appm__guide_eff *e)
 {
     unsigned char take[APPM__GUIDE_LIGHTS];
     double V = 0.0, K = 0.0, mu_o = 0.0, mu_e = 0.0;
     uint32_t s;
     int c;
     for (s = 0; s < gd->nslot; ++s) {
-        const double pi = gd->pick[gd->light[s]];
+        const double pi = sc->light[gd->light[s]].pick;
         take[s] = gd->active[s];
         gd->active[s] = 0;
         V += e[s].m_own / pi;
@@ -12108,7 +12112,7 @@ static void appm__guide_select(appm__guide *gd, const appm__guide_eff *e)
         double best_vk = HUGE_VAL, bv = 0.0, bk = 0.0;
         uint32_t best = UINT32_MAX;
         for (s = 0; s < gd->nslot; ++s) {
-            const double pi = gd->pick[gd->light[s]];
+            const double pi = sc->light[gd->light[s]].pick;
             double v, k;
             if (!take[s] || gd->active[s]) continue;
             v = V + (e[s].m_with - e[s].m_own) / pi;
@@ -12186,7 +12190,7 @@ static void appm__guide_densities(const appm_renderer *r, appm__guide *gd)
     appm__guide_eff e[APPM__GUIDE_LIGHTS];
     uint32_t s;
     for (s = 0; s < gd->nslot; ++s) appm__guide_density(gd, s, &e[s]);
-    appm__guide_select(gd, e);
+    appm__guide_select(r->scene, gd, e);
     appm__guide_picks(r->scene, gd, e);
 }
 

@@ -435,7 +435,10 @@ static void select_case(double hot_cost, double T, int disagree, double odd_spik
     static appm__light L[2];
     uint32_t slot[2] = {0, 1}, light[2] = {0, 1};
     uint64_t seen[2] = {APPM__GUIDE_MIN, APPM__GUIDE_MIN}, passes[2] = {2, 2};
-    double lcdf[3] = {0.0, 0.5, 1.0}, pick[2] = {0.5, 0.5}, pcdf[3], sq[2] = {0.0, 0.0}; /* no B: picked by power */
+    /* no B: lights picked by power.  The picks a pass left are not part of the learned state: stale
+     * ones (0.05 and 0.95, as if the last pass had learned another choice) must not change what is
+     * guided, or a resumed render, which starts from the power's, would choose otherwise */
+    double lcdf[3] = {0.0, 0.5, 1.0}, pick[2] = {0.05, 0.95}, pcdf[3], sq[2] = {0.0, 0.0};
     unsigned char active[2];
     int c;
     memset(&r, 0, sizeof r);
