@@ -12218,9 +12218,15 @@ static void appm__count_add(uint64_t *c, uint64_t add)
 /* One pixel-photon pair into a worker's counts (a gather inside the kernel of
  * radius^2 R2): the pair's share of the pixel, n = k_R(d) lum(Psi) / M, in
  * units of ref / 2^16 (unit = 2^16 / (pi M ref); the biweight's 3 / pi, the
- * uniform kernel's 1 / pi), rounded; one pair; and n^2.  `pairs` is where the
- * pairs per slot start, nslot x RES^2 words in; the squares start 2 x pairs
- * + nslot words after them. */
+ * uniform kernel's 1 / pi), rounded; one pair; and n^2 in units of
+ * APPM__GUIDE_SQ_UNIT (so that a firefly's square, n up to 4e9, still fits:
+ * shares of a few units, whose squares round to 0, weigh nothing beside it).
+ * Every sum saturates, here and where the workers' and ranks' counts are
+ * added (appm__guide_learn, appm__cluster_guide): min(the sum, UINT64_MAX)
+ * does not depend on how the pairs were split.  `pairs` is where the pairs
+ * per slot start, nslot x RES^2 words in; the squares start 2 x pairs + nslot
+ * words after them. */
+#define APPM__GUIDE_SQ_UNIT 256.0
 static void appm__guide_count(uint64_t *count, size_t pairs, uint32_t tag, float d2, float R2, int biweight,
                               double q, double unit)
 {
@@ -12229,11 +12235,12 @@ static void appm__guide_count(uint64_t *count, size_t pairs, uint32_t tag, float
     if (!(n > 0.0)) n = 0.0;
     appm__count_add(&count[tag], n < 1e15 ? (uint64_t)(n + 0.5) : (uint64_t)1e15);
     count[pairs + slot]++;
-    appm__count_add(&count[3 * pairs + pairs / APPM__GUIDE_CELLS + slot], n < 1e9 ? (uint64_t)(n * n + 0.5) : (uint64_t)1e18);
+    appm__count_add(&count[3 * pairs + pairs / APPM__GUIDE_CELLS + slot],
+                    n < 4e9 ? (uint64_t)(n * n / APPM__GUIDE_SQ_UNIT + 0.5) : (uint64_t)(4e9 * 4e9 / APPM__GUIDE_SQ_UNIT));
 }
 
-/* After the gather: the workers' counts (integers: the same sums in any
- * order) into the scores, cell by cell - score_c += S_c RES^2, S_c the pass's
+/* After the gather: the workers' counts (integers, saturating: the same sums
+ * in any order) into the scores, cell by cell - score_c += S_c RES^2, S_c the pass's
  * contributions from cell c, which estimates the mean over the cell of the
  * image contribution of the light's paths started there, whatever density
  * drew the cell (the photon's weight carries 1 / p) - and back to 0. */
@@ -12250,12 +12257,12 @@ static void appm__guide_learn(appm_renderer *r)
     for (c = 0; c < stride; ++c) {
         uint64_t n = 0;
         for (w = 0; w < r->threads; ++w) {
-            n += gd->count[w * stride + c];
+            appm__count_add(&n, gd->count[w * stride + c]);
             gd->count[w * stride + c] = 0;
         }
         if (c >= 3 * cells + gd->nslot) { /* B_l += pi_l x the squared shares (appm__guide_picks) */
             const size_t l = c - 3 * cells - gd->nslot;
-            gd->sq[l] += (double)n * (gd->ref / 65536.0) * (gd->ref / 65536.0) * gd->pick[gd->light[l]];
+            gd->sq[l] += (double)n * APPM__GUIDE_SQ_UNIT * (gd->ref / 65536.0) * (gd->ref / 65536.0) * gd->pick[gd->light[l]];
         } else if (c >= 2 * cells + gd->nslot) gd->work[c - 2 * cells - gd->nslot] += (double)n;
         else if (c >= cells + gd->nslot) gd->paths[c - cells - gd->nslot] += (double)n;
         else if (c >= cells) gd->seen[c - cells] += n;
@@ -15011,7 +15018,7 @@ static appm_status appm__cluster_guide(appm_renderer *r)
     for (c = 0; c < stride; ++c) {
         uint64_t sum = 0;
         for (w = 0; w < r->threads; ++w) {
-            sum += gd->count[w * stride + c];
+            appm__count_add(&sum, gd->count[w * stride + c]);
             gd->count[w * stride + c] = 0;
         }
         mine[c] = sum;
@@ -15019,7 +15026,7 @@ static appm_status appm__cluster_guide(appm_renderer *r)
     for (k = 0; k < r->cluster.ranks; ++k) r->cl_lens[k] = stride * sizeof *r->cl_count;
     if ((st = appm__cluster_exchange(r, r->cl_count)) != APPM_OK) return st;
     for (k = 0; k < r->cluster.ranks; ++k)
-        for (c = 0; c < stride; ++c) gd->count[c] += r->cl_count[k * stride + c];
+        for (c = 0; c < stride; ++c) appm__count_add(&gd->count[c], r->cl_count[k * stride + c]);
     return APPM_OK;
 }
 

@@ -135,7 +135,7 @@
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
 #define APPM_VERSION_PATCH 3
-#define APPM_VERSION "0.1.2"
+#define APPM_VERSION "0.1.3"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,7 +165,7 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.2": the version of the implementation that was compiled (APPM_VERSION is
+/* "0.1.3": the version of the implementation that was compiled (APPM_VERSION is
  * the version of the header).  The patch number changes with every change to
  * what a pass computes (an estimator's constant, the sampler, the emission),
  * so a checkpoint never resumes under passes other than those that wrote it. */
@@ -557,8 +557,9 @@ typedef struct appm_stats {
                                     /* var from the spread between the                   */
                                     /* chains (chains >= 2) or the passes (one chain:    */
                                     /* scaled by the sequence's halves); < 0: none (ppm, */
-                                    /* sppm; pt on a scene with a point or spot light    */
-                                    /* and a mirror or glass, whose caustics it misses)  */
+                                    /* sppm; pt where a point or spot light, a tiny area */
+                                    /* light or a sun may shine through a mirror or      */
+                                    /* glass: appm_renderer_keeps_error)                 */
     double clamped;                 /* appm: fraction of gathering pixels at a radius bound
                                        after the last pass (< 0: none)                     */
     unsigned threads;

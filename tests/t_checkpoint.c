@@ -634,9 +634,9 @@ static void test_byte_order(const appm_scene *s)
     u = get_le(buf + OFF_R1, 8);
     memcpy(&r1, &u, sizeof r1);
     CHECK(r1 == a->r1 && r1 > 0.0);
-    /* ppm: 7 pixel values and lit + I[3]; then per guided light 2 counts and 2 x RES^2 doubles; the
-     * photon budget's flag and reading (12 bytes) */
-    pix0 = n - 8 - 12 - (size_t)a->guide.nslot * 8 * (2 + 2 * APPM__GUIDE_CELLS) - (size_t)a->w * a->h * 8 * (8 + 3);
+    /* ppm: 7 pixel values and lit + I[3]; then per guided light APPM__CK_GUIDE_WORDS words (none
+     * here); the photon budget's flag and reading (12 bytes) */
+    pix0 = n - 8 - 12 - (size_t)a->guide.nslot * 8 * APPM__CK_GUIDE_WORDS - (size_t)a->w * a->h * 8 * (8 + 3);
     CHECK(get_le(buf + n - 20, 4) == 0); /* photons given: no budget */
     u = get_le(buf + pix0, 8);
     memcpy(&ld0, &u, sizeof ld0);
@@ -862,6 +862,12 @@ int main(void)
 {
     appm_scene *s = check_load_scene("scenes/cornell-sphere.scene");
     appm_scene *other = check_load_scene("scenes/cornell-original.scene");
+    {   /* checkpoints record the version numbers; --version and appm_version() say the string */
+        char v[32];
+        snprintf(v, sizeof v, "%d.%d.%d", APPM_VERSION_MAJOR, APPM_VERSION_MINOR, APPM_VERSION_PATCH);
+        CHECK_MSG(strcmp(v, APPM_VERSION) == 0 && strcmp(v, appm_version()) == 0, "version %s, string %s", v,
+                  APPM_VERSION);
+    }
     if (s && other) {
         test_resume(s);
         test_file(s);
