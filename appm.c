@@ -12343,6 +12343,14 @@ static void appm__guide_free(appm_renderer *r)
 
 #define APPM__CHUNK 1024u /* photon paths per chunk: fixed, so results do not depend on threads */
 
+/* Whether this pass's photons carry their emission cell (appm__pmap.tag): only
+ * a pass that learns reads them (a gather counts their shares), so the others
+ * neither store, move nor sort them (9.1). */
+static int appm__guide_tags(const appm_renderer *r)
+{
+    return r->tag != NULL && r->guide.ref > 0.0;
+}
+
 static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__surf *sf, appm__v3 wi,
                                    appm__v3 gamma, unsigned segs, unsigned comp, uint32_t tag)
 {
@@ -12352,7 +12360,7 @@ static int appm__store_photon_comp(appm_renderer *r, uint32_t task, const appm__
     size_t slot;
     if (r->task_used[task] >= r->cap) return 0;
     slot = (size_t)task * r->cap + r->task_used[task]++;
-    if (r->tag) r->tag[slot] = tag;
+    if (appm__guide_tags(r)) r->tag[slot] = tag;
     p = &r->ph[slot];
     p->x = sf->p.x;
     p->y = sf->p.y;
@@ -12588,7 +12596,8 @@ static size_t appm__store_compact(appm_renderer *r)
         for (c = r->chunk0 + t; c < r->chunk1; c += r->tasks) {
             if (cr[c].count && base + cr[c].start != out) {
                 memmove(&r->ph[out], &r->ph[base + cr[c].start], cr[c].count * sizeof *r->ph);
-                if (r->tag) memmove(&r->tag[out], &r->tag[base + cr[c].start], cr[c].count * sizeof *r->tag);
+                if (appm__guide_tags(r))
+                    memmove(&r->tag[out], &r->tag[base + cr[c].start], cr[c].count * sizeof *r->tag);
             }
             cr[c].start = (uint32_t)out;
             out += cr[c].count;
@@ -14999,10 +15008,10 @@ static appm_status appm__cluster_photons(appm_renderer *r, size_t *n)
     st = appm__cluster_agree(r, appm__store_reserve(r, total, *n), "the photon store");
     if (st != APPM_OK) return st;
     memmove(r->ph + base, r->ph, *n * sizeof *r->ph);
-    if (r->tag) memmove(r->tag + base, r->tag, *n * sizeof *r->tag);
+    if (appm__guide_tags(r)) memmove(r->tag + base, r->tag, *n * sizeof *r->tag);
     *n = total;
     if ((st = appm__cluster_share_photons(r, r->ph, sizeof *r->ph)) != APPM_OK) return st;
-    return r->tag ? appm__cluster_share_photons(r, r->tag, sizeof *r->tag) : APPM_OK;
+    return appm__guide_tags(r) ? appm__cluster_share_photons(r, r->tag, sizeof *r->tag) : APPM_OK;
 }
 
 /* Guided emission's counts of this rank's workers, summed, then over the
@@ -15287,7 +15296,7 @@ static appm_status appm__photon_method_pass(appm_renderer *r, double *t)
     n = appm__store_compact(r);
     if (!alone && (st = appm__cluster_photons(r, &n)) != APPM_OK) return st;
     t[1] = appm__seconds();
-    r->pmap.tag = r->tag;
+    r->pmap.tag = appm__guide_tags(r) ? r->tag : NULL;
     st = appm__pmap_build(&r->pmap, &r->mem, r->ph, n, r->dest, r->chunk, r->nchunks, cell > 0.0f ? cell : 1.0f);
     if ((st = appm__cluster_agree(r, st, "the photon map's build")) != APPM_OK) return st;
     t[2] = appm__seconds();
