@@ -12236,12 +12236,12 @@ static void appm__guide_count(uint64_t *count, size_t pairs, uint32_t tag, float
     appm__count_add(&count[tag], n < 1e15 ? (uint64_t)(n + 0.5) : (uint64_t)1e15);
     count[pairs + slot]++;
     appm__count_add(&count[3 * pairs + pairs / APPM__GUIDE_CELLS + slot],
-                    n < 4e9 ? (uint64_t)(n * n / APPM__GUIDE_SQ_UNIT + 0.5) : (uint64_t)(4e9 * 4e9 / APPM__GUIDE_SQ_UNIT));
+                    (uint64_t)((n < 4e9 ? n * n : 4e9 * 4e9) / APPM__GUIDE_SQ_UNIT + 0.5));
 }
 
 /* After the gather: the workers' counts (integers, saturating: the same sums
- * in any order) into the scores, cell by cell - score_c += S_c RES^2, S_c the pass's
- * contributions from cell c, which estimates the mean over the cell of the
+ * in any order) into the scores, cell by cell - score_c += S_c RES^2, S_c the
+ * pass's contributions from cell c, which estimates the mean over the cell of the
  * image contribution of the light's paths started there, whatever density
  * drew the cell (the photon's weight carries 1 / p) - and back to 0. */
 static void appm__guide_learn(appm_renderer *r)
@@ -12250,7 +12250,7 @@ static void appm__guide_learn(appm_renderer *r)
     size_t cells = (size_t)gd->nslot * APPM__GUIDE_CELLS, stride = APPM__GUIDE_STRIDE(gd->nslot), c;
     unsigned w;
     if (!(gd->ref > 0.0)) return; /* a pass that does not learn: nothing was counted */
-    for (c = 0; c < cells; ++c) /* M pick_l p_c / RES^2 paths from cell c this pass */
+    for (c = 0; c < cells; ++c) /* M pi_l p_c / RES^2 paths from cell c this pass */
         gd->samples[c] += (double)r->M * gd->pick[gd->light[c / APPM__GUIDE_CELLS]] * (double)gd->pdf[c] /
                           APPM__GUIDE_CELLS;
     for (w = 0; w < gd->nslot; ++w) gd->passes[w]++;
@@ -12262,7 +12262,8 @@ static void appm__guide_learn(appm_renderer *r)
         }
         if (c >= 3 * cells + gd->nslot) { /* B_l += pi_l x the squared shares (appm__guide_picks) */
             const size_t l = c - 3 * cells - gd->nslot;
-            gd->sq[l] += (double)n * APPM__GUIDE_SQ_UNIT * (gd->ref / 65536.0) * (gd->ref / 65536.0) * gd->pick[gd->light[l]];
+            const double u = gd->ref / 65536.0;
+            gd->sq[l] += (double)n * APPM__GUIDE_SQ_UNIT * u * u * gd->pick[gd->light[l]];
         } else if (c >= 2 * cells + gd->nslot) gd->work[c - 2 * cells - gd->nslot] += (double)n;
         else if (c >= cells + gd->nslot) gd->paths[c - cells - gd->nslot] += (double)n;
         else if (c >= cells) gd->seen[c - cells] += n;
@@ -12316,8 +12317,8 @@ static int appm__guide_alloc(appm_renderer *r)
     gd->cdf = (double *)appm__alloc(&r->mem, (size_t)n * APPM__GUIDE_CDF, sizeof *gd->cdf);
     gd->active = (unsigned char *)appm__alloc(&r->mem, n, 1);
     gd->count = (uint64_t *)appm__alloc(&r->mem, APPM__GUIDE_STRIDE(n), (size_t)r->threads * sizeof *gd->count);
-    return n == 0 || (gd->cells && gd->half && gd->sq && gd->pick && gd->pcdf && gd->seen && gd->passes && gd->pdf && gd->cdf && gd->active &&
-                      gd->count);
+    return n == 0 || (gd->cells && gd->half && gd->sq && gd->pick && gd->pcdf && gd->seen && gd->passes && gd->pdf &&
+                      gd->cdf && gd->active && gd->count);
 }
 
 static void appm__guide_free(appm_renderer *r)
