@@ -9513,15 +9513,29 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
     return appm__env_prod_build(m, e, name, diag);
 }
 
+/* The solid angle of a texel of row y: 2 pi / w in phi times cos theta_y -
+ * cos theta_y+1. */
+static double appm__env_texel_omega(const appm__envmap *e, uint32_t y)
+{
+    return 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
+}
+
+/* The mean of texel (x, y)'s RGB radiance. */
+static double appm__env_texel_mean(const appm__envmap *e, uint32_t x, uint32_t y)
+{
+    const float *t = appm__env_texel(e, x, y);
+    return ((double)t[0] + t[1] + t[2]) / 3.0;
+}
+
 /* Integral of L over the sphere (W / m^2 / sr times sr), RGB, texel by
- * texel: texel (x, y) spans 2 pi / w in phi and cos theta_y - cos theta_y+1. */
+ * texel (appm__env_texel_omega). */
 static void appm__env_integral(const appm__envmap *e, double *out)
 {
     uint32_t x, y;
     int k;
     out[0] = out[1] = out[2] = 0.0;
     for (y = 0; y < e->h; ++y) {
-        double dw = 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
+        double dw = appm__env_texel_omega(e, y);
         for (x = 0; x < e->w; ++x)
             for (k = 0; k < 3; ++k) out[k] += dw * appm__env_texel(e, x, y)[k];
     }
@@ -9544,18 +9558,16 @@ static double appm__env_pinpoint(const appm__envmap *e, double omega)
     int b;
     for (y = 0; y < e->h; ++y)
         for (x = 0; x < e->w; ++x) {
-            const float *t = appm__env_texel(e, x, y);
-            const double l = ((double)t[0] + t[1] + t[2]) / 3.0;
+            const double l = appm__env_texel_mean(e, x, y);
             lmax = l > lmax ? l : lmax;
         }
     if (!(lmax > 0.0 && lmax < HUGE_VAL)) return 0.0;
     memset(bw, 0, sizeof bw);
     memset(bp, 0, sizeof bp);
     for (y = 0; y < e->h; ++y) {
-        const double dw = 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
+        const double dw = appm__env_texel_omega(e, y);
         for (x = 0; x < e->w; ++x) {
-            const float *t = appm__env_texel(e, x, y);
-            const double l = ((double)t[0] + t[1] + t[2]) / 3.0, f = l > 0.0 ? -log2(l / lmax) * APPM__ENV_PIN_BINS : NB;
+            const double l = appm__env_texel_mean(e, x, y), f = l > 0.0 ? -log2(l / lmax) * APPM__ENV_PIN_BINS : NB;
             total += dw * l;
             if (f < (double)NB) { /* f >= 0: lmax is the brightest */
                 b = (int)f;
@@ -11432,7 +11444,8 @@ typedef struct appm__guide { /* emission guided by visual importance (section 9.
     uint64_t *count;     /* per worker, APPM__GUIDE_STRIDE(nslot) words: per slot and cell the
                           * contributions gathered this pass, in units of ref / 2^16; per slot the
                           * pixel-photon pairs; per slot and cell the paths traced, then their cost;
-                          * per slot the pairs' squared shares, in units of (ref / 2^16)^2 */
+                          * per slot the pairs' squared shares, in units of APPM__GUIDE_SQ_UNIT
+                          * (ref / 2^16)^2 */
     float *map;          /* appm_renderer_emission_map's picture */
     double *half;        /* scratch: the two halves' importance of one slot (appm__guide_halves) */
     double *sq;          /* per slot: its pixel-photon pairs' squared shares, times its pick, summed
@@ -12156,7 +12169,8 @@ static void appm__guide_picks_own(const appm_scene *sc, appm__guide *gd)
 static void appm__guide_picks(const appm_scene *sc, appm__guide *gd, const appm__guide_eff *e)
 {
     const double a = APPM__GUIDE_DEFENSIVE;
-    double o[APPM__GUIDE_LIGHTS], k[APPM__GUIDE_LIGHTS], P = 0.0, tot = 0.0, v0 = 0.0, k0 = 0.0, v1 = 0.0, k1 = 0.0;
+    double o[APPM__GUIDE_LIGHTS], k[APPM__GUIDE_LIGHTS], pi[APPM__GUIDE_LIGHTS], P = 0.0, tot = 0.0, v0 = 0.0,
+        k0 = 0.0, v1 = 0.0, k1 = 0.0;
     uint64_t seen = 0;
     uint32_t s, i;
     appm__guide_picks_own(sc, gd);
@@ -12169,15 +12183,15 @@ static void appm__guide_picks(const appm_scene *sc, appm__guide *gd, const appm_
     }
     if (seen < APPM__GUIDE_MIN || !(tot > 0.0 && tot < HUGE_VAL)) return;
     for (s = 0; s < gd->nslot; ++s) {
-        const double own = sc->light[gd->light[s]].pick, pi = a * own + (1.0 - a) * P * o[s] / tot;
+        const double own = sc->light[gd->light[s]].pick;
+        pi[s] = a * own + (1.0 - a) * P * o[s] / tot;
         v0 += gd->sq[s] / own;
         k0 += own * k[s];
-        v1 += gd->sq[s] / pi;
-        k1 += pi * k[s];
+        v1 += gd->sq[s] / pi[s];
+        k1 += pi[s] * k[s];
     }
     if (!(v1 * k1 <= APPM__GUIDE_PICK_GAIN * v0 * k0)) return; /* does not pay (or NaN: a state not to trust) */
-    for (s = 0; s < gd->nslot; ++s)
-        gd->pick[gd->light[s]] = a * sc->light[gd->light[s]].pick + (1.0 - a) * P * o[s] / tot;
+    for (s = 0; s < gd->nslot; ++s) gd->pick[gd->light[s]] = pi[s];
     gd->pcdf[0] = 0.0;
     for (i = 0; i < sc->nlight; ++i) gd->pcdf[i + 1] = gd->pcdf[i] + gd->pick[i];
     gd->pcdf[sc->nlight] = 1.0;
