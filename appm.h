@@ -529,7 +529,10 @@ APPM_API appm_status appm_image_compare(const appm_image *a, const appm_image *b
 /* Prepares a progressive render of `scene` (which must outlive the renderer).
  * Allocates everything a pass needs except the photon store, which is sized by
  * the first pass.  Options are validated here: alpha outside (0,1], a size
- * of 0 or above 32768, a negative or non-finite radius give APPM_ERR_INVALID_ARG. */
+ * of 0 or above 32768, a negative or non-finite radius give APPM_ERR_INVALID_ARG.
+ * A radius above a tenth of the scene's bounding-box diagonal is valid, but each
+ * pixel then gathers a large share of the photons and a pass is slow: cfg.log
+ * (if set) is told so once. */
 APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_config *cfg,
                                           appm_renderer **out, appm_diag *diag);
 

@@ -239,6 +239,23 @@ static inline void check_use_alloc(appm_config *cfg, check_alloc *a, long fail_a
     cfg->allocator.user = a;
 }
 
+/* The warnings a library call passes to cfg.log (set cfg.log = check_on_log,
+ * cfg.log_user = a check_log): how many, and the last one with its line. */
+typedef struct check_log {
+    int n;
+    unsigned line;
+    char last[512];
+} check_log;
+
+static inline void check_on_log(void *user, const char *file, unsigned line, const char *msg)
+{
+    check_log *l = (check_log *)user;
+    (void)file;
+    l->n++;
+    l->line = line;
+    snprintf(l->last, sizeof l->last, "%s", msg);
+}
+
 /* Loads a scene, recording a failed CHECK (with file:line: message) on error. */
 static inline appm_scene *check_load_scene(const char *path)
 {

@@ -3,7 +3,8 @@
  * Each group pushes one quantity to its limit and states, in its comment, what
  * good behaviour is there; the checks assert exactly that:
  *
- *   r  radius 1e-9 and 1e9 scene units         finite; 1e9 gives the blurred value
+ *   r  radius 1e-9 and 1e9 scene units         finite; 1e9 gives the blurred value;
+ *                                              past a tenth of the scene, one warning
  *   a  alpha 1e-6 and 1 - 1e-6; invalid alphas finite, r > 0, r never grows; refused
  *   o  one photon per pass; photons 2^32        finite; clean APPM_ERR_NOMEM, no leak
  *   n  accumulators at 1e7 passes, n = 2^40     exact means, updates never stall
@@ -198,6 +199,43 @@ static int write_box(const char *name, double s, double tx, unsigned size)
  * appm weights the photons with the biweight kernel, and shrinks its radius as
  * j^(-1/6) from r1, so its value is not this one: it is checked for finite,
  * non-negative pixels and a finite positive radius map only. */
+/* A radius past a tenth of the scene's bounding-box diagonal is valid (above), but each pixel
+ * then visits a large share of the photons (the sphere box at 512 x 512: 0.5 s a pass at the
+ * automatic radius, 340 s at r = 5): appm_renderer_create says so through cfg.log, once, and
+ * not for a radius below that. */
+static void test_radius_warning(const appm_scene *s)
+{
+    static const double share[3] = {0.09, 0.5, 1.5}; /* of the diagonal */
+    static const char *const want[3] = {NULL, "% of the scene's size", "larger than the whole scene"};
+    appm_scene_info info;
+    double diagonal = 0.0;
+    int k;
+    appm_scene_get_info(s, &info);
+    for (k = 0; k < 3; ++k)
+        diagonal += (info.bbox_max[k] - info.bbox_min[k]) * (info.bbox_max[k] - info.bbox_min[k]);
+    diagonal = sqrt(diagonal);
+    for (k = 0; k < 3; ++k) {
+        appm_config cfg;
+        appm_renderer *r = NULL;
+        appm_diag d;
+        check_log l;
+        memset(&l, 0, sizeof l);
+        appm_config_init(&cfg);
+        cfg.width = cfg.height = 8;
+        cfg.threads = 1; /* a build without threads would warn about 2 */
+        cfg.radius = share[k] * diagonal;
+        cfg.log = check_on_log;
+        cfg.log_user = &l;
+        CHECK_MSG(appm_renderer_create(s, &cfg, &r, &d) == APPM_OK, "radius %g: %s", cfg.radius, d.message);
+        if (want[k])
+            CHECK_MSG(l.n == 1 && strstr(l.last, want[k]) != NULL, "radius %.2f diagonals: %d warnings, '%s'",
+                      share[k], l.n, l.last);
+        else
+            CHECK_MSG(l.n == 0, "radius %.2f diagonals: %d warnings, '%s'", share[k], l.n, l.last);
+        appm_renderer_destroy(r);
+    }
+}
+
 static void test_radius(void)
 {
     static const appm_method methods[3] = {APPM_METHOD_PPM, APPM_METHOD_SPPM, APPM_METHOD_APPM};
@@ -263,6 +301,7 @@ static void test_radius(void)
             appm_renderer_destroy(r);
         }
     }
+    test_radius_warning(s);
     appm_scene_destroy(s);
 }
 

@@ -22,20 +22,6 @@ static const char QUAD_OBJ[] = "mtllib q.mtl\nusemtl grey\n"
                                "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n";
 static const char QUAD_MTL[] = "newmtl grey\nKd 0.5 0.5 0.5\n";
 
-typedef struct warnings {
-    int n;
-    char last[256];
-} warnings;
-
-static void on_log(void *user, const char *file, unsigned line, const char *msg)
-{
-    warnings *w = (warnings *)user;
-    (void)file;
-    (void)line;
-    w->n++;
-    snprintf(w->last, sizeof w->last, "%s", msg);
-}
-
 /* The quad under the white stand-in (appm_config.stand_in), cfg's other
  * fields as given (cfg may be NULL). */
 static appm_scene *load_quad(const appm_config *cfg)
@@ -64,7 +50,7 @@ static double rect_mean(const appm_image *img, uint32_t x0, uint32_t x1, uint32_
 }
 
 /* Renders `passes` passes of `method` at 32x32 into *img (a copy, to free). */
-static int render_method(const appm_scene *s, appm_method method, int passes, warnings *w, appm_image *img)
+static int render_method(const appm_scene *s, appm_method method, int passes, check_log *w, appm_image *img)
 {
     appm_config cfg;
     appm_renderer *r = NULL;
@@ -75,7 +61,7 @@ static int render_method(const appm_scene *s, appm_method method, int passes, wa
     cfg.method = method;
     cfg.width = cfg.height = 32;
     cfg.threads = 1; /* a build without threads would warn about 2 */
-    cfg.log = on_log;
+    cfg.log = check_on_log;
     cfg.log_user = w;
     img->rgb = NULL;
     if (appm_renderer_create(s, &cfg, &r, &d) != APPM_OK) {
@@ -92,7 +78,7 @@ static int render_method(const appm_scene *s, appm_method method, int passes, wa
 }
 
 /* The same with the path tracer. */
-static int render_lights(const appm_scene *s, int passes, warnings *w, appm_image *img)
+static int render_lights(const appm_scene *s, int passes, check_log *w, appm_image *img)
 {
     return render_method(s, APPM_METHOD_PT, passes, w, img);
 }
@@ -102,7 +88,7 @@ static void test_white_environment(void)
     appm_scene *s = load_quad(NULL);
     appm_scene_info in;
     appm_image img;
-    warnings w = {0, ""};
+    check_log w = {0, 0, ""};
     const double R = sqrt(2.0), want = 4.0 * APPM__PI * APPM__PI * R * R;
     if (!s) return;
     appm_scene_get_info(s, &in);
@@ -126,7 +112,7 @@ static void test_point_light_falloff(void)
     appm_scene_info in;
     appm_image img;
     appm_diag d;
-    warnings w = {0, ""};
+    check_log w = {0, 0, ""};
     const double pos[3] = {0, 0, 2}, I[3] = {4 * APPM__PI, 4 * APPM__PI, 4 * APPM__PI};
     const double bad[3] = {1, -1, 1}, nan3[3] = {0, (double)NAN, 0};
     if (!s) return;
@@ -183,7 +169,7 @@ static void test_delta_lights_every_point(void)
     appm_scene *s = load_quad(NULL);
     appm_image img;
     appm_diag d;
-    warnings w = {0, ""};
+    check_log w = {0, 0, ""};
     const double pos[3] = {0, 0, 2}, I[3] = {4 * APPM__PI, 4 * APPM__PI, 4 * APPM__PI};
     const double L[3] = {0.25, 0.25, 0.25};
     const appm_method methods[2] = {APPM_METHOD_APPM, APPM_METHOD_PT};
@@ -262,7 +248,7 @@ static void test_pt_sky_by_bsdf(void)
     appm_scene *s = NULL;
     appm_diag d;
     appm_image img;
-    warnings w = {0, ""};
+    check_log w = {0, 0, ""};
     uint32_t k;
     int m, side;
     for (side = -1; side <= 1; side += 2) { /* x in side * [0.3, 0.8], y in [-0.5, 0.5] */
@@ -298,7 +284,7 @@ static void test_set_environment(void)
     appm_scene_info in;
     appm_image img;
     appm_diag d;
-    warnings w = {0, ""};
+    check_log w = {0, 0, ""};
     const double L[3] = {2, 2, 2}, zero[3] = {0, 0, 0}, inf3[3] = {1, (double)HUGE_VAL, 1};
     const double want = 4.0 * APPM__PI * APPM__PI * 2.0 * 2.0;
     if (!s) return;
@@ -390,7 +376,7 @@ static void test_studio(void)
     appm_diag d;
     appm_scene_info in;
     appm_image img;
-    warnings w = {0, ""};
+    check_log w = {0, 0, ""};
     uint32_t t, plate = 0;
     if (!s) return;
     /* the photons' focus (6.3): the model's bounding sphere, not the plate's */

@@ -722,21 +722,6 @@ static void test_env_furnace(void)
 /* Loading: vt forms, a texture named twice is loaded once, a missing map is
  * an error naming it and the MTL line, or with warn one warning per file; a
  * face without vt on a textured material is untextured. */
-typedef struct texlog {
-    int n;
-    char last[512];
-    unsigned line;
-} texlog;
-
-static void on_texlog(void *user, const char *file, unsigned line, const char *msg)
-{
-    texlog *b = (texlog *)user;
-    (void)file;
-    b->n++;
-    b->line = line;
-    snprintf(b->last, sizeof b->last, "%s", msg);
-}
-
 static void test_loading(void)
 {
     char tex[256], mtl[256], obj[256];
@@ -744,7 +729,7 @@ static void test_loading(void)
     appm_scene *s = NULL;
     appm_diag d;
     appm_config cfg;
-    texlog lb;
+    check_log lb;
     tpath(tex, "grey.pfm");
     tpath(mtl, "two.mtl");
     tpath(obj, "two.obj");
@@ -760,7 +745,7 @@ static void test_loading(void)
     appm_config_init(&cfg);
     memset(&lb, 0, sizeof lb);
     cfg.missing_textures = APPM_MISSING_TEXTURES_WARN;
-    cfg.log = on_texlog;
+    cfg.log = check_on_log;
     cfg.log_user = &lb;
     CHECK(appm_scene_load(obj, &cfg, &s, &d) == APPM_OK);
     CHECK_MSG(lb.n == 1 && strstr(lb.last, "texture-none.png") != NULL && lb.line == 8, "%d warnings, last '%s'",
