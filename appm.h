@@ -134,8 +134,8 @@
 
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
-#define APPM_VERSION_PATCH 3
-#define APPM_VERSION "0.1.3"
+#define APPM_VERSION_PATCH 4
+#define APPM_VERSION "0.1.4"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,7 +165,7 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.3": the version of the implementation that was compiled (APPM_VERSION is
+/* "0.1.4": the version of the implementation that was compiled (APPM_VERSION is
  * the version of the header).  The patch number changes with every change to
  * what a pass computes (an estimator's constant, the sampler, the emission),
  * so a checkpoint never resumes under passes other than those that wrote it. */
@@ -223,7 +223,9 @@ typedef struct appm_file_reader {
  * surface ends inside it (a wall meeting the floor, a box's edge, a mesh's
  * open edge where the surface ends against nothing: without it every seam and
  * rim is dark by the kernel's missing part).  ppm and sppm keep their
- * papers' estimators. */
+ * papers' estimators.  Every photon method keeps out the photons of a surface
+ * that covers the gathering point (a lamp hung just under a ceiling, facing as
+ * it does: docs/algorithm.md 5.6, since 0.1.4). */
 typedef enum appm_method {
     APPM_METHOD_APPM = 0,   /* adaptive bandwidth, per pixel and pass (default)       */
     APPM_METHOD_PPM,        /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */

@@ -1322,6 +1322,58 @@ static void test_open_edge_bias(void)
     appm_scene_destroy(s);
 }
 
+/* 10.6: a photon on a surface that covers x is not x's light.  A floor (z = 0)
+ * and a shelf 1 cm above its middle, both facing up: under the shelf the
+ * floor's point x keeps a photon of the floor and not one on the shelf's top
+ * (with the same stored normal, 1 cm in front of x); beside the shelf, where
+ * nothing covers the floor, a shelf photon as near is kept.  Without the
+ * scene (no probe) the gather under the shelf keeps both: what the test
+ * catches. */
+static void test_covered(void)
+{
+    static const char obj[] = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                              "v 0.3 0.3 0.01\nv 0.7 0.3 0.01\nv 0.7 0.7 0.01\nv 0.3 0.7 0.01\nf 1 2 3 4\nf 5 6 7 8\n";
+    static const float at[3][3] = {{0.5f, 0.5f, 0.0f}, {0.75f, 0.5f, 0.0f}, {0.5f, 0.5f, 0.0f}};
+    static const float shelf[3][2] = {{0.52f, 0.5f}, {0.69f, 0.5f}, {0.52f, 0.5f}};
+    static const uint64_t want[3] = {1, 2, 2};
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_config cfg;
+    int k;
+    appm_config_init(&cfg);
+    cfg.stand_in = APPM_STAND_IN_WHITE;
+    if (appm_scene_load_obj_memory(obj, strlen(obj), NULL, 0, "shelf.obj", &cfg, &s, &d) != APPM_OK) {
+        CHECK_MSG(0, "shelf.obj: %s", d.message);
+        return;
+    }
+    for (k = 0; k < 3; ++k) { /* under the shelf, beside it, under it without the probe */
+        appm__gather g;
+        appm__photon p[2];
+        appm__ray ray;
+        appm__hit h;
+        int i;
+        toy_gather_init(&g, 0.1f, 0.0f, 1);
+        g.x = appm__v(at[k][0], at[k][1], at[k][2]);
+        appm__ray_init(&ray, appm__v(at[k][0], at[k][1], -1.0f), appm__v(0, 0, 1), 2.0f);
+        CHECK(appm__intersect(s, &ray, UINT32_MAX, &h) && fabsf(h.t - 1.0f) < 1e-6f);
+        g.tri = h.tri;
+        g.scene = k < 2 ? s : NULL;
+        for (i = 0; i < 2; ++i) { /* on the floor 2 cm from x; on the shelf */
+            memset(&p[i], 0, sizeof p[i]);
+            p[i].x = i ? shelf[k][0] : at[k][0] - 0.02f;
+            p[i].y = i ? shelf[k][1] : at[k][1];
+            p[i].z = i ? 0.01f : 0.0f;
+            p[i].power[0] = p[i].power[1] = p[i].power[2] = 1.0f;
+            p[i].segs = 1;
+            appm__normal_code(g.n, p[i].n);
+            appm__gather_photon(&g, &p[i], 0.01f, 0.01f);
+        }
+        CHECK_MSG(g.sum[APPM__COMP_DIFFUSE].count == want[k], "case %d: %llu photons gathered, not %llu", k,
+                  (unsigned long long)g.sum[APPM__COMP_DIFFUSE].count, (unsigned long long)want[k]);
+    }
+    appm_scene_destroy(s);
+}
+
 int main(void)
 {
     test_kernel_normalisation();
@@ -1345,5 +1397,6 @@ int main(void)
     test_corner_bias();
     test_open_edges();
     test_open_edge_bias();
+    test_covered();
     return check_finish();
 }
