@@ -223,9 +223,10 @@ typedef struct appm_file_reader {
  * surface ends inside it (a wall meeting the floor, a box's edge, a mesh's
  * open edge where the surface ends against nothing: without it every seam and
  * rim is dark by the kernel's missing part).  ppm and sppm keep their
- * papers' estimators.  Every photon method keeps out the photons of a surface
- * that covers the gathering point (a lamp hung just under a ceiling, facing as
- * it does: docs/algorithm.md 5.6, since 0.1.4). */
+ * papers' estimators but for one test that every photon method shares: a
+ * photon on a surface that covers the gathering point (a lamp hung just under
+ * a ceiling, facing as it does) is not gathered there (docs/algorithm.md 5.6,
+ * since 0.1.4). */
 typedef enum appm_method {
     APPM_METHOD_APPM = 0,   /* adaptive bandwidth, per pixel and pass (default)       */
     APPM_METHOD_PPM,        /* global radius r_j^2 = r_1^2 prod (k+alpha)/(k+1)       */

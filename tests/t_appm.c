@@ -1365,13 +1365,73 @@ static void test_covered(void)
             p[i].z = i ? 0.01f : 0.0f;
             p[i].power[0] = p[i].power[1] = p[i].power[2] = 1.0f;
             p[i].segs = 1;
-            appm__normal_code(g.n, p[i].n);
+            p[i].n[0] = p[i].n[1] = 0; /* +z, octahedral */
             appm__gather_photon(&g, &p[i], 0.01f, 0.01f);
         }
         CHECK_MSG(g.sum[APPM__COMP_DIFFUSE].count == want[k], "case %d: %llu photons gathered, not %llu", k,
                   (unsigned long long)g.sum[APPM__COMP_DIFFUSE].count, (unsigned long long)want[k]);
     }
     appm_scene_destroy(s);
+}
+
+/* The same through a render: a floor and a lid 1 cm above it that covers all
+ * of it, a point light above, the camera between them looking at the floor,
+ * direct light by photons (so the lid's top stores them at their first hit)
+ * and ppm at a fixed radius of 5 cm.  No photon reaches the floor, so every
+ * pixel is 0 exactly; gathering the lid's photons made it about the lid's
+ * radiance.  Once facing up and once facing down with the lid tilted by 1e-6
+ * (normals at the corner of the octahedral code, where the sign of a tiny
+ * component picks the code: compared as codes, the test switched itself off
+ * there). */
+static void test_covered_render(void)
+{
+    static const char *const obj[2] = {
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nv -2 -2 0.01\nv 2 -2 0.01\nv 2 2 0.01\nv -2 2 0.01\n"
+        "f 1 2 3 4\nf 5 6 7 8\n",
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nv -2 -2 -0.01\nv 2 -2 -0.01000001\nv 2 2 -0.01\nv -2 2 -0.01\n"
+        "f 4 3 2 1\nf 8 7 6 5\n"};
+    static const char *const scene[2] = {
+        "mesh gap.obj\ncamera eye 0 0 0.005 target 0 0 0 up 0 1 0 fov 60\nimage 8 8\n"
+        "light point position 0 0 1 intensity 1 1 1\n",
+        "mesh gap.obj\ncamera eye 0 0 -0.005 target 0 0 0 up 0 1 0 fov 60\nimage 8 8\n"
+        "light point position 0 0 -1 intensity 1 1 1\n"};
+    int k;
+    for (k = 0; k < 2; ++k) {
+        appm_memory_file f;
+        appm_scene *s = NULL;
+        appm_diag d;
+        appm_config cfg;
+        appm_renderer *r;
+        appm_image im;
+        appm_stats st;
+        double sum = 0.0;
+        int i;
+        f.name = "gap.obj";
+        f.text = obj[k];
+        f.len = strlen(obj[k]);
+        if (appm_scene_load_memory(scene[k], strlen(scene[k]), "gap.scene", &f, 1, NULL, &s, &d) != APPM_OK) {
+            CHECK_MSG(0, "gap.scene %d: %s", k, d.message);
+            continue;
+        }
+        appm_config_init(&cfg);
+        cfg.method = APPM_METHOD_PPM;
+        cfg.direct = APPM_DIRECT_PHOTONS;
+        cfg.radius = 0.05;
+        cfg.alpha = 1.0;
+        cfg.photons = 4096;
+        cfg.threads = 1;
+        r = check_renderer(s, &cfg);
+        if (r && check_passes(r, 4)) {
+            appm_renderer_image(r, &im);
+            appm_renderer_stats(r, &st);
+            for (i = 0; i < 8 * 8 * 3; ++i) sum += im.rgb[i];
+            CHECK_MSG(st.photons_stored > 500, "case %d: %llu photons stored", k,
+                      (unsigned long long)st.photons_stored);
+            CHECK_MSG(sum == 0.0, "case %d: the covered floor sums to %g, not 0", k, sum);
+        }
+        appm_renderer_destroy(r);
+        appm_scene_destroy(s);
+    }
 }
 
 int main(void)
@@ -1398,5 +1458,6 @@ int main(void)
     test_open_edges();
     test_open_edge_bias();
     test_covered();
+    test_covered_render();
     return check_finish();
 }

@@ -234,6 +234,20 @@ static void test_radius_warning(const appm_scene *s)
             CHECK_MSG(l.n == 0, "radius %.2f diagonals: %d warnings, '%s'", share[k], l.n, l.last);
         appm_renderer_destroy(r);
     }
+    { /* an option refused after the radius's check: no warning for a renderer not made */
+        appm_config cfg;
+        appm_renderer *r = NULL;
+        appm_diag d;
+        check_log l;
+        memset(&l, 0, sizeof l);
+        appm_config_init(&cfg);
+        cfg.radius = diagonal;
+        cfg.max_depth = 300;
+        cfg.log = check_on_log;
+        cfg.log_user = &l;
+        CHECK(appm_renderer_create(s, &cfg, &r, &d) == APPM_ERR_INVALID_ARG && r == NULL);
+        CHECK_MSG(l.n == 0, "a refused renderer warned %d times: '%s'", l.n, l.last);
+    }
 }
 
 static void test_radius(void)
