@@ -199,57 +199,6 @@ static int write_box(const char *name, double s, double tx, unsigned size)
  * appm weights the photons with the biweight kernel, and shrinks its radius as
  * j^(-1/6) from r1, so its value is not this one: it is checked for finite,
  * non-negative pixels and a finite positive radius map only. */
-/* A radius past a tenth of the scene's bounding-box diagonal is valid (above), but each pixel
- * then visits a large share of the photons (the sphere box at 512 x 512: 0.5 s a pass at the
- * automatic radius, 340 s at r = 5): appm_renderer_create says so through cfg.log, once, and
- * not for a radius below that. */
-static void test_radius_warning(const appm_scene *s)
-{
-    static const double share[3] = {0.09, 0.5, 1.5}; /* of the diagonal */
-    static const char *const want[3] = {NULL, "% of the scene's size", "larger than the whole scene"};
-    appm_scene_info info;
-    double diagonal = 0.0;
-    int k;
-    appm_scene_get_info(s, &info);
-    for (k = 0; k < 3; ++k)
-        diagonal += (info.bbox_max[k] - info.bbox_min[k]) * (info.bbox_max[k] - info.bbox_min[k]);
-    diagonal = sqrt(diagonal);
-    for (k = 0; k < 3; ++k) {
-        appm_config cfg;
-        appm_renderer *r = NULL;
-        appm_diag d;
-        check_log l;
-        memset(&l, 0, sizeof l);
-        appm_config_init(&cfg);
-        cfg.width = cfg.height = 8;
-        cfg.threads = 1; /* a build without threads would warn about 2 */
-        cfg.radius = share[k] * diagonal;
-        cfg.log = check_on_log;
-        cfg.log_user = &l;
-        CHECK_MSG(appm_renderer_create(s, &cfg, &r, &d) == APPM_OK, "radius %g: %s", cfg.radius, d.message);
-        if (want[k])
-            CHECK_MSG(l.n == 1 && strstr(l.last, want[k]) != NULL, "radius %.2f diagonals: %d warnings, '%s'",
-                      share[k], l.n, l.last);
-        else
-            CHECK_MSG(l.n == 0, "radius %.2f diagonals: %d warnings, '%s'", share[k], l.n, l.last);
-        appm_renderer_destroy(r);
-    }
-    { /* an option refused after the radius's check: no warning for a renderer not made */
-        appm_config cfg;
-        appm_renderer *r = NULL;
-        appm_diag d;
-        check_log l;
-        memset(&l, 0, sizeof l);
-        appm_config_init(&cfg);
-        cfg.radius = diagonal;
-        cfg.max_depth = 300;
-        cfg.log = check_on_log;
-        cfg.log_user = &l;
-        CHECK(appm_renderer_create(s, &cfg, &r, &d) == APPM_ERR_INVALID_ARG && r == NULL);
-        CHECK_MSG(l.n == 0, "a refused renderer warned %d times: '%s'", l.n, l.last);
-    }
-}
-
 static void test_radius(void)
 {
     static const appm_method methods[3] = {APPM_METHOD_PPM, APPM_METHOD_SPPM, APPM_METHOD_APPM};
@@ -315,7 +264,48 @@ static void test_radius(void)
             appm_renderer_destroy(r);
         }
     }
-    test_radius_warning(s);
+    appm_scene_destroy(s);
+}
+
+/* A radius past a tenth of the scene's bounding-box diagonal is valid (test_radius), but each pixel
+ * then visits a large share of the photons (the sphere box at 512 x 512: 0.5 s a pass at the
+ * automatic radius, 340 s at r = 5): appm_renderer_create says so through cfg.log, once, and
+ * not for a radius below that, nor for a renderer it refuses for another option. */
+static void test_radius_warning(void)
+{
+    static const double share[4] = {0.09, 0.5, 1.5, 1.5}; /* of the diagonal */
+    static const char *const want[4] = {NULL, "% of the scene's size", "larger than the whole scene", NULL};
+    appm_scene_info info;
+    appm_scene *s = load_scene("plane.scene");
+    double diagonal = 0.0;
+    int k;
+    if (!s) return;
+    appm_scene_get_info(s, &info);
+    for (k = 0; k < 3; ++k)
+        diagonal += (info.bbox_max[k] - info.bbox_min[k]) * (info.bbox_max[k] - info.bbox_min[k]);
+    diagonal = sqrt(diagonal);
+    for (k = 0; k < 4; ++k) {
+        appm_config cfg;
+        appm_renderer *r = NULL;
+        appm_diag d;
+        check_log l;
+        memset(&l, 0, sizeof l);
+        appm_config_init(&cfg);
+        cfg.width = cfg.height = 8;
+        cfg.threads = 1; /* a build without threads would warn about 2 */
+        cfg.radius = share[k] * diagonal;
+        cfg.max_depth = k == 3 ? 300 : 0; /* 300: refused after the radius's check */
+        cfg.log = check_on_log;
+        cfg.log_user = &l;
+        CHECK_MSG(appm_renderer_create(s, &cfg, &r, &d) == (k == 3 ? APPM_ERR_INVALID_ARG : APPM_OK),
+                  "radius %g, case %d: %s", cfg.radius, k, d.message);
+        if (want[k])
+            CHECK_MSG(l.n == 1 && strstr(l.last, want[k]) != NULL, "radius %.2f diagonals: %d warnings, '%s'",
+                      share[k], l.n, l.last);
+        else
+            CHECK_MSG(l.n == 0, "radius %.2f diagonals, case %d: %d warnings, '%s'", share[k], k, l.n, l.last);
+        appm_renderer_destroy(r);
+    }
     appm_scene_destroy(s);
 }
 
@@ -1316,7 +1306,10 @@ int main(void)
           write_scratch("plane.scene", PLANE_SCENE) && write_box("box", 1.0, 0.0, 8) &&
           write_scratch("white.obj", WHITE_BOX_OBJ) && write_scratch("white.mtl", WHITE_BOX_MTL) &&
           write_scratch("white.scene", WHITE_BOX_SCENE));
-    if (wanted('r')) test_radius();
+    if (wanted('r')) {
+        test_radius();
+        test_radius_warning();
+    }
     if (wanted('a')) test_alpha();
     if (wanted('o')) test_photon_counts();
     if (wanted('n')) test_accumulators();
