@@ -14540,10 +14540,11 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
-    if (scene->radius > 0.0f && c.radius > 0.1 * 2.0 * (double)scene->radius && c.log) {
-        /* valid (the estimates stay sound: tests/t_extremes.c renders r = 1e9), but each pixel
-         * visits a large share of the photons: the sphere box at 512 x 512 takes 0.5 s a pass
-         * at the automatic radius and 340 s at r = 5, its diagonal being 3.3 */
+    if (c.log && scene->radius > 0.0f && c.radius > 0.1 * 2.0 * (double)scene->radius) {
+        /* a radius past a tenth of the diagonal is valid (the estimates stay sound:
+         * tests/t_extremes.c renders r = 1e9), but each pixel visits a large share of the
+         * photons: the sphere box at 512 x 512 takes 0.5 s a pass at the automatic radius and
+         * 340 s at r = 5, its diagonal being 3.3 */
         const double diagonal = 2.0 * (double)scene->radius;
         char msg[256];
         if (c.radius > diagonal)
