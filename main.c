@@ -665,6 +665,7 @@ typedef struct render_run {
     int have_cmp, progress;
     FILE *logf;                 /* --log */
     double t0, last_ck[2];      /* start of the passes; time and pass of the last checkpoint */
+    double drawn;               /* when the progress line was last drawn (seconds after t0) */
     unsigned long long resumed; /* passes the --resume checkpoint held */
     clock_t c0;                 /* processor time of the passes: the cost on a shared machine */
 } render_run;
@@ -825,6 +826,23 @@ static int render_next(render_run *R, double el)
     return g_cli ? g_cli->decide(code) : code;
 }
 
+/* After a pass at el seconds: R->st as this render reads it.  Reading the
+ * stats makes the error estimate (appm_renderer_stats: a sweep over the
+ * pixels, 3 % of a small pass), so they are read after every pass only for
+ * --log, --reference and --until-error; else only to redraw the progress line
+ * (at most five times a second: R->drawn = el), and the pass count, all the
+ * stopping rules and the checkpoints read besides, moves on by itself. */
+static void render_read_stats(render_run *R, double el)
+{
+    const render_opts *o = &R->o;
+    if (R->logf || R->ref.rgb || o->have_until || (R->progress && el - R->drawn >= 0.2)) {
+        appm_renderer_stats(R->r, &R->st);
+        R->drawn = R->progress && el - R->drawn >= 0.2 ? el : R->drawn;
+    } else {
+        R->st.passes++;
+    }
+}
+
 /* Passes until a stopping rule holds (--passes, --time, --until-error, Ctrl-C)
  * or a pass or a checkpoint fails; EXIT_OK or the exit code. */
 static int render_passes(render_run *R)
@@ -836,6 +854,7 @@ static int render_passes(render_run *R)
     signal(SIGINT, on_sigint);
     signal(SIGTERM, on_sigint); /* a shutdown, a batch system's time limit: finish the pass, save, write */
     R->t0 = R->last_ck[0] = now_seconds();
+    R->drawn = -1.0;
     R->c0 = clock();
     appm_renderer_stats(R->r, &R->st);
     for (;;) {
@@ -846,10 +865,10 @@ static int render_passes(render_run *R)
                     appm_renderer_last_error(R->r)[0] ? appm_renderer_last_error(R->r) : appm_status_string(s));
             return EXIT_RUNTIME;
         }
-        appm_renderer_stats(R->r, &R->st);
         el = now_seconds() - R->t0;
+        render_read_stats(R, el);
         render_log_pass(R, el);
-        if (R->progress) render_progress(R, el);
+        if (R->progress && R->drawn == el) render_progress(R, el);
         if ((next = render_next(R, el)) != 0) return next == 1 ? EXIT_OK : next;
     }
     return EXIT_OK;
@@ -884,9 +903,12 @@ static int render_write(render_run *R, int rc)
     render_opts *o = &R->o;
     appm_diag d;
     appm_status s;
-    if (R->progress) fprintf(stderr, "\n");
-    if (!cli_root()) return rc;
     appm_renderer_stats(R->r, &R->st); /* also after a failed pass, even the first */
+    if (R->progress) {
+        render_progress(R, now_seconds() - R->t0); /* the last pass's line */
+        fprintf(stderr, "\n");
+    }
+    if (!cli_root()) return rc;
     if (o->checkpoint && (double)R->st.passes != R->last_ck[1] && !save_checkpoint(R->r, o, now_seconds(), R->last_ck))
         rc = EXIT_RUNTIME;
     if (rc != EXIT_OK && R->st.passes == 0) return rc;

@@ -75,6 +75,7 @@ int main(int argc, char **argv)
                 for (i = 0; i < EP_N; ++i) Q[k][p / (P / 4) - 1][i] = r->pix[i].wmean * p;
         }
         appm_renderer_image(r, &img);
+        appm__error_update(r); /* the estimate's parts: err_lum, err_b2, var_scale */
         for (i = 0; i < EP_N; ++i) {
             L[k][i] = lum(img.rgb + 3 * i);
             W[k][i] = appm__err_weight(r, i);

@@ -234,7 +234,11 @@ static void test_paper_render(appm_scene *s)
     CHECK_MSG(inside, "appm-paper: a radius outside [0.1, 2] r1 j^(-1/6)");
     CHECK_MSG(kept, "appm-paper: the state's radius is not the gather's");
     CHECK_MSG(map, "appm-paper: the RADIUS map is not the state's radius");
-    CHECK(r->stats.clamped >= 0.0 && r->stats.clamped <= 1.0 && r->stats.est_relerr > 0.0);
+    {
+        appm_stats st;
+        appm_renderer_stats(r, &st);
+        CHECK(st.clamped >= 0.0 && st.clamped <= 1.0 && st.est_relerr > 0.0);
+    }
     appm_renderer_destroy(r);
 }
 
@@ -639,6 +643,63 @@ static void test_error_parts(appm_scene *s)
     CHECK_MSG(lowered_all > 0, "no pixel took its neighbourhood's luminance (%d)", lowered_all);
 }
 
+/* 6d. The error estimate is made when it is read (appm__error_update), not by
+ * the pass: a renderer read after every pass and one read only after passes 4
+ * and 9 - the ERROR and VARIANCE maps asked before the stats at 9 - give the same
+ * bits, and a pass leaves the estimate to be made.  For every method that
+ * keeps one. */
+static void test_error_lazy(appm_scene *s)
+{
+    int m;
+    for (m = 0; m < (int)APPM_METHOD_COUNT; ++m) {
+        appm_config cfg;
+        appm_renderer *a, *b;
+        double ea[10] = {0};
+        int j, stale = 1, same = 1;
+        appm_config_init(&cfg);
+        cfg.method = (appm_method)m;
+        cfg.width = 24;
+        cfg.height = 16;
+        cfg.photons = 4000;
+        cfg.threads = 2;
+        cfg.seed = 11;
+        if (!(appm__estimators[m].caps & APPM__CAP_ERROR)) continue;
+        a = check_renderer(s, &cfg);
+        b = check_renderer(s, &cfg);
+        for (j = 1; a && b && j <= 9; ++j) {
+            appm_stats st;
+            if (appm_renderer_pass(a) != APPM_OK || appm_renderer_pass(b) != APPM_OK) break;
+            stale &= a->err_stale && b->err_stale; /* no pass makes it */
+            appm_renderer_stats(a, &st);
+            ea[j] = st.est_relerr;
+            if (j == 4) {
+                appm_renderer_stats(b, &st);
+                same &= st.est_relerr == ea[4] && !b->err_stale;
+            }
+        }
+        if (a && b && j == 10) {
+            appm_stats st;
+            const appm_aux maps[2] = {APPM_AUX_ERROR, APPM_AUX_VARIANCE};
+            int k;
+            size_t i, n = (size_t)cfg.width * cfg.height;
+            for (k = 0; k < 2; ++k) {
+                const float *mb = appm_renderer_aux(b, maps[k]), *ma = appm_renderer_aux(a, maps[k]);
+                CHECK_MSG(ma && mb, "%s: no map %d", appm_method_name(cfg.method), (int)maps[k]);
+                for (i = 0; ma && mb && i < n; ++i) same &= memcmp(&ma[i], &mb[i], sizeof ma[i]) == 0;
+            }
+            appm_renderer_stats(b, &st);
+            same &= st.est_relerr == ea[9];
+            CHECK_MSG(stale, "%s: a pass made the error estimate", appm_method_name(cfg.method));
+            CHECK_MSG(same && ea[9] > 0.0, "%s: the estimate read late differs from the one read after every pass",
+                      appm_method_name(cfg.method));
+        } else {
+            CHECK_MSG(0, "%s: the passes failed", appm_method_name(cfg.method));
+        }
+        appm_renderer_destroy(a);
+        appm_renderer_destroy(b);
+    }
+}
+
 /* 8. appm__err_weight worked by hand.  A 4 x 4 render (its state then set by
  * hand) after 4 passes: the middle pixel (1, 1) and the corner (0, 0).  One
  * pass holding the pixel: per-pass luminances 0, 0, 0, X give mu = X / 4 and
@@ -891,6 +952,7 @@ int main(void)
         test_seam_bias(s);
         test_paper_mass_mean(s);
         test_error_parts(s);
+        test_error_lazy(s);
         test_err_weight(s);
         test_lit(s);
         test_pt_blind(s);
