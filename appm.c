@@ -11397,8 +11397,6 @@ typedef struct appm__vp { /* visible point of one pixel in the current pass: 96 
     float R;              /* the radius of this pass (appm: of the diffuse photons) */
     float Rc;             /* appm: the caustic photons' radius of this pass; 0: none */
     uint8_t segs;         /* eye-path segments to x; 0: no visible point this pass */
-    uint8_t edge_dist;    /* how many pixels along the row to the nearest pixel with a neighbour
-                           * on another surface (0: this one; 255: none near; 10.4, step 6) */
     uint8_t lit;          /* 1: the eye path met a light or the environment through specular
                            * vertices only (the pixel shows a light; appm__pixel.lit), a glossy
                            * lobe it follows as a mirror (appm__eye_split) counting as one */
@@ -11487,6 +11485,9 @@ struct appm_renderer {
     unsigned chains;     /* qmc: chains of passes (section 2.3); 1 with random */
     int cut;             /* the kernel renormalised where the surface ends inside it (10.4, step 6) */
     int edges;           /* the lines of that cut found: to cut, or to measure the mass (appm__gather.mass) */
+    uint8_t *edge_dist;  /* with edges, per pixel: how many pixels along the row to the nearest pixel
+                          * with a neighbour on another surface (0: this one; 255: none near; 10.4,
+                          * step 6); an array of its own, as the cut's window reads it for 9 rows */
     double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
     double var_scale;    /* the spread of the passes times this is the variance (appm__var_scale) */
     double *err_w;       /* per pixel, the error estimate's parts (12, appm__estimate_error): the weight
@@ -13719,7 +13720,7 @@ static double appm__adaptive_aux(const appm_renderer *r, const void *state, appm
  * the gather, or 2h on the passes that estimate the Laplacian).  The
  * candidates are the pixels of the (2W+1)^2 window, W = reach / (pixel width)
  * + 1 (at most APPM__CUT_WIN), that
- * have a 4-neighbour on another surface (vp.edge_dist, set with the radii): a
+ * have a 4-neighbour on another surface (edge_dist, set with the radii): a
  * line between two pixels separates two 4-neighbours.  Several lines (the
  * APPM__CUT_LINES nearest): the product of what each leaves (exact for one, and for two perpendicular lines
  * of which one passes through x).  m is floored at APPM__CUT_MMIN.
@@ -13753,20 +13754,20 @@ static uint8_t appm__edge_flag(const appm_renderer *r, size_t i)
     return 0;
 }
 
-/* The edge flags of a row and, in vp.edge_dist, each pixel's distance along the row
+/* The edge flags of a row and, in edge_dist, each pixel's distance along the row
  * to the nearest flagged one (capped at 255): a sweep each way. */
 static void appm__edge_row(appm_renderer *r, uint32_t row)
 {
-    appm__vp *v = &r->vp[(size_t)row * r->w];
+    uint8_t *e = &r->edge_dist[(size_t)row * r->w];
     uint32_t x, d = 255;
-    for (x = 0; x < r->w; ++x) v[x].edge_dist = appm__edge_flag(r, (size_t)row * r->w + x) ? 0 : 255;
+    for (x = 0; x < r->w; ++x) e[x] = appm__edge_flag(r, (size_t)row * r->w + x) ? 0 : 255;
     for (x = 0; x < r->w; ++x) {
-        d = v[x].edge_dist == 0 ? 0 : (d < 255 ? d + 1 : 255);
-        v[x].edge_dist = (uint8_t)d;
+        d = e[x] == 0 ? 0 : (d < 255 ? d + 1 : 255);
+        e[x] = (uint8_t)d;
     }
     for (x = r->w, d = 255; x-- > 0;) {
-        d = v[x].edge_dist == 0 ? 0 : (d < 255 ? d + 1 : 255);
-        if (d < v[x].edge_dist) v[x].edge_dist = (uint8_t)d;
+        d = e[x] == 0 ? 0 : (d < 255 ? d + 1 : 255);
+        if (d < e[x]) e[x] = (uint8_t)d;
     }
 }
 
@@ -13839,15 +13840,17 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
     xa = x0 - W < 0 ? 0 : x0 - W;
     xb = x0 + W >= (int64_t)r->w ? (int64_t)r->w - 1 : x0 + W;
     for (y = ya; y <= yb; ++y) {
-        /* vp.edge_dist of (x0, y): the distance to the nearest flagged pixel of row y; beyond W
+        /* edge_dist of (x0, y): the distance to the nearest flagged pixel of row y; beyond W
          * this row's part of the window has no candidate */
-        if (r->vp[(size_t)(y * (int64_t)r->w + x0)].edge_dist > W) continue;
+        const uint8_t *e = &r->edge_dist[(size_t)(y * (int64_t)r->w)];
+        if (e[x0] > W) continue;
         for (x = xa; x <= xb; ++x) {
             const appm__vp *q;
             float c, at, ab, al, g0, d, hq, ux, uy, sq;
             appm__v3 xq;
+            if (e[x] != 0) continue; /* a plane's pixels next to the line give it */
             q = &r->vp[(size_t)(y * (int64_t)r->w + x)];
-            if (q->edge_dist != 0 || q == v) continue; /* a plane's pixels next to the line give it */
+            if (q == v) continue;
             c = appm__dot(v->n, q->n);
             if (c >= APPM__NORMAL_COS) continue; /* the same surface for the gather */
             at = appm__dot(q->n, g->t);
@@ -14452,6 +14455,7 @@ static void appm__renderer_free_parts(appm_renderer *r)
 {
     int k;
     appm__free(&r->mem, r->vp);
+    appm__free(&r->mem, r->edge_dist);
     appm__free(&r->mem, r->pix);
     appm__free(&r->mem, r->image);
     for (k = 0; k < APPM_AUX_COUNT; ++k) appm__free(&r->mem, r->aux[k]);
@@ -14676,7 +14680,8 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->pix = (appm__pixel *)appm__alloc(&r->mem, npix, sizeof *r->pix);
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
     if (r->est->state_size) r->state = (unsigned char *)appm__alloc(&r->mem, npix, r->est->state_size);
-    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) || !appm__sampler_alloc(r, &c) ||
+    if (r->edges) r->edge_dist = (uint8_t *)appm__alloc(&r->mem, npix, 1);
+    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) || (r->edges && !r->edge_dist) || !appm__sampler_alloc(r, &c) ||
         !appm__error_alloc(r) || ((r->est->caps & APPM__CAP_PHOTONS) && !appm__photon_alloc(r, &c))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
