@@ -13994,23 +13994,17 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
 }
 
 /* Whether photon p, on a surface facing as x's (normals within 1.5 degrees:
- * APPM__COVER_SIDE), lies on a surface that covers x: in front of x (along n,
- * on the side x is seen from) by more than x's rounding error and by at least
- * 1/64 of its distance, with a surface in front of x at or before the
- * photon's depth.  The lamp of every McGuire Cornell box hangs 1 cm below the
- * ceiling, facing down as the ceiling does; through the lamp's front edge the
- * camera sees the ceiling above it, which the lamp shadows, and a kernel wider
- * than 1 cm gathered there the photons on the lamp: 0.263 against the path
- * tracer's 0.217 on that band (CornellBox-Original, 256 x 256, 400 passes),
- * and on the sphere box (64 x 64, 1500 passes) the row along the edge 0.3 %
- * over.  The test asks the geometry, not the photons: beside the lamp the
- * ceiling is not covered, and its kernel keeps the lamp's photons, which stand
- * in for the ceiling's hidden above it (keeping them out there blurred the
- * dark band into the lit ceiling: docs/experiments.md); a bumpy surface's
- * photons on a crest in front of a trough are kept unless something overhangs
- * the trough.  One probe ray a gather, cast at the first such photon, from
- * beyond x's rounding error (far from the origin a ray from x itself met the
- * next triangle of x's own plane). */
+ * APPM__COVER_SIDE), lies on a surface that covers x: in front of x along n
+ * by more than x's rounding error and by at least 1/64 of its distance, with
+ * a surface in front of x at or before the photon's depth.  Why: every
+ * McGuire Cornell box's lamp hangs 1 cm below its ceiling, facing down as the
+ * ceiling does; the ceiling seen past the lamp's edge lies in the lamp's
+ * shadow, and a kernel wider than 1 cm gathered the lamp's photons there
+ * (21 % bright on that band; docs/algorithm.md 5.6).  The test asks the
+ * geometry, not the photons: beside the lamp nothing covers the ceiling, and
+ * its kernel keeps the lamp's photons.  One probe ray a gather, cast at the
+ * first such photon, from beyond x's rounding error (a ray from x itself
+ * can meet the next triangle of x's own plane far from the origin). */
 static int appm__covered(appm__gather *g, const appm__photon *p, float d2)
 {
     float o = (p->x - g->x.x) * g->n.x + (p->y - g->x.y) * g->n.y + (p->z - g->x.z) * g->n.z;
