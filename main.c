@@ -252,7 +252,7 @@ static int parse_u64(const char *s, unsigned long long *out)
             *out = (unsigned long long)d;
             return 1;
         }
-        if (v > (18446744073709551615ull - 9) / 10) return 0;
+        if (v > (18446744073709551615ull - (unsigned long long)(*p - '0')) / 10) return 0; /* past 2^64 - 1 */
         v = v * 10 + (unsigned long long)(*p - '0');
     }
     *out = v;
@@ -506,7 +506,7 @@ static int parse_render_option(const char *a, const char *v, render_opts *o, int
         if (!parse_u64(v, &u) || u == 0 || u > 256) *rc = usage_error("--threads needs 1..256, not '%s'", v);
         else o->cfg.threads = (unsigned)u;
     } else if (strcmp(a, "--seed") == 0) {
-        if (!parse_u64(v, &u)) *rc = usage_error("--seed needs a non-negative integer, not '%s'", v);
+        if (!parse_u64(v, &u)) *rc = usage_error("--seed needs an integer from 0 to 18446744073709551615, not '%s'", v);
         else o->cfg.seed = u;
     } else if (strcmp(a, "--emission") == 0) {
         if (strcmp(v, "guided") == 0) o->cfg.emission = APPM_EMISSION_GUIDED;

@@ -273,6 +273,11 @@ check "seeds 1 and 2 differ: rmse $(value rmse) > 0" awk -v x="$(value rmse)" 'B
 check "compare of renders: means agree within 10% ($(value mean_a), $(value mean_b))" \
     awk -v a="$(value mean_a)" -v b="$(value mean_b)" 'BEGIN { exit !(a > 0.9 * b && a < 1.1 * b) }'
 check "seed 1 on 1 thread and on all threads: the same file" cmp -s "$T/s1.pfm" "$T/s1b.pfm"
+# the whole 64-bit range of seeds, and no more
+small "$SCENE" --seed 18446744073709551615 -o "$T/smax.pfm"
+check "--seed 2^64 - 1 is a seed" [ "$rc" -eq 0 ]
+small "$SCENE" --seed 18446744073709551616 -o "$T/sover.pfm"
+check "--seed 2^64 is refused" refused_with "from 0 to 18446744073709551615"
 
 # ---- --log and --reference ---------------------------------------------------------
 
