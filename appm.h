@@ -585,9 +585,11 @@ typedef struct appm_stats {
     double seconds_cluster;
 } appm_stats;
 
-/* The counters after the last pass.  est_relerr is made here when a pass has
- * run since it was last read (a sweep over the pixels, as appm_renderer_image
- * makes the image): a pass does not pay for an estimate nobody reads. */
+/* The counters after the last pass.  est_relerr is made here (with the
+ * renderer's worker threads, like appm_renderer_image's image) when a pass or
+ * a checkpoint load has come since it was last read: a pass does not pay for an
+ * estimate nobody reads.  Its value does not depend on when it is read;
+ * seconds counts the passes only. */
 APPM_API void appm_renderer_stats(const appm_renderer *r, appm_stats *out);
 
 /* 1 when the renderer keeps an error estimate (appm_stats.est_relerr >= 0 from

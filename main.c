@@ -905,7 +905,7 @@ static int render_write(render_run *R, int rc)
     appm_status s;
     appm_renderer_stats(R->r, &R->st); /* also after a failed pass, even the first */
     if (R->progress) {
-        render_progress(R, now_seconds() - R->t0); /* the last pass's line */
+        if (rc == EXIT_OK && R->st.passes > R->resumed) render_progress(R, now_seconds() - R->t0); /* the last pass's */
         fprintf(stderr, "\n");
     }
     if (!cli_root()) return rc;

@@ -521,6 +521,7 @@ static void test_bias2_noise(appm_scene *s)
     double c, noise, unit;
     uint64_t n = appm__lap_count(3);
     if (!r) return;
+    appm__error_update(r); /* var_scale of pass 3 */
     c = r->var_scale;
     CHECK_MSG(c > 0.0 && c <= 1.0 && n == 3, "var_scale %g, %u Laplacian passes", c, (unsigned)n);
     unit = 0.25 * APPM__MU2 * APPM__MU2 / (double)(n - 1); /* noise of b per unit of m2 */
@@ -646,8 +647,9 @@ static void test_error_parts(appm_scene *s)
 /* 6d. The error estimate is made when it is read (appm__error_update), not by
  * the pass: a renderer read after every pass and one read only after passes 4
  * and 9 - the ERROR and VARIANCE maps asked before the stats at 9 - give the same
- * bits, and a pass leaves the estimate to be made.  For every method that
- * keeps one. */
+ * bits, so do a new renderer and one read after its first pass, each loaded from
+ * a checkpoint of pass 9 and read at once, and a pass leaves the estimate to be
+ * made.  For every method that keeps one. */
 static void test_error_lazy(appm_scene *s)
 {
     int m;
@@ -689,6 +691,28 @@ static void test_error_lazy(appm_scene *s)
             }
             appm_renderer_stats(b, &st);
             same &= st.est_relerr == ea[9];
+            { /* a checkpoint of pass 9, loaded into a new renderer and into one read at pass 1: read at once */
+                appm_renderer *c = check_renderer(s, &cfg), *d = check_renderer(s, &cfg);
+                size_t need = 0, got = 0;
+                unsigned char *buf = NULL;
+                int loaded = c && d && appm_renderer_pass(d) == APPM_OK;
+                if (loaded) appm_renderer_stats(d, &st);
+                loaded = loaded && appm_renderer_save(a, NULL, 0, &need, NULL) == APPM_OK &&
+                         (buf = (unsigned char *)malloc(need)) != NULL &&
+                         appm_renderer_save(a, buf, need, &got, NULL) == APPM_OK &&
+                         appm_renderer_load(c, buf, got, NULL) == APPM_OK &&
+                         appm_renderer_load(d, buf, got, NULL) == APPM_OK;
+                CHECK_MSG(loaded, "%s: the checkpoint round trip failed", appm_method_name(cfg.method));
+                if (loaded) {
+                    appm_renderer_stats(c, &st);
+                    same &= st.est_relerr == ea[9];
+                    appm_renderer_stats(d, &st);
+                    same &= st.est_relerr == ea[9];
+                }
+                free(buf);
+                appm_renderer_destroy(c);
+                appm_renderer_destroy(d);
+            }
             CHECK_MSG(stale, "%s: a pass made the error estimate", appm_method_name(cfg.method));
             CHECK_MSG(same && ea[9] > 0.0, "%s: the estimate read late differs from the one read after every pass",
                       appm_method_name(cfg.method));

@@ -3,7 +3,7 @@
  * Not one of the tests/t_*.c programs: tests/dynamic.sh builds it with
  * -fsanitize=thread and runs it with TSAN_OPTIONS=halt_on_error=1, so any
  * data race in the worker loop (eye pass, photon pass, gather, radius update,
- * path tracer) ends the program with a report.  A race that TSan does not
+ * path tracer, the error estimate) ends the program with a report.  A race that TSan does not
  * happen to see can still show as a difference in the image: each method
  * renders 4 passes (appm with guided emission 8) with 4 threads and with 1
  * thread, and the two images must
@@ -60,11 +60,13 @@ static int render(const appm_scene *s, appm_method m, appm_emission e, unsigned 
         return 0;
     }
     for (pass = 0; pass < (e == APPM_EMISSION_GUIDED ? 8 : 4); ++pass) {
+        appm_stats st;
         if (appm_renderer_pass(r) != APPM_OK) {
             fprintf(stderr, "appm_renderer_pass: %s\n", appm_renderer_last_error(r));
             appm_renderer_destroy(r);
             return 0;
         }
+        appm_renderer_stats(r, &st); /* the error estimate's sweeps run on the workers when it is read */
     }
     appm_renderer_image(r, &img);
     memcpy(out, img.rgb, sizeof(float) * SIZE * SIZE * 3);
