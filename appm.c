@@ -11494,7 +11494,8 @@ struct appm_renderer {
                           * w of its relative error, then its term w (bias^2 + Var) */
     double *err_b2;      /* per pixel, the method's bias^2 less its noise (appm__bias2's input) */
     uint64_t err_pass;   /* the pass err_b2 holds (0: none) */
-    int err_stale;       /* a pass has run since the error estimate was made (appm__error_update) */
+    int err_stale;       /* a pass or a checkpoint load has come since the error estimate was made
+                          * (appm__error_update) */
     int err_blind;       /* no error estimate: the path tracer on a scene whose point or spot
                           * lights may reach a surface through a mirror or glass (appm__pt_blind) */
     float *err_lum;      /* per pixel, its luminance I after the last pass (appm__err_weight's input;
@@ -14675,8 +14676,9 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     r->image = (float *)appm__alloc(&r->mem, npix, 3 * sizeof(float));
     if (r->est->state_size) r->state = (unsigned char *)appm__alloc(&r->mem, npix, r->est->state_size);
     if (r->edges) r->edge_dist = (uint8_t *)appm__alloc(&r->mem, npix, 1);
-    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) || (r->edges && !r->edge_dist) || !appm__sampler_alloc(r, &c) ||
-        !appm__error_alloc(r) || ((r->est->caps & APPM__CAP_PHOTONS) && !appm__photon_alloc(r, &c))) {
+    if (!r->vp || !r->pix || !r->image || (r->est->state_size && !r->state) || (r->edges && !r->edge_dist) ||
+        !appm__sampler_alloc(r, &c) || !appm__error_alloc(r) ||
+        ((r->est->caps & APPM__CAP_PHOTONS) && !appm__photon_alloc(r, &c))) {
         appm__mem fm;
         appm__renderer_free_parts(r);
         fm = r->mem;
@@ -14985,8 +14987,8 @@ static void appm__estimate_error(appm_renderer *r)
 /* The error estimate is made when it is read - appm_renderer_stats, the
  * VARIANCE and ERROR maps - as the image is (appm_renderer_image), not after
  * every pass: its sweeps over the pixels took 3 % of a pass (the sphere box,
- * 64 x 64, one thread) where nothing read it, the command line without --log
- * or --until-error among them.  It depends only on the state after the last
+ * 64 x 64, one thread) where nothing read it, the command line without --log,
+ * --reference or --until-error among them.  It depends only on the state after the last
  * pass, so when it is made changes no digit of it. */
 static void appm__error_update(appm_renderer *r)
 {
