@@ -14540,11 +14540,11 @@ static appm_status appm__config_resolve(const appm_scene *scene, const appm_conf
     if (c.threads > 1 && c.log) c.log(c.log_user, "", 0, "built without threads: rendering on 1 thread");
     c.threads = 1;
 #endif
-    if (c.log && scene->radius > 0.0f && c.radius > 0.1 * 2.0 * (double)scene->radius) {
-        /* a radius past a tenth of the diagonal is valid (the estimates stay sound:
-         * tests/t_extremes.c renders r = 1e9), but each pixel visits a large share of the
-         * photons: the sphere box at 512 x 512 takes 0.5 s a pass at the automatic radius and
-         * 340 s at r = 5, its diagonal being 3.3 */
+    if (c.log && scene->radius > 0.0f && c.radius > 0.1 * (2.0 * (double)scene->radius)) {
+        /* a radius past a tenth of the bounding box's diagonal (2 scene->radius) is valid (the
+         * estimates stay sound: tests/t_extremes.c renders r = 1e9), but each pixel visits a
+         * large share of the photons: the sphere box at 512 x 512 takes 0.5 s a pass at the
+         * automatic radius and 340 s at r = 5, its diagonal being 3.3 */
         const double diagonal = 2.0 * (double)scene->radius;
         char msg[256];
         if (c.radius > diagonal)
@@ -14944,7 +14944,7 @@ static void appm__err_term_task(void *arg, uint32_t row, unsigned worker)
     }
 }
 
-/* err_b2 for this pass (the ERROR map may ask before the estimate has run). */
+/* err_b2 for this pass (the ERROR map of pass 1, which has no estimate, needs it too). */
 static void appm__err_b2_fill(appm_renderer *r)
 {
     if (!r->err_b2 || r->err_pass == r->pass) return;
@@ -15508,7 +15508,7 @@ APPM_API const float *appm_renderer_aux(appm_renderer *r, appm_aux which)
         if (!r->aux[which]) return NULL;
     }
     a = r->aux[which];
-    appm__error_update(r); /* var_scale */
+    if (which == APPM_AUX_VARIANCE || which == APPM_AUX_ERROR) appm__error_update(r); /* var_scale */
     if (which == APPM_AUX_ERROR) appm__err_b2_fill(r);
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
