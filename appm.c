@@ -13787,12 +13787,22 @@ static void appm__open_lines(const appm_renderer *r, const appm__vp *v, appm__ga
         appm__v3 a, b, c = appm__sub(appm__corner(&s->tri[e / 3], (e % 3 + 2) % 3), v->x);
         float ex, ey, len, ux, uy, d, foot;
         int k;
+        appm__v3 ab, axe;
         appm__edge_ends(s, e, &a, &b);
         a = appm__sub(a, v->x);
         b = appm__sub(b, v->x);
         if (fabsf(appm__dot(s->info[e / 3].ng, v->n)) < 0.5f || fabsf(appm__dot(a, v->n)) > 0.1f * Rm ||
             fabsf(appm__dot(b, v->n)) > 0.1f * Rm)
             continue;
+        /* Most edges that pass lie in x's plane far from x (a floor's rim seen from
+         * its middle): reject them before the square root and divisions below.
+         * An edge that cuts has x's foot q on it within Rm in the plane, and q is
+         * within 0.1 Rm of the plane, so x's distance from the edge's line in
+         * space is below sqrt(1.01) Rm; |a x (b - a)|^2 / |b - a|^2 is that
+         * distance squared, and 1.05 leaves room for rounding. */
+        ab = appm__sub(b, a);
+        axe = appm__cross(a, ab);
+        if (appm__dot(axe, axe) >= 1.05f * Rm * Rm * appm__dot(ab, ab)) continue;
         ex = appm__dot(b, g->t) - appm__dot(a, g->t);
         ey = appm__dot(b, g->b) - appm__dot(a, g->b);
         len = sqrtf(ex * ex + ey * ey);

@@ -1277,6 +1277,50 @@ static void test_open_edges(void)
     CHECK(open_edges_of(rug) == 4);
 }
 
+/* appm__open_lines at the edge of its reach.  The unit quad's edge y = 0 seen
+ * from x = (0.5, f Rm, z): it cuts while f < 1 (in x's plane) and |z| <= 0.1 Rm
+ * (the edge lies in x's plane), at distance f Rm.  x at f = 0.999 and z = 0.0999
+ * Rm is sqrt(1.008) Rm from the edge's line in space, which the early rejection
+ * of far edges must let through. */
+static void test_open_lines_reach(void)
+{
+    static const char quad[] = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
+    static const float f[] = {0.5f, 0.999f, 0.999f, 0.999f, 1.001f, 1.5f};
+    static const float z[] = {0.0f, 0.0f, 0.0999f, -0.0999f, 0.0f, 0.0999f};
+    const float Rm = 0.1f;
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm_config cfg;
+    appm_renderer r;
+    size_t k;
+    appm_config_init(&cfg);
+    cfg.stand_in = APPM_STAND_IN_WHITE;
+    if (appm_scene_load_obj_memory(quad, strlen(quad), NULL, 0, "quad.obj", &cfg, &s, &d) != APPM_OK) {
+        CHECK_MSG(0, "quad.obj: %s", d.message);
+        return;
+    }
+    memset(&r, 0, sizeof r);
+    r.scene = s;
+    for (k = 0; k < sizeof f / sizeof f[0]; ++k) {
+        appm__vp v;
+        appm__gather g;
+        memset(&v, 0, sizeof v);
+        memset(&g, 0, sizeof g);
+        v.x = appm__v(0.5f, f[k] * Rm, z[k] * Rm);
+        v.n = appm__v(0.0f, 0.0f, 1.0f);
+        v.tri = 0; /* (0,0,0) (1,0,0) (1,1,0): x's triangle, with the edge y = 0 */
+        appm__basis(v.n, &g.t, &g.b);
+        appm__open_lines(&r, &v, &g, Rm);
+        if (f[k] < 1.0f) {
+            CHECK_MSG(g.ncut == 1, "x at %.4f Rm, %.4f Rm off the plane: %d lines, not 1", f[k], z[k], g.ncut);
+            if (g.ncut == 1) CHECK_NEAR(g.cut_d[0], f[k] * Rm, 1e-6);
+        } else {
+            CHECK_MSG(g.ncut == 0, "x at %.4f Rm: %d lines, not 0", f[k], g.ncut);
+        }
+    }
+    appm_scene_destroy(s);
+}
+
 /* The open front of CornellBox-Empty-White at 32 x 32: the pixels whose kernel an
  * open edge cuts (in the last pass) against a path-traced render of 2048 passes,
  * mean relative error over those pixels, with the open edges and without them
@@ -1459,6 +1503,7 @@ int main(void)
     test_cut_lines();
     test_corner_bias();
     test_open_edges();
+    test_open_lines_reach();
     test_open_edge_bias();
     test_covered();
     test_covered_render();
