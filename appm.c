@@ -12448,7 +12448,14 @@ static void appm__guide_tally(appm_renderer *r, unsigned worker, uint32_t tag, u
 
 /* Traces photon path `index` (cache: shared by the paths the worker traces in
  * turn, appm__sampler_photon), adding the rays it casts to *rays (the photon
- * budget's count, 12.2); returns 0 if the task's region is full. */
+ * budget's count, 12.2); returns 0 if the task's region is full.
+ *
+ * After each bounce a roulette keeps the path with probability q, the largest
+ * channel's loss.  A studio's photon (6.3) skips it until its first stored hit:
+ * its first hit, on the plate or the model, is direct light and not stored, and
+ * a roulette there (the plate's albedo 1/2) ended half the paths after their
+ * rays were paid for.  1.78x the photons stored for 1.07x the time a pass
+ * (docs/algorithm.md 5.10, which says why the other scenes keep it). */
 static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
                              appm__ld_cache *cache, uint64_t *rays)
 {
@@ -12512,7 +12519,7 @@ static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, un
         }
         g2 = appm__mul(gamma, bs.weight);
         q = appm__maxc(gamma) > 0.0f ? appm__maxc(g2) / appm__maxc(gamma) : 0.0f;
-        if (q < 1.0f) {
+        if (q < 1.0f && !(s->focus_r > 0.0f && segs < first)) { /* a studio's: see above */
             if (!(appm__smp_rr(&smp, segs - 1, dims, u3) < q)) break;
             g2 = appm__scale(g2, 1.0f / q);
         }

@@ -627,6 +627,38 @@ static void test_focus_unbiased(void)
     appm_scene_destroy(s);
 }
 
+/* A studio's photon skips the roulette until its first stored hit (appm.c 9.2,
+ * docs/algorithm.md 5.10): the sky's photons land on the plate (albedo 1/2) or
+ * the sphere (0.8) first, direct light, and the roulette there ended 20-50 %
+ * of them.  Photons stored a path over 4 passes of the sphere in the studio:
+ * 0.205 without the roulette, 0.112 with it. */
+static void test_focus_roulette(void)
+{
+    appm_scene *s = studio_sphere();
+    appm_config cfg;
+    appm_renderer *r;
+    appm_stats st;
+    double stored = 0.0;
+    int k;
+    if (!s) return;
+    appm_config_init(&cfg);
+    cfg.width = cfg.height = 32;
+    cfg.photons = 16384;
+    cfg.threads = 1;
+    cfg.seed = 5;
+    if ((r = check_renderer(s, &cfg)) != NULL) {
+        for (k = 0; k < 4; ++k) {
+            CHECK(appm_renderer_pass(r) == APPM_OK);
+            appm_renderer_stats(r, &st);
+            stored += (double)st.photons_stored / (4.0 * 16384.0);
+        }
+        printf("the studio's sphere: %.4f photons stored a path\n", stored);
+        CHECK_MSG(stored > 0.16, "%.4f photons stored a path, not above 0.16", stored);
+        appm_renderer_destroy(r);
+    }
+    appm_scene_destroy(s);
+}
+
 /* The studio's aimed photons with 1 and 3 threads: the same bytes (appm,
  * 6 passes at 24x24; the aim is a function of each path's own numbers). */
 static void test_focus_threads(void)
@@ -661,6 +693,7 @@ int main(void)
 {
     test_focus_threads();
     test_focus_unbiased();
+    test_focus_roulette();
     test_studio();
     test_focus_bounce();
     test_focus_oblique();
