@@ -1233,19 +1233,29 @@ static void test_corner_bias(void)
 
 /* ---- 5.5: open edges --------------------------------------------------------- */
 
-/* How many edges a mesh of quads (OBJ text) has where its surface ends. */
-static uint64_t open_edges_of(const char *obj)
+/* OBJ text loaded as a bare OBJ under the white stand-in (the studio would add
+ * its ground plate and its four open edges); NULL, with a failed check, if it
+ * does not load. */
+static appm_scene *white_obj(const char *obj, const char *name)
 {
     appm_scene *s = NULL;
     appm_diag d;
-    appm_scene_info in;
     appm_config cfg;
     appm_config_init(&cfg);
-    cfg.stand_in = APPM_STAND_IN_WHITE; /* the studio would add its ground plate's four */
-    if (appm_scene_load_obj_memory(obj, strlen(obj), NULL, 0, "open.obj", &cfg, &s, &d) != APPM_OK) {
-        CHECK_MSG(0, "open.obj: %s", d.message);
-        return UINT64_MAX;
+    cfg.stand_in = APPM_STAND_IN_WHITE;
+    if (appm_scene_load_obj_memory(obj, strlen(obj), NULL, 0, name, &cfg, &s, &d) != APPM_OK) {
+        CHECK_MSG(0, "%s: %s", name, d.message);
+        return NULL;
     }
+    return s;
+}
+
+/* How many edges a mesh of quads (OBJ text) has where its surface ends. */
+static uint64_t open_edges_of(const char *obj)
+{
+    appm_scene *s = white_obj(obj, "open.obj");
+    appm_scene_info in;
+    if (!s) return UINT64_MAX;
     appm_scene_get_info(s, &in);
     CHECK(in.open_edges == s->nopen && (s->nopen == 0) == (s->open_off == NULL));
     appm_scene_destroy(s);
@@ -1288,17 +1298,10 @@ static void test_open_lines_reach(void)
     static const float f[] = {0.5f, 0.999f, 0.999f, 0.999f, 1.001f, 1.5f};
     static const float z[] = {0.0f, 0.0f, 0.0999f, -0.0999f, 0.0f, 0.0999f};
     const float Rm = 0.1f;
-    appm_scene *s = NULL;
-    appm_diag d;
-    appm_config cfg;
+    appm_scene *s = white_obj(quad, "quad.obj");
     appm_renderer r;
     size_t k;
-    appm_config_init(&cfg);
-    cfg.stand_in = APPM_STAND_IN_WHITE;
-    if (appm_scene_load_obj_memory(quad, strlen(quad), NULL, 0, "quad.obj", &cfg, &s, &d) != APPM_OK) {
-        CHECK_MSG(0, "quad.obj: %s", d.message);
-        return;
-    }
+    if (!s) return;
     memset(&r, 0, sizeof r);
     r.scene = s;
     for (k = 0; k < sizeof f / sizeof f[0]; ++k) {
@@ -1383,16 +1386,9 @@ static void test_covered(void)
     static const float at[3][3] = {{0.5f, 0.5f, 0.0f}, {0.75f, 0.5f, 0.0f}, {0.5f, 0.5f, 0.0f}};
     static const float shelf[3][2] = {{0.52f, 0.5f}, {0.69f, 0.5f}, {0.52f, 0.5f}};
     static const uint64_t want[3] = {1, 2, 2};
-    appm_scene *s = NULL;
-    appm_diag d;
-    appm_config cfg;
+    appm_scene *s = white_obj(obj, "shelf.obj");
     int k;
-    appm_config_init(&cfg);
-    cfg.stand_in = APPM_STAND_IN_WHITE;
-    if (appm_scene_load_obj_memory(obj, strlen(obj), NULL, 0, "shelf.obj", &cfg, &s, &d) != APPM_OK) {
-        CHECK_MSG(0, "shelf.obj: %s", d.message);
-        return;
-    }
+    if (!s) return;
     for (k = 0; k < 3; ++k) { /* under the shelf, beside it, under it without the probe */
         appm__gather g;
         appm__photon p[2];
