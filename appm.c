@@ -10532,6 +10532,15 @@ static appm_status appm__loader_begin(appm__loader *L, appm__mem *m, const appm_
 
 enum { APPM__TEXT_NONE = 0, APPM__TEXT_OBJ, APPM__TEXT_SCENE };
 
+/* Shadow rays a shading point of the eye pass sends to the lights that table 0
+ * picks among (the area and environment lights): none without any, two in a
+ * studio (a scene with a focus, 6.3: appm__direct), else one. */
+static unsigned appm__nee_samples(const appm_scene *s)
+{
+    if (!s->nee_cdf[0] || !(s->nee_cdf[0][s->nlight] > 0.0)) return 0u; /* no light table: no lights */
+    return s->focus_r > 0.0f ? 2u : 1u;
+}
+
 /* Common path of the public loaders.  text_kind NONE: read `path` (a .scene or
  * a .obj); OBJ or SCENE: parse `text` (named `path` in messages) instead.
  * files (SCENE only): the texts its meshes and material libraries name, instead
@@ -10682,6 +10691,7 @@ APPM_API void appm_scene_get_info(const appm_scene *s, appm_scene_info *info)
         p[1] += l->power[1];
         p[2] += l->power[2];
     }
+    info->shadow_rays_samples = appm__nee_samples(s);
     info->bbox_min[0] = s->bmin.x;
     info->bbox_min[1] = s->bmin.y;
     info->bbox_min[2] = s->bmin.z;
@@ -11633,23 +11643,35 @@ static appm__v3 appm__direct_one(const appm_scene *s, const appm__surf *sf, cons
 }
 
 /* Direct light at diffuse or glossy point sf seen from wo: a shadow ray to
- * each point and spot light and one sample of the others (6.4). */
+ * each point and spot light and appm__nee_samples samples of the others (6.4).
+ * A studio's sky takes two, the second from the same numbers turned by 1/2 in
+ * each of their three dimensions (a rotation of the sequence's point: each
+ * sample is uniform, and the two are stratified against each other): a sky
+ * lights a point from its whole hemisphere, half hidden by the model near it,
+ * and one ray a pass left the plate's grain for the first hundreds of passes
+ * (docs/algorithm.md 5.10). */
 static appm__v3 appm__direct(const appm_renderer *r, const appm__surf *sf, const appm__material *m,
                              appm__v3 wo, appm__sampler *smp, unsigned vertex)
 {
     float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f;
     appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side), sum = appm__v(0, 0, 0);
+    appm__v3 picked = appm__v(0, 0, 0);
     float u[3];
     uint32_t k;
+    unsigned t, n;
     appm__light_sample ls;
     const appm_scene *s = r->scene;
     for (k = 0; k < s->nnee_delta; ++k)
         if (appm__sample_light_k(s, s->nee_delta[k], 1.0, sf, ns, 0.0f, 0.0f, &ls))
             sum = appm__add(sum, appm__direct_one(s, sf, m, wo, ns, ng, &ls));
     appm__smp_light(smp, vertex, r->nee_dims, u);
-    if (appm__sample_light(s, 0, sf, ns, u[0], u[1], u[2], &ls))
-        sum = appm__add(sum, appm__direct_one(s, sf, m, wo, ns, ng, &ls));
-    return sum;
+    for (t = 0, n = appm__nee_samples(s); t < n; ++t) {
+        if (t == 1)
+            for (k = 0; k < 3; ++k) u[k] = u[k] < 0.5f ? u[k] + 0.5f : u[k] - 0.5f;
+        if (appm__sample_light(s, 0, sf, ns, u[0], u[1], u[2], &ls))
+            picked = appm__add(picked, appm__direct_one(s, sf, m, wo, ns, ng, &ls));
+    }
+    return appm__add(sum, n > 1 ? appm__scale(picked, 1.0f / (float)n) : picked);
 }
 
 /* ---- 8.2 Where eye paths stop ------------------------------------------------
@@ -11720,8 +11742,8 @@ static unsigned appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__sur
     vp->footprint = travelled * r->pixel_angle;
     if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth) {
         *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1)));
-        /* one to each point and spot light, and one sample of the rest if there is a rest */
-        rays = r->scene->nnee_delta + (r->scene->nee_cdf[0][r->scene->nlight] > 0.0);
+        /* one to each point and spot light, and the samples of the rest */
+        rays = r->scene->nnee_delta + appm__nee_samples(r->scene);
     }
     if (!appm__finite3(vp->wf) || !appm__finite3(vp->wg)) {
         vp->segs = 0;
@@ -15346,7 +15368,13 @@ static appm_status appm__budget(appm_renderer *r, const uint64_t *dropped)
     uint32_t t;
     appm_status st;
     if ((st = appm__budget_rays(r, 0, &E)) != APPM_OK || (st = appm__budget_rays(r, 1, &P)) != APPM_OK) return st;
-    while (2 * k <= APPM__BUDGET_MAX && APPM__BUDGET_DEN * 2 * k * P <= APPM__BUDGET_NUM * E) k *= 2;
+    /* A studio keeps w h (docs/algorithm.md 5.12): its photons are aimed at the
+     * model (6.3), and its error is its sky's grain on the plate, which the
+     * second shadow ray of appm__direct buys down but the count reads as eye
+     * cost (E / P 1.27, not 0.93): 2 w h rendered 1.06x the error of w h. */
+    while (!(r->scene->focus_r > 0.0f) && 2 * k <= APPM__BUDGET_MAX &&
+           APPM__BUDGET_DEN * 2 * k * P <= APPM__BUDGET_NUM * E)
+        k *= 2;
     if (r->cluster.ranks > 1) { /* the same sums give the same k; a rank of another build might not */
         if ((st = appm__cluster_words(r, k)) != APPM_OK) return st;
         for (t = 0; t < r->cluster.ranks; ++t)

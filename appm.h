@@ -134,8 +134,8 @@
 
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
-#define APPM_VERSION_PATCH 5
-#define APPM_VERSION "0.1.5"
+#define APPM_VERSION_PATCH 6
+#define APPM_VERSION "0.1.6"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,7 +165,7 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.5": the version of the implementation that was compiled (APPM_VERSION is
+/* "0.1.6": the version of the implementation that was compiled (APPM_VERSION is
  * the version of the header).  The patch number changes with every change to
  * what a pass computes (an estimator's constant, the sampler, the emission),
  * so a checkpoint never resumes under passes other than those that wrote it. */
@@ -470,6 +470,9 @@ typedef struct appm_scene_info {
     uint32_t shadow_rays_picked;    /* the other lights, among which one more shadow ray
                                      * a shading point picks by power (appm's eye pass;
                                      * the path tracer leaves a constant sky out)        */
+    uint32_t shadow_rays_samples;   /* how many it picks a shading point in the eye pass:
+                                     * 0 without such lights, 2 for the studio's sky,
+                                     * else 1                                            */
 } appm_scene_info;
 
 APPM_API void appm_scene_get_info(const appm_scene *scene, appm_scene_info *info);

@@ -1075,14 +1075,16 @@ static int cmd_info(int argc, char **argv)
     if (in.lights_environment)
         printf("  power environment  %.4g %.4g %.4g W\n", in.power_environment[0],
                in.power_environment[1], in.power_environment[2]);
-    printf("shadow rays %u a shading point", in.shadow_rays_own + (in.shadow_rays_picked > 0));
+    printf("shadow rays %u a shading point", in.shadow_rays_own + in.shadow_rays_samples);
     if (in.shadow_rays_own)
         printf(": one to each of %u point or spot light%s", in.shadow_rays_own, in.shadow_rays_own > 1 ? "s" : "");
     if (in.shadow_rays_picked > 1)
-        printf("%s one to a light picked by power among %u%s", in.shadow_rays_own ? "," : ":",
-               in.shadow_rays_picked, in.shadow_rays_own ? " others" : " lights");
+        printf("%s %s to a light picked by power among %u%s", in.shadow_rays_own ? "," : ":",
+               in.shadow_rays_samples > 1 ? "two" : "one", in.shadow_rays_picked,
+               in.shadow_rays_own ? " others" : " lights");
     else if (in.shadow_rays_picked == 1)
-        printf("%s one to the %slight", in.shadow_rays_own ? "," : ":", in.shadow_rays_own ? "other " : "");
+        printf("%s %s to the %slight", in.shadow_rays_own ? "," : ":", in.shadow_rays_samples > 1 ? "two" : "one",
+               in.shadow_rays_own ? "other " : "");
     printf("\n");
     printf("bounds      (%.5g, %.5g, %.5g) .. (%.5g, %.5g, %.5g)\n", in.bbox_min[0], in.bbox_min[1],
            in.bbox_min[2], in.bbox_max[0], in.bbox_max[1], in.bbox_max[2]);

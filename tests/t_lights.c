@@ -185,7 +185,7 @@ static void test_delta_lights_every_point(void)
     {
         appm_scene_info in;
         appm_scene_get_info(s, &in);
-        CHECK(in.shadow_rays_own == 1 && in.shadow_rays_picked == 1);
+        CHECK(in.shadow_rays_own == 1 && in.shadow_rays_picked == 1 && in.shadow_rays_samples == 1);
     }
     for (m = 0; m < 2; ++m)
         if (render_method(s, methods[m], 4, &w, &img)) {
@@ -384,6 +384,7 @@ static void test_studio(void)
     CHECK(fabsf(s->focus_r - sqrtf(3.0f)) < 1e-4f);
     appm_scene_get_info(s, &in);
     CHECK(in.lights_environment == 1 && in.environment_map_width == 128 && in.environment_map_height == 64);
+    CHECK(in.shadow_rays_samples == 2); /* the sky's two a shading point (appm__direct) */
     for (t = 0; t < s->ntri; ++t)
         if (s->info[t].ng.y > 0.999f && s->tri[t].p0.y < -1.0f && s->tri[t].p0.y > -1.01f) {
             plate++;
