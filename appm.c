@@ -10204,7 +10204,7 @@ static int appm__nee_picked(const appm_scene *s, const appm__light *l, int t)
  * (appm__light.nee_all: the APPM__NEE_DELTA most powerful of them), and one
  * sample picks among the other lights - area, environment and any further
  * point or spot lights - by their power (appm__light.nee[0], the cumulative
- * s->nee_cdf[0]).
+ * s->nee_cdf[0]; two samples under the studio's sky, appm__direct).
  * The sum of the two is the same expectation with the delta lights' share
  * of the variance gone.
  *
@@ -10533,12 +10533,13 @@ static appm_status appm__loader_begin(appm__loader *L, appm__mem *m, const appm_
 enum { APPM__TEXT_NONE = 0, APPM__TEXT_OBJ, APPM__TEXT_SCENE };
 
 /* Shadow rays a shading point of the eye pass sends to the lights that table 0
- * picks among (the area and environment lights): none without any, two in a
- * studio (a scene with a focus, 6.3: appm__direct), else one. */
+ * picks among (area and environment lights, point and spot lights past the
+ * APPM__NEE_DELTA that get their own): none without any, two while the studio's
+ * sky lights the scene (env_auto 2: appm__direct), else one. */
 static unsigned appm__nee_samples(const appm_scene *s)
 {
     if (!s->nee_cdf[0] || !(s->nee_cdf[0][s->nlight] > 0.0)) return 0u; /* no light table: no lights */
-    return s->focus_r > 0.0f ? 2u : 1u;
+    return s->env_auto == 2 ? 2u : 1u;
 }
 
 /* Common path of the public loaders.  text_kind NONE: read `path` (a .scene or
@@ -11383,7 +11384,8 @@ static void appm__pmap_free(appm__pmap *m, appm__mem *mem)
  *   emission Le of every surface hit on its front side (the light seen
  *   directly, or in a mirror), and at x the direct light by next-event
  *   estimation (a shadow ray to each point and spot light and one to an
- *   area or environment light chosen by power, 6.4).
+ *   area or environment light chosen by power, two under the studio's sky;
+ *   6.4).
  * With --direct photons the shadow ray is skipped and first-bounce photons are
  * gathered instead (the analytic tests and the teaching mode use this).
  *
@@ -11644,7 +11646,7 @@ static appm__v3 appm__direct_one(const appm_scene *s, const appm__surf *sf, cons
 
 /* Direct light at diffuse or glossy point sf seen from wo: a shadow ray to
  * each point and spot light and appm__nee_samples samples of the others (6.4).
- * A studio's sky takes two, the second from the same numbers turned by 1/2 in
+ * The studio's sky takes two, the second from the same numbers turned by 1/2 in
  * each of their three dimensions (a rotation of the sequence's point: each
  * sample is uniform, and the two are stratified against each other): a sky
  * lights a point from its whole hemisphere, half hidden by the model near it,
@@ -12473,11 +12475,12 @@ static void appm__guide_tally(appm_renderer *r, unsigned worker, uint32_t tag, u
  * budget's count, 12.2); returns 0 if the task's region is full.
  *
  * After each bounce a roulette keeps the path with probability q, the largest
- * channel's loss.  A studio's photon (6.3) skips it until its first stored hit:
- * its first hit, on the plate or the model, is direct light and not stored, and
- * a roulette there (the plate's albedo 1/2) ended half the paths after their
- * rays were paid for.  1.78x the photons stored for 1.07x the time a pass
- * (docs/algorithm.md 5.10, which says why the other scenes keep it). */
+ * channel's loss.  A studio's photon (6.3; its aim, which the user's lights
+ * keep) skips it at its first hit, which is direct light (on the plate or the
+ * model) and not stored: a roulette there (the plate's albedo 1/2) ended half
+ * the paths after their rays were paid for.  1.78x the photons stored for
+ * 1.07x the time a pass (docs/algorithm.md 5.10, which says why the other
+ * scenes keep it). */
 static int appm__photon_path(appm_renderer *r, uint32_t task, uint64_t index, unsigned worker,
                              appm__ld_cache *cache, uint64_t *rays)
 {
@@ -13816,7 +13819,8 @@ static void appm__open_lines(const appm_renderer *r, const appm__vp *v, appm__ga
         appm__v3 a, b, c = appm__sub(appm__corner(&s->tri[e / 3], (e % 3 + 2) % 3), v->x);
         float ex, ey, len, ux, uy, d, foot;
         int k;
-        appm__v3 ab, axe;
+        appm__v3 ab;
+        double ax, ay, az, bx, by, bz, cx, cy, cz;
         appm__edge_ends(s, e, &a, &b);
         a = appm__sub(a, v->x);
         b = appm__sub(b, v->x);
@@ -13828,10 +13832,13 @@ static void appm__open_lines(const appm_renderer *r, const appm__vp *v, appm__ga
          * An edge that cuts has x's foot q on it within Rm in the plane, and q is
          * within 0.1 Rm of the plane, so x's distance from the edge's line in
          * space is below sqrt(1.01) Rm; |a x (b - a)|^2 / |b - a|^2 is that
-         * distance squared, and 1.05 leaves room for rounding. */
+         * distance squared, and 1.05 leaves room for rounding.  In double: both
+         * sides go as the fourth power of the scene's scale, which a float
+         * overflows (or flushes to 0) for a scene 1e10 times larger or smaller. */
         ab = appm__sub(b, a);
-        axe = appm__cross(a, ab);
-        if (appm__dot(axe, axe) >= 1.05f * Rm * Rm * appm__dot(ab, ab)) continue;
+        ax = a.x, ay = a.y, az = a.z, bx = ab.x, by = ab.y, bz = ab.z;
+        cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+        if (cx * cx + cy * cy + cz * cz >= 1.05 * (double)Rm * Rm * (bx * bx + by * by + bz * bz)) continue;
         ex = appm__dot(b, g->t) - appm__dot(a, g->t);
         ey = appm__dot(b, g->b) - appm__dot(a, g->b);
         len = sqrtf(ex * ex + ey * ey);
@@ -15368,11 +15375,12 @@ static appm_status appm__budget(appm_renderer *r, const uint64_t *dropped)
     uint32_t t;
     appm_status st;
     if ((st = appm__budget_rays(r, 0, &E)) != APPM_OK || (st = appm__budget_rays(r, 1, &P)) != APPM_OK) return st;
-    /* A studio keeps w h (docs/algorithm.md 5.12): its photons are aimed at the
-     * model (6.3), and its error is its sky's grain on the plate, which the
-     * second shadow ray of appm__direct buys down but the count reads as eye
-     * cost (E / P 1.27, not 0.93): 2 w h rendered 1.06x the error of w h. */
-    while (!(r->scene->focus_r > 0.0f) && 2 * k <= APPM__BUDGET_MAX &&
+    /* Under the studio's sky k stays 1 (docs/algorithm.md 5.12): its photons are
+     * aimed at the model (6.3), and its error is the sky's grain on the plate,
+     * which the second shadow ray of appm__direct buys down but the count
+     * reads as eye cost (E / P 1.27, not 0.93): 2 w h rendered 1.06x the
+     * error of w h. */
+    while (r->scene->env_auto != 2 && 2 * k <= APPM__BUDGET_MAX &&
            APPM__BUDGET_DEN * 2 * k * P <= APPM__BUDGET_NUM * E)
         k *= 2;
     if (r->cluster.ranks > 1) { /* the same sums give the same k; a rank of another build might not */

@@ -100,7 +100,7 @@
  *     1. eye pass: per pixel, one jittered camera path through mirrors and glass to
  *        its first diffuse vertex x with weight W; direct light at x by next-event
  *        estimation (a shadow ray to each point and spot light, and one to an
- *        area or environment light picked by power).
+ *        area or environment light picked by power; two under the studio's sky).
  *     2. radius: r = [c R(K) S / (M j mu2^2 dI^2)]^(1/6) from the pixel's running
  *        second moment S and Laplacian dI, per photon component (caustic:
  *        photons whose last bounce was specular; diffuse: the rest), clamped
@@ -318,8 +318,10 @@ typedef enum appm_stand_in {
                                * looking along -z: a furnace, as earlier versions lit it   */
 } appm_stand_in;
 /* Lights added to the loaded scene (appm_scene_add_point_light, ..._set_environment,
- * ..._set_environment_map) replace the stand-in's sky or white environment; the
- * studio's plate, camera and aim stay.  The command line loads with WHITE when it is
+ * ..._set_environment_map) replace the stand-in's sky or white environment, and
+ * with the sky its two shadow rays a shading point and its photon count of width *
+ * height; the studio's plate, camera and aim stay, and its photons still skip
+ * the roulette at their first hit.  The command line loads with WHITE when it is
  * given lights, so that they replace all of it. */
 
 /* Every field: 0 (or NULL) means "default".  `appm_config cfg = {0};` works. */
@@ -337,7 +339,8 @@ typedef struct appm_config {
                                * and takes k * width * height, k the largest of 1,
                                * 2, 4 with k P <= 1.65 E (a caustic seen through
                                * glass: 4, 0.78-0.87x the error at equal time; the
-                               * Cornell boxes: 1).  Counted, not timed: the same
+                               * Cornell boxes: 1; the studio's sky keeps 1 whatever
+                               * it counts).  Counted, not timed: the same
                                * choice on every machine and thread count, and the
                                * image of that count given.  stats.photons_per_pass
                                * says what was chosen                               */
@@ -470,9 +473,9 @@ typedef struct appm_scene_info {
     uint32_t shadow_rays_picked;    /* the other lights, among which one more shadow ray
                                      * a shading point picks by power (appm's eye pass;
                                      * the path tracer leaves a constant sky out)        */
-    uint32_t shadow_rays_samples;   /* how many it picks a shading point in the eye pass:
-                                     * 0 without such lights, 2 for the studio's sky,
-                                     * else 1                                            */
+    uint32_t shadow_rays_samples;   /* how many it picks a shading point in the eye pass
+                                     * (each picks its own): 0 without such lights, 2
+                                     * while the studio's sky lights the scene, else 1  */
 } appm_scene_info;
 
 APPM_API void appm_scene_get_info(const appm_scene *scene, appm_scene_info *info);

@@ -1079,8 +1079,8 @@ static int cmd_info(int argc, char **argv)
     if (in.shadow_rays_own)
         printf(": one to each of %u point or spot light%s", in.shadow_rays_own, in.shadow_rays_own > 1 ? "s" : "");
     if (in.shadow_rays_picked > 1)
-        printf("%s %s to a light picked by power among %u%s", in.shadow_rays_own ? "," : ":",
-               in.shadow_rays_samples > 1 ? "two" : "one", in.shadow_rays_picked,
+        printf("%s %s picked by power among %u%s", in.shadow_rays_own ? "," : ":",
+               in.shadow_rays_samples > 1 ? "two, each to a light" : "one to a light", in.shadow_rays_picked,
                in.shadow_rays_own ? " others" : " lights");
     else if (in.shadow_rays_picked == 1)
         printf("%s %s to the %slight", in.shadow_rays_own ? "," : ":", in.shadow_rays_samples > 1 ? "two" : "one",

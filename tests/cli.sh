@@ -130,7 +130,7 @@ for scene in scenes/*.scene; do
     check "info $scene: $got triangles (with dropped ones), the OBJ has $expect" [ "$got" = "$expect" ]
 done
 # Shadow rays (docs/algorithm.md 5.11): the teapot's spot gets a ray of its own and its sky the
-# other; the Cornell box's two light triangles share one ray, picked by power.
+# other; the Cornell box's two light triangles share one ray, picked by power; the studio's sky two.
 run "$APPM" info scenes/teapot.scene
 check "info: the teapot's shadow rays" contains "$T/out" \
     'shadow rays 2 a shading point: one to each of 1 point or spot light, one to the other light'
@@ -139,6 +139,9 @@ check "info: the Cornell box's shadow ray" contains "$T/out" \
     'shadow rays 1 a shading point: one to a light picked by power among 2 lights'
 check "info: the photon budget's three counts" contains "$T/out" 'with 262144, 524288 or 1048576 photon paths per pass'
 check "info: the renderer's memory before any pass" lacks "$T/out" 'renderer 0.0 MiB'
+run "$APPM" info scenes/stanford-bunny.obj
+check "info: the studio's sky takes two shadow rays (docs/algorithm.md 5.10)" contains "$T/out" \
+    'shadow rays 2 a shading point: two to the light'
 
 # ---- render: every method to every format -------------------------------------
 

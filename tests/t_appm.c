@@ -1287,41 +1287,48 @@ static void test_open_edges(void)
     CHECK(open_edges_of(rug) == 4);
 }
 
-/* appm__open_lines at the edge of its reach.  The unit quad's edge y = 0 seen
- * from x = (0.5, f Rm, z): it cuts while f < 1 (in x's plane) and |z| <= 0.1 Rm
- * (the edge lies in x's plane), at distance f Rm.  x at f = 0.999 and z = 0.0999
- * Rm is sqrt(1.008) Rm from the edge's line in space, which the early rejection
- * of far edges must let through. */
+/* appm__open_lines at the edge of its reach.  The quad of side S's edge y = 0
+ * seen from x = (S/2, f Rm, z), Rm = S/10: it cuts while f < 1 (in x's plane)
+ * and |z| <= 0.1 Rm (the edge lies in x's plane), at distance f Rm.  x at
+ * f = 0.999 and z = 0.0999 Rm is sqrt(1.008) Rm from the edge's line in space,
+ * which the early rejection of far edges must let through; at S = 1e12 and
+ * 1e-12 its squared areas overflow and flush a float. */
 static void test_open_lines_reach(void)
 {
-    static const char quad[] = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
     static const float f[] = {0.5f, 0.999f, 0.999f, 0.999f, 1.001f, 1.5f};
     static const float z[] = {0.0f, 0.0f, 0.0999f, -0.0999f, 0.0f, 0.0999f};
-    const float Rm = 0.1f;
-    appm_scene *s = white_obj(quad, "quad.obj");
-    appm_renderer r;
-    size_t k;
-    if (!s) return;
-    memset(&r, 0, sizeof r);
-    r.scene = s;
-    for (k = 0; k < sizeof f / sizeof f[0]; ++k) {
-        appm__vp v;
-        appm__gather g;
-        memset(&v, 0, sizeof v);
-        memset(&g, 0, sizeof g);
-        v.x = appm__v(0.5f, f[k] * Rm, z[k] * Rm);
-        v.n = appm__v(0.0f, 0.0f, 1.0f);
-        v.tri = 0; /* (0,0,0) (1,0,0) (1,1,0): x's triangle, with the edge y = 0 */
-        appm__basis(v.n, &g.t, &g.b);
-        appm__open_lines(&r, &v, &g, Rm);
-        if (f[k] < 1.0f) {
-            CHECK_MSG(g.ncut == 1, "x at %.4f Rm, %.4f Rm off the plane: %d lines, not 1", f[k], z[k], g.ncut);
-            if (g.ncut == 1) CHECK_NEAR(g.cut_d[0], f[k] * Rm, 1e-6);
-        } else {
-            CHECK_MSG(g.ncut == 0, "x at %.4f Rm: %d lines, not 0", f[k], g.ncut);
+    static const double scale[] = {1.0, 1e12, 1e-12};
+    size_t k, q;
+    for (q = 0; q < sizeof scale / sizeof scale[0]; ++q) {
+        char quad[256];
+        const double S = scale[q];
+        const float Rm = (float)(0.1 * S);
+        appm_scene *s;
+        appm_renderer r;
+        snprintf(quad, sizeof quad, "v 0 0 0\nv %.17g 0 0\nv %.17g %.17g 0\nv 0 %.17g 0\nf 1 2 3 4\n", S, S, S, S);
+        if (!(s = white_obj(quad, "quad.obj"))) continue;
+        memset(&r, 0, sizeof r);
+        r.scene = s;
+        for (k = 0; k < sizeof f / sizeof f[0]; ++k) {
+            appm__vp v;
+            appm__gather g;
+            memset(&v, 0, sizeof v);
+            memset(&g, 0, sizeof g);
+            v.x = appm__v((float)(0.5 * S), f[k] * Rm, z[k] * Rm);
+            v.n = appm__v(0.0f, 0.0f, 1.0f);
+            v.tri = 0; /* (0,0,0) (S,0,0) (S,S,0): x's triangle, with the edge y = 0 */
+            appm__basis(v.n, &g.t, &g.b);
+            appm__open_lines(&r, &v, &g, Rm);
+            if (f[k] < 1.0f) {
+                CHECK_MSG(g.ncut == 1, "side %g, x at %.4f Rm, %.4f Rm off the plane: %d lines, not 1", S, f[k], z[k],
+                          g.ncut);
+                if (g.ncut == 1) CHECK_NEAR(g.cut_d[0] / Rm, f[k], 1e-5);
+            } else {
+                CHECK_MSG(g.ncut == 0, "side %g, x at %.4f Rm: %d lines, not 0", S, f[k], g.ncut);
+            }
         }
+        appm_scene_destroy(s);
     }
-    appm_scene_destroy(s);
 }
 
 /* The open front of CornellBox-Empty-White at 32 x 32: the pixels whose kernel an

@@ -586,7 +586,8 @@ static double render_photons(const appm_scene *s, int passes, uint64_t seed, dou
 }
 
 /* The mean over seeds 1-3 of the ratios aimed / not aimed (focus_r = 0: the
- * sky's own emission, cosine bounces) of the image's mean and of its centre,
+ * sky's own emission, cosine bounces; env_auto = 0: one shadow ray to the sky)
+ * of the image's mean and of its centre,
  * less 1, into image[0] and image[1]. */
 static void focus_ratios(appm_scene *s, int passes, double *image)
 {
@@ -595,19 +596,24 @@ static void focus_ratios(appm_scene *s, int passes, double *image)
     for (seed = 1; seed <= 3; ++seed) {
         double c1, c0, m1 = render_photons(s, passes, seed, &c1), m0;
         float keep = s->focus_r;
+        int sky = s->env_auto;
         s->focus_r = 0.0f;
+        s->env_auto = 0; /* and one shadow ray to the sky (appm__nee_samples) */
         m0 = render_photons(s, passes, seed, &c0);
         s->focus_r = keep;
+        s->env_auto = sky;
         image[0] += (m1 / m0 - 1.0) / 3.0;
         image[1] += (c1 / c0 - 1.0) / 3.0;
     }
 }
 
 /* The studio's aimed photons change the noise, not the picture: the sphere in
- * the studio rendered by ppm at a fixed radius with its focus and without, the
- * same eye paths, so the difference is the photon term's alone; under the
+ * the studio rendered by ppm at a fixed radius with its focus and without (the
+ * photons aimed and spared the roulette at their first hit, or not); under the
  * studio's sky and under a constant environment set on the scene (the aim
- * stays), which takes the other branch of the sky's emission. */
+ * stays), which takes the other branch of the sky's emission.  Under the sky
+ * the direct term differs too: its two samples a shading point are weighed
+ * by 1/2 each, and weighed by 1 the image's mean reads +0.75. */
 static void test_focus_unbiased(void)
 {
     appm_scene *s = studio_sphere();
@@ -628,7 +634,7 @@ static void test_focus_unbiased(void)
     appm_scene_destroy(s);
 }
 
-/* A studio's photon skips the roulette until its first stored hit (appm.c 9.2,
+/* A studio's photon skips the roulette at its first hit (appm.c 9.2,
  * docs/algorithm.md 5.10): the sky's photons land on the plate (albedo 1/2) or
  * the sphere (0.8) first, direct light, and the roulette there ended 20-50 %
  * of them.  Photons stored a path over 4 passes of the sphere in the studio:
