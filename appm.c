@@ -11645,7 +11645,7 @@ static appm__v3 appm__direct_one(const appm_scene *s, const appm__surf *sf, cons
 }
 
 /* Direct light at diffuse or glossy point sf seen from wo: a shadow ray to
- * each point and spot light and appm__nee_samples samples of the others (6.4).
+ * each point and spot light and n = appm__nee_samples samples of the others (6.4).
  * The studio's sky takes two, the second from the same numbers turned by 1/2 in
  * each of their three dimensions (a rotation of the sequence's point: each
  * sample is uniform, and the two are stratified against each other): a sky
@@ -11653,21 +11653,21 @@ static appm__v3 appm__direct_one(const appm_scene *s, const appm__surf *sf, cons
  * and one ray a pass left the plate's grain for the first hundreds of passes
  * (docs/algorithm.md 5.10). */
 static appm__v3 appm__direct(const appm_renderer *r, const appm__surf *sf, const appm__material *m,
-                             appm__v3 wo, appm__sampler *smp, unsigned vertex)
+                             appm__v3 wo, appm__sampler *smp, unsigned vertex, unsigned n)
 {
     float side = appm__dot(wo, sf->ng) >= 0.0f ? 1.0f : -1.0f;
     appm__v3 ns = appm__scale(sf->ns, side), ng = appm__scale(sf->ng, side), sum = appm__v(0, 0, 0);
     appm__v3 picked = appm__v(0, 0, 0);
     float u[3];
     uint32_t k;
-    unsigned t, n;
+    unsigned t;
     appm__light_sample ls;
     const appm_scene *s = r->scene;
     for (k = 0; k < s->nnee_delta; ++k)
         if (appm__sample_light_k(s, s->nee_delta[k], 1.0, sf, ns, 0.0f, 0.0f, &ls))
             sum = appm__add(sum, appm__direct_one(s, sf, m, wo, ns, ng, &ls));
     appm__smp_light(smp, vertex, r->nee_dims, u);
-    for (t = 0, n = appm__nee_samples(s); t < n; ++t) {
+    for (t = 0; t < n; ++t) {
         if (t == 1)
             for (k = 0; k < 3; ++k) u[k] = u[k] < 0.5f ? u[k] + 0.5f : u[k] - 0.5f;
         if (appm__sample_light(s, 0, sf, ns, u[0], u[1], u[2], &ls))
@@ -11743,9 +11743,9 @@ static unsigned appm__eye_vertex(appm_renderer *r, appm__vp *vp, const appm__sur
     vp->tri = sf->tri;
     vp->footprint = travelled * r->pixel_angle;
     if (r->direct == APPM_DIRECT_NEE && segs + 1 <= r->max_depth) {
-        *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1)));
-        /* one to each point and spot light, and the samples of the rest */
-        rays = r->scene->nnee_delta + appm__nee_samples(r->scene);
+        const unsigned n = appm__nee_samples(r->scene);
+        *ld = appm__add(*ld, appm__mul(W, appm__direct(r, sf, m, wo, smp, segs - 1, n)));
+        rays = r->scene->nnee_delta + n; /* one to each point and spot light, and the samples of the rest */
     }
     if (!appm__finite3(vp->wf) || !appm__finite3(vp->wg)) {
         vp->segs = 0;
@@ -13816,7 +13816,7 @@ static void appm__open_lines(const appm_renderer *r, const appm__vp *v, appm__ga
     if (!s || !s->open_off || v->tri >= s->ntri) return;
     for (j = s->open_off[v->tri], j1 = s->open_off[v->tri + 1]; j < j1; ++j) {
         const uint32_t e = s->open_ref[j];
-        appm__v3 a, b, c = appm__sub(appm__corner(&s->tri[e / 3], (e % 3 + 2) % 3), v->x);
+        appm__v3 a, b, c;
         float ex, ey, len, ux, uy, d, foot;
         int k;
         appm__v3 ab;
@@ -13839,6 +13839,7 @@ static void appm__open_lines(const appm_renderer *r, const appm__vp *v, appm__ga
         ax = a.x, ay = a.y, az = a.z, bx = ab.x, by = ab.y, bz = ab.z;
         cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
         if (cx * cx + cy * cy + cz * cz >= 1.05 * (double)Rm * Rm * (bx * bx + by * by + bz * bz)) continue;
+        c = appm__sub(appm__corner(&s->tri[e / 3], (e % 3 + 2) % 3), v->x); /* the triangle's third corner */
         ex = appm__dot(b, g->t) - appm__dot(a, g->t);
         ey = appm__dot(b, g->b) - appm__dot(a, g->b);
         len = sqrtf(ex * ex + ey * ey);
