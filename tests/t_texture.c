@@ -418,11 +418,14 @@ static void test_env_small_maps(void)
 /* appm__cdf_invert (which the map's rows and columns are drawn by) against a
  * scan: the cell is the last i < n with c[i] <= u, also where cells have zero
  * probability (equal neighbours, which a scan skips to the last of) and where
- * u is exactly a cell's start; the point is (i + t) / n within it. */
+ * u is exactly a cell's start; the point is (i + t) / n within it.  The guided
+ * inversion gives the same cell and the same bits of the point, also at the
+ * guide's own steps k / APPM__CDF_G and just below them. */
 static void test_cdf_invert(void)
 {
     static double c[130];
-    unsigned seed = 7, bad = 0, cases = 0;
+    uint32_t g[APPM__CDF_G + 1];
+    unsigned seed = 7, bad = 0, cases = 0, differ = 0, guided = 0;
     int n, trial, k;
     for (n = 1; n <= 129; n += (n < 9 ? 1 : 15))
         for (trial = 0; trial < 20; ++trial) {
@@ -433,20 +436,30 @@ static void test_cdf_invert(void)
             }
             if (!(c[n] > 0.0)) c[n] = 1.0;
             for (k = 1; k <= n; ++k) c[k] /= c[n];
-            for (k = 0; k < 64; ++k) {
-                float u, x;
-                int cell, want = 0, i;
+            appm__cdf_guide(c, n, g);
+            for (k = 0; k < 64 + 2 * APPM__CDF_G; ++k) {
+                float u, x, xg;
+                int cell, cg, want = 0, i;
                 seed = seed * 1103515245u + 12345u;
-                u = k < n ? (float)c[k] : (float)((seed >> 8) & 0xFFFF) / 65536.0f; /* starts, then anywhere */
+                if (k >= 64) /* the guide's steps, and the float just below each */
+                    u = (k - 64) % 2 ? nextafterf((float)((k - 64) / 2 + 1) / APPM__CDF_G, 0.0f)
+                                     : (float)((k - 64) / 2) / APPM__CDF_G;
+                else
+                    u = k < n ? (float)c[k] : (float)((seed >> 8) & 0xFFFF) / 65536.0f; /* starts, then anywhere */
                 if (!(u < 1.0f)) continue;
                 for (i = 0; i < n; ++i)
                     if (c[i] <= (double)u) want = i;
                 x = appm__cdf_invert(c, n, u, &cell);
+                xg = appm__cdf_invert_guided(c, n, g, u, &cg);
                 cases++;
                 if (cell != want || !(x >= (double)want / n - 1e-6 && x <= (double)(want + 1) / n + 1e-6)) bad++;
+                guided++;
+                if (cg != cell || memcmp(&xg, &x, sizeof x) != 0) differ++;
             }
         }
     CHECK_MSG(bad == 0 && cases > 5000, "%u of %u inversions off the scan's cell", bad, cases);
+    CHECK_MSG(differ == 0 && guided == cases, "%u of %u guided inversions differ from the whole search", differ,
+              guided);
 }
 
 /* The sampler draws directions with the density appm__env_pdf says (chi-square
