@@ -13950,7 +13950,10 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
             const appm__vp *q;
             float c, at, ab, al, g0, d, hq, ux, uy, sq;
             appm__v3 xq;
-            if (e[x] != 0) continue; /* a plane's pixels next to the line give it */
+            if (e[x] != 0) { /* a plane's pixels next to the line give it; the next lies e[x] on */
+                x += e[x] - 1;
+                continue;
+            }
             q = &r->vp[(size_t)(y * (int64_t)r->w + x)];
             if (q == v) continue;
             c = appm__dot(v->n, q->n);
