@@ -7745,8 +7745,13 @@ static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
     }
 }
 #define APPM__PREFETCH_ENTRY(s, e) appm__prefetch_entry(s, e)
+/* Of a triangle that is the closest hit so far: what appm__surface will read
+ * of it (its corners and its shading record), fetched while the traversal
+ * goes on, since the ray most often ends at it. */
+#define APPM__PREFETCH_HIT(s, i) (__builtin_prefetch(&(s)->tri[i]), __builtin_prefetch(&(s)->info[i]))
 #else
 #define APPM__PREFETCH_ENTRY(s, e) ((void)(s), (void)(e))
+#define APPM__PREFETCH_HIT(s, i) ((void)(s), (void)(i))
 #endif
 
 #define APPM__WSTACK ((APPM__BVH_W - 1) * APPM__BVH_MAX_DEPTH + APPM__BVH_W)
@@ -7920,6 +7925,7 @@ static int appm__leaf_hit(const appm_scene *s, appm__ray *q, uint32_t first, uin
                 found = 1;
             }
         }
+        if (found) APPM__PREFETCH_HIT(s, h->tri);
         return found;
     }
     first = s->ptri[first]; /* the scalar path: the leaf's triangles, consecutive */
