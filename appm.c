@@ -9275,9 +9275,9 @@ static double appm__env_cell_pdf(const double *c, uint32_t w, uint32_t h, uint32
     return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * w * h / (2.0 * APPM__PI * APPM__PI * st);
 }
 
-static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double u, double v)
+/* st: sin(pi v), which the caller may have for another grid at the same (u, v) */
+static double appm__env_grid_pdf_st(const double *c, uint32_t w, uint32_t h, double u, double v, double st)
 {
-    double st = sin(APPM__PI * v);
     uint32_t x, y;
     if (!(st > 0.0)) return 0.0;
     x = (uint32_t)(u * w);
@@ -9285,6 +9285,11 @@ static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double
     if (x >= w) x = w - 1;
     if (y >= h) y = h - 1;
     return appm__env_cell_pdf(c, w, h, x, y, st);
+}
+
+static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double u, double v)
+{
+    return appm__env_grid_pdf_st(c, w, h, u, v, sin(APPM__PI * v));
 }
 
 /* The solid-angle density with which appm__env_sample draws the direction at
@@ -9396,8 +9401,9 @@ static size_t appm__env_prod_size(const appm__envmap *e)
 }
 
 /* The solid-angle density with which bin `bin`'s product density draws the
- * direction at (u, v) of appm__env_uv (0 where the bin has none). */
-static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double u, double v)
+ * direction at (u, v) of appm__env_uv (0 where the bin has none; the tests'
+ * entry: appm__env_mix_pdf evaluates it with the map's sin(pi v)). */
+APPM__UNUSED static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double u, double v)
 {
     if (!e->pcdf || !e->pok[bin]) return 0.0;
     return appm__env_grid_pdf(e->pcdf + bin * appm__env_prod_size(e), e->pw, e->ph, u, v);
@@ -9674,12 +9680,14 @@ static double appm__env_pinpoint(const appm__envmap *e, double omega)
 #define APPM__ENV_MIX_PROD 0.5  /* the product density's; the map's is the rest */
 static double appm__env_mix_pdf(const appm__envmap *e, uint32_t bin, double u, double v, float cos_n)
 {
-    double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm;
+    double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm, st;
     if (APPM_ENV_UNIFORM) return pc;
-    pm = appm__env_pdf_uv(e, u, v);
+    st = sin(APPM__PI * v); /* the map's grid and the product's at the same (u, v) */
+    pm = (float)appm__env_grid_pdf_st(e->cdf, e->w, e->h, u, v, st); /* appm__env_pdf_uv */
     if (e->pcdf && e->pok[bin])
         return APPM__ENV_MIX_COS * pc + (1.0 - APPM__ENV_MIX_COS - APPM__ENV_MIX_PROD) * pm +
-               APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, u, v);
+               APPM__ENV_MIX_PROD * appm__env_grid_pdf_st(e->pcdf + bin * appm__env_prod_size(e), e->pw, e->ph,
+                                                          u, v, st);
     return 0.5 * pm + 0.5 * pc;
 }
 
