@@ -7745,9 +7745,9 @@ static void appm__prefetch_entry(const appm_scene *s, const appm__wentry *e)
     }
 }
 #define APPM__PREFETCH_ENTRY(s, e) appm__prefetch_entry(s, e)
-/* Of a triangle that is the closest hit so far: what appm__surface will read
- * of it (its corners and its shading record), fetched while the traversal
- * goes on, since the ray most often ends at it. */
+/* Of a triangle that is the closest hit so far (once per leaf that gives one):
+ * what appm__surface will read of it (its corners and its shading record),
+ * fetched while the traversal goes on, since the ray most often ends at it. */
 #define APPM__PREFETCH_HIT(s, i) (__builtin_prefetch(&(s)->tri[i]), __builtin_prefetch(&(s)->info[i]))
 #else
 #define APPM__PREFETCH_ENTRY(s, e) ((void)(s), (void)(e))
@@ -7943,6 +7943,7 @@ static int appm__leaf_hit(const appm_scene *s, appm__ray *q, uint32_t first, uin
             }
         }
     }
+    if (found) APPM__PREFETCH_HIT(s, h->tri);
     return found;
 }
 
@@ -13964,7 +13965,8 @@ static void appm__cut_lines(const appm_renderer *r, size_t i, appm__gather *g)
             const appm__vp *q;
             float c, at, ab, al, g0, d, hq, ux, uy, sq;
             appm__v3 xq;
-            if (e[x] != 0) { /* a plane's pixels next to the line give it; the next lies e[x] on */
+            if (e[x] != 0) { /* a plane's pixels next to the line give it; e[x] is the distance to the
+                              * nearest of those, so none lies before x + e[x] */
                 x += e[x] - 1;
                 continue;
             }
