@@ -9276,8 +9276,9 @@ static double appm__env_cell_pdf(const double *c, uint32_t w, uint32_t h, uint32
     return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * w * h / (2.0 * APPM__PI * APPM__PI * st);
 }
 
-/* st: sin(pi v), which the caller may have for another grid at the same (u, v) */
-static double appm__env_grid_pdf_st(const double *c, uint32_t w, uint32_t h, double u, double v, double st)
+/* st: sin(pi v), which a shadow ray's mixture (appm__env_mix_pdf) takes once
+ * for the map's grid and the product's at the same (u, v). */
+static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double u, double v, double st)
 {
     uint32_t x, y;
     if (!(st > 0.0)) return 0.0;
@@ -9288,16 +9289,11 @@ static double appm__env_grid_pdf_st(const double *c, uint32_t w, uint32_t h, dou
     return appm__env_cell_pdf(c, w, h, x, y, st);
 }
 
-static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double u, double v)
-{
-    return appm__env_grid_pdf_st(c, w, h, u, v, sin(APPM__PI * v));
-}
-
 /* The solid-angle density with which appm__env_sample draws the direction at
- * (u, v) of appm__env_uv. */
-static float appm__env_pdf_uv(const appm__envmap *e, double u, double v)
+ * (u, v) of appm__env_uv (st = sin(pi v)). */
+static float appm__env_pdf_uv(const appm__envmap *e, double u, double v, double st)
 {
-    return (float)appm__env_grid_pdf(e->cdf, e->w, e->h, u, v);
+    return (float)appm__env_grid_pdf(e->cdf, e->w, e->h, u, v, st);
 }
 
 /* The same of direction d (the tests' entry: the library finds (u, v) once for both). */
@@ -9305,7 +9301,7 @@ APPM__UNUSED static float appm__env_pdf(const appm__envmap *e, appm__v3 d)
 {
     double u, v;
     appm__env_uv(e, d, &u, &v);
-    return appm__env_pdf_uv(e, u, v);
+    return appm__env_pdf_uv(e, u, v, sin(APPM__PI * v));
 }
 
 /* (u1, u2) to the place (*u, *v) of the grid density c of appm__env_grid_pdf:
@@ -9401,13 +9397,22 @@ static size_t appm__env_prod_size(const appm__envmap *e)
     return (size_t)e->ph + 1 + (size_t)e->ph * ((size_t)e->pw + 1);
 }
 
+/* Bin `bin`'s CDFs in pcdf, and their guide tables in pguide (NULL: none). */
+static const double *appm__env_prod_cdf(const appm__envmap *e, uint32_t bin)
+{
+    return e->pcdf + bin * appm__env_prod_size(e);
+}
+static uint32_t *appm__env_prod_guide(const appm__envmap *e, uint32_t bin)
+{
+    return e->pguide ? e->pguide + bin * ((size_t)e->ph + 1) * (APPM__CDF_G + 1) : NULL;
+}
+
 /* The solid-angle density with which bin `bin`'s product density draws the
- * direction at (u, v) of appm__env_uv (0 where the bin has none; the tests'
- * entry: appm__env_mix_pdf evaluates it with the map's sin(pi v)). */
-APPM__UNUSED static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double u, double v)
+ * direction at (u, v) of appm__env_uv (0 where the bin has none; st = sin(pi v)). */
+static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double u, double v, double st)
 {
     if (!e->pcdf || !e->pok[bin]) return 0.0;
-    return appm__env_grid_pdf(e->pcdf + bin * appm__env_prod_size(e), e->pw, e->ph, u, v);
+    return appm__env_grid_pdf(appm__env_prod_cdf(e, bin), e->pw, e->ph, u, v, st);
 }
 
 /* A direction *d drawn from bin `bin`'s product density (which must exist). */
@@ -9415,9 +9420,8 @@ static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1,
 {
     int y, x;
     float u, v;
-    appm__env_grid_invert(e->pcdf + bin * appm__env_prod_size(e),
-                          e->pguide ? e->pguide + bin * ((size_t)e->ph + 1) * (APPM__CDF_G + 1) : NULL, e->pw, e->ph,
-                          u1, u2, &u, &v, &x, &y);
+    appm__env_grid_invert(appm__env_prod_cdf(e, bin), appm__env_prod_guide(e, bin), e->pw, e->ph, u1, u2, &u, &v,
+                          &x, &y);
     *d = appm__env_dir(e, u, v);
 }
 
@@ -9470,7 +9474,7 @@ static appm_status appm__env_prod_build(appm__mem *m, appm__envmap *e, const cha
         e->pok[bin] = total > 0.0 && total < HUGE_VAL;
         for (y = 1; y <= ph; ++y) rows[y] = e->pok[bin] ? rows[y] / total : (double)y / ph;
         rows[ph] = 1.0;
-        appm__env_grid_guide(rows, pw, ph, e->pguide + (size_t)bin * (ph + 1) * (APPM__CDF_G + 1));
+        appm__env_grid_guide(rows, pw, ph, appm__env_prod_guide(e, bin));
     }
     appm__free(m, mean);
     return APPM_OK;
@@ -9683,12 +9687,11 @@ static double appm__env_mix_pdf(const appm__envmap *e, uint32_t bin, double u, d
 {
     double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm, st;
     if (APPM_ENV_UNIFORM) return pc;
-    st = sin(APPM__PI * v); /* the map's grid and the product's at the same (u, v) */
-    pm = (float)appm__env_grid_pdf_st(e->cdf, e->w, e->h, u, v, st); /* appm__env_pdf_uv */
+    st = sin(APPM__PI * v); /* once, for the map's grid and the product's */
+    pm = appm__env_pdf_uv(e, u, v, st);
     if (e->pcdf && e->pok[bin])
         return APPM__ENV_MIX_COS * pc + (1.0 - APPM__ENV_MIX_COS - APPM__ENV_MIX_PROD) * pm +
-               APPM__ENV_MIX_PROD * appm__env_grid_pdf_st(e->pcdf + bin * appm__env_prod_size(e), e->pw, e->ph,
-                                                          u, v, st);
+               APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, u, v, st);
     return 0.5 * pm + 0.5 * pc;
 }
 

@@ -480,8 +480,8 @@ static void test_env_guides(void)
     for (b = 0; b <= APPM__ENV_BINS; ++b) { /* bin APPM__ENV_BINS: the map's own grid */
         const int own = b == APPM__ENV_BINS;
         const uint32_t w = own ? e.w : e.pw, h = own ? e.h : e.ph;
-        const double *c = own ? e.cdf : e.pcdf + b * appm__env_prod_size(&e);
-        const uint32_t *g = own ? e.guide : e.pguide + b * ((size_t)e.ph + 1) * (APPM__CDF_G + 1);
+        const double *c = own ? e.cdf : appm__env_prod_cdf(&e, b);
+        const uint32_t *g = own ? e.guide : appm__env_prod_guide(&e, b);
         if (!own && !e.pok[b]) continue;
         for (i = 0; i < 256 + APPM__CDF_G; ++i)
             for (k = 0; k < 256 + APPM__CDF_G; ++k) {
@@ -583,8 +583,8 @@ static void test_env_product(void)
                 double u, v;
                 appm__v3 d = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
                 appm__env_uv(&e, d, &u, &v);
-                integral += appm__env_prod_pdf_uv(&e, b, u, v) * sin(th) * (CHECK_PI / (5 * APPM__ENV_PH)) *
-                            (2 * CHECK_PI / (5 * APPM__ENV_PW));
+                integral += appm__env_prod_pdf_uv(&e, b, u, v, sin(CHECK_PI * v)) * sin(th) *
+                            (CHECK_PI / (5 * APPM__ENV_PH)) * (2 * CHECK_PI / (5 * APPM__ENV_PW));
             }
         CHECK_MSG(fabs(integral - 1.0) < 1e-3, "bin %u: its density integrates to %.5f", b, integral);
     }
@@ -602,7 +602,7 @@ static void test_env_product(void)
     }
     for (y = 0; y < e.ph; ++y)
         for (x = 0; x < e.pw; ++x) {
-            const double *c = e.pcdf + b * appm__env_prod_size(&e), *cr = c + (e.ph + 1) + (size_t)y * (e.pw + 1);
+            const double *c = appm__env_prod_cdf(&e, b), *cr = c + (e.ph + 1) + (size_t)y * (e.pw + 1);
             double pr = (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * N, o = count[(size_t)y * e.pw + x];
             if (pr == 0.0 && o > 0.0) stray++; /* below the centre normal's horizon: never drawn */
             if (pr < 5.0) continue;
