@@ -134,8 +134,8 @@
 
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
-#define APPM_VERSION_PATCH 6
-#define APPM_VERSION "0.1.6"
+#define APPM_VERSION_PATCH 7
+#define APPM_VERSION "0.1.7"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,7 +165,7 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.6": the version of the implementation that was compiled (APPM_VERSION is
+/* "0.1.7": the version of the implementation that was compiled (APPM_VERSION is
  * the version of the header).  The patch number changes with every change to
  * what a pass computes (an estimator's constant, the sampler, the emission),
  * so a checkpoint never resumes under passes other than those that wrote it. */
@@ -310,10 +310,11 @@ typedef enum appm_stand_in {
                                * environment map), a grey ground plate (albedo 0.5) under
                                * the model's bounding box, 2 of its bounding radii each
                                * way, and the camera 20 degrees above, framing the model;
-                               * its photons are aimed at the model (half the sky's
-                               * emission, three quarters of the bounces off the plate: 0.83x
-                               * the RMSE at equal time), with weights that keep every
-                               * estimate unbiased (appm.c 6.3)                          */
+                               * its photons are aimed at the model and the plate (half
+                               * the sky's emission at the model, half at the plate, none
+                               * elsewhere; three quarters of the bounces off the plate at
+                               * the model), with weights that keep every estimate
+                               * unbiased (appm.c 6.3)                                    */
     APPM_STAND_IN_WHITE       /* a constant white environment of radiance 1 and the camera
                                * looking along -z: a furnace, as earlier versions lit it   */
 } appm_stand_in;
