@@ -134,8 +134,8 @@
 
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
-#define APPM_VERSION_PATCH 7
-#define APPM_VERSION "0.1.7"
+#define APPM_VERSION_PATCH 8
+#define APPM_VERSION "0.1.8"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,7 +165,7 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.7": the version of the implementation that was compiled (APPM_VERSION is
+/* "0.1.8": the version of the implementation that was compiled (APPM_VERSION is
  * the version of the header).  The patch number changes with every change to
  * what a pass computes (an estimator's constant, the sampler, the emission),
  * so a checkpoint never resumes under passes other than those that wrote it. */
@@ -320,7 +320,7 @@ typedef enum appm_stand_in {
 } appm_stand_in;
 /* Lights added to the loaded scene (appm_scene_add_point_light, ..._set_environment,
  * ..._set_environment_map) replace the stand-in's sky or white environment, and
- * with the sky its two shadow rays a shading point and its photon count of width *
+ * with the sky its four shadow rays a shading point and its photon count of width *
  * height; the studio's plate, camera and aim stay, and its photons still skip
  * the roulette at their first hit.  The command line loads with WHITE when it is
  * given lights, so that they replace all of it. */
@@ -475,7 +475,7 @@ typedef struct appm_scene_info {
                                      * a shading point picks by power (appm's eye pass;
                                      * the path tracer leaves a constant sky out)        */
     uint32_t shadow_rays_samples;   /* how many it picks a shading point in the eye pass
-                                     * (each picks its own): 0 without such lights, 2
+                                     * (each picks its own): 0 without such lights, 4
                                      * while the studio's sky lights the scene, else 1  */
 } appm_scene_info;
 

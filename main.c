@@ -1075,16 +1075,22 @@ static int cmd_info(int argc, char **argv)
     if (in.lights_environment)
         printf("  power environment  %.4g %.4g %.4g W\n", in.power_environment[0],
                in.power_environment[1], in.power_environment[2]);
-    printf("shadow rays %u a shading point", in.shadow_rays_own + in.shadow_rays_samples);
-    if (in.shadow_rays_own)
-        printf(": one to each of %u point or spot light%s", in.shadow_rays_own, in.shadow_rays_own > 1 ? "s" : "");
-    if (in.shadow_rays_picked > 1)
-        printf("%s %s picked by power among %u%s", in.shadow_rays_own ? "," : ":",
-               in.shadow_rays_samples > 1 ? "two, each to a light" : "one to a light", in.shadow_rays_picked,
-               in.shadow_rays_own ? " others" : " lights");
-    else if (in.shadow_rays_picked == 1)
-        printf("%s %s to the %slight", in.shadow_rays_own ? "," : ":", in.shadow_rays_samples > 1 ? "two" : "one",
-               in.shadow_rays_own ? "other " : "");
+    {
+        static const char *const word[] = {"none", "one", "two", "three", "four"};
+        unsigned n = in.shadow_rays_samples;
+        char many[16];
+        const char *samples = n < 5 ? word[n] : many;
+        if (n >= 5) snprintf(many, sizeof many, "%u", n);
+        printf("shadow rays %u a shading point", in.shadow_rays_own + n);
+        if (in.shadow_rays_own)
+            printf(": one to each of %u point or spot light%s", in.shadow_rays_own, in.shadow_rays_own > 1 ? "s" : "");
+        if (in.shadow_rays_picked > 1)
+            printf("%s %s%s picked by power among %u%s", in.shadow_rays_own ? "," : ":", samples,
+                   n > 1 ? ", each to a light" : " to a light", in.shadow_rays_picked,
+                   in.shadow_rays_own ? " others" : " lights");
+        else if (in.shadow_rays_picked == 1)
+            printf("%s %s to the %slight", in.shadow_rays_own ? "," : ":", samples, in.shadow_rays_own ? "other " : "");
+    }
     printf("\n");
     printf("bounds      (%.5g, %.5g, %.5g) .. (%.5g, %.5g, %.5g)\n", in.bbox_min[0], in.bbox_min[1],
            in.bbox_min[2], in.bbox_max[0], in.bbox_max[1], in.bbox_max[2]);

@@ -140,8 +140,8 @@ check "info: the Cornell box's shadow ray" contains "$T/out" \
 check "info: the photon budget's three counts" contains "$T/out" 'with 262144, 524288 or 1048576 photon paths per pass'
 check "info: the renderer's memory before any pass" lacks "$T/out" 'renderer 0.0 MiB'
 run "$APPM" info scenes/stanford-bunny.obj
-check "info: the studio's sky takes two shadow rays (docs/algorithm.md 5.10)" contains "$T/out" \
-    'shadow rays 2 a shading point: two to the light'
+check "info: the studio's sky takes four shadow rays (docs/algorithm.md 5.10)" contains "$T/out" \
+    'shadow rays 4 a shading point: four to the light'
 
 # ---- render: every method to every format -------------------------------------
 

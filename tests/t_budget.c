@@ -28,7 +28,7 @@
  *   4. The committed scenes the rule was set on (docs/algorithm.md 5.12):
  *      caustic-glass takes 4 w h, the bunny 2 w h, CornellBox-Original w h,
  *      and the studio (a bare OBJ) w h, which it keeps whatever its count
- *      (E / P 1.27 with its two sky samples a shading point: 2 w h without
+ *      (E / P 1.63 with its four sky samples a shading point: 2 w h without
  *      the studio's exception).
  */
 #include "../appm.c"

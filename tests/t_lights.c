@@ -384,7 +384,7 @@ static void test_studio(void)
     CHECK(fabsf(s->focus_r - sqrtf(3.0f)) < 1e-4f);
     appm_scene_get_info(s, &in);
     CHECK(in.lights_environment == 1 && in.environment_map_width == 128 && in.environment_map_height == 64);
-    CHECK(in.shadow_rays_samples == 2); /* the sky's two a shading point (appm__direct) */
+    CHECK(in.shadow_rays_samples == APPM__SKY_SAMPLES); /* the sky's four a shading point (appm__direct) */
     for (t = 0; t < s->ntri; ++t)
         if (s->info[t].ng.y > 0.999f && s->tri[t].p0.y < -1.0f && s->tri[t].p0.y > -1.01f) {
             plate++;
@@ -655,8 +655,8 @@ static void focus_ratios(appm_scene *s, int passes, double *image)
  * photons aimed and spared the roulette at their first hit, or not); under the
  * studio's sky and under a constant environment set on the scene (the aim
  * stays), which takes the other branch of the sky's emission.  Under the sky
- * the direct term differs too: its two samples a shading point are weighed
- * by 1/2 each, and weighed by 1 the image's mean reads +0.75. */
+ * the direct term differs too: its four samples a shading point are weighed
+ * by 1/4 each, and weighed by 1 the image's mean reads +2.24. */
 static void test_focus_unbiased(void)
 {
     appm_scene *s = studio_sphere();
@@ -711,16 +711,16 @@ static void test_focus_roulette(void)
     appm_scene_destroy(s);
 }
 
-/* The studio's two sky samples a shading point (appm__direct, docs/algorithm.md
- * 5.10): the second is the first's numbers turned by 1/2, so the two are
+/* The studio's four sky samples a shading point (appm__direct, docs/algorithm.md
+ * 5.10): the t-th is the first's numbers turned by t/4, so the four are
  * stratified against each other.  At a point of the plate beside the sphere,
- * over 256 passes of one pixel's numbers: the two samples' mean has the same
- * mean as one sample and 0.465 of its spread across passes (a second sample
- * equal to the first gives the same spread, ratio 1; two independent ones
- * 1/2).  And each sample is a shadow ray the photon budget counts (12.2):
- * a pass of the studio casts one eye ray more for each shading point than the
- * same pass with one sample. */
-static void test_sky_two_samples(void)
+ * over 256 passes of one pixel's numbers: the four samples' mean has the same
+ * mean as one sample and 0.174 of its spread across passes (four equal samples
+ * give the same spread, ratio 1; four independent ones 1/4; two turned by 1/2,
+ * as until 0.1.7, 0.465).  And each sample is a shadow ray the photon budget
+ * counts (12.2): a pass of the studio casts three eye rays more for each
+ * shading point than the same pass with one sample. */
+static void test_sky_samples(void)
 {
     appm_scene *s = studio_sphere();
     appm_config cfg;
@@ -739,9 +739,10 @@ static void test_sky_two_samples(void)
         double sum[2] = {0, 0}, sq[2] = {0, 0}, var[2];
         uint64_t rays[2], points = 0;
         const int N = 256;
+        const unsigned n = APPM__SKY_SAMPLES;
         int j, k;
         size_t i;
-        CHECK(appm__nee_samples(s) == 2);
+        CHECK(appm__nee_samples(s) == n && n == 4);
         appm__ray_init(&ray, appm__v(1.3f, 5.0f, 0.4f), appm__v(0.0f, -1.0f, 0.0f), FLT_MAX);
         CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
         appm__surface(s, &h, &sf);
@@ -751,17 +752,17 @@ static void test_sky_two_samples(void)
                 appm__sampler smp;
                 double v;
                 appm__sampler_eye(&smp, r->sobol, r->chains, r->seed, (uint64_t)j, 7);
-                v = appm__lum(appm__direct(r, &sf, m, appm__v(0.0f, 1.0f, 0.0f), &smp, 0, k ? 1u : 2u));
+                v = appm__lum(appm__direct(r, &sf, m, appm__v(0.0f, 1.0f, 0.0f), &smp, 0, k ? 1u : n));
                 sum[k] += v;
                 sq[k] += v * v;
             }
         for (k = 0; k < 2; ++k) var[k] = (sq[k] - sum[k] * sum[k] / N) / (N - 1);
-        printf("the studio's plate: %.4f with two sky samples, %.4f with one; spread %.3g against %.3g (%.3f)\n",
-               sum[0] / N, sum[1] / N, var[0], var[1], var[0] / var[1]);
+        printf("the studio's plate: %.4f with %u sky samples, %.4f with one; spread %.3g against %.3g (%.3f)\n",
+               sum[0] / N, n, sum[1] / N, var[0], var[1], var[0] / var[1]);
         CHECK_NEAR(sum[0] / N, sum[1] / N, 0.03 * sum[1] / N);
-        CHECK_MSG(var[1] > 0.0 && var[0] < 0.75 * var[1], "two samples' spread %.3f of one's, not below 0.75",
+        CHECK_MSG(var[1] > 0.0 && var[0] < 0.38 * var[1], "four samples' spread %.3f of one's, not below 0.38",
                   var[1] > 0.0 ? var[0] / var[1] : 0.0);
-        for (k = 0; k < 2; ++k) { /* one pass with two samples, one with one: the eye rays it counts */
+        for (k = 0; k < 2; ++k) { /* one pass with four samples, one with one: the eye rays it counts */
             int sky = s->env_auto;
             if (k) s->env_auto = 0;
             r->pass = 0;
@@ -770,8 +771,8 @@ static void test_sky_two_samples(void)
             s->env_auto = sky;
         }
         for (i = 0; i < (size_t)r->w * r->h; ++i) points += r->vp[i].segs > 0;
-        CHECK_MSG(points > 100 && rays[0] - rays[1] == points,
-                  "eye rays %llu with two sky samples, %llu with one: %llu more, for %llu shading points",
+        CHECK_MSG(points > 100 && rays[0] - rays[1] == (n - 1) * points,
+                  "eye rays %llu with four sky samples, %llu with one: %llu more, for %llu shading points",
                   (unsigned long long)rays[0], (unsigned long long)rays[1],
                   (unsigned long long)(rays[0] - rays[1]), (unsigned long long)points);
         appm_renderer_destroy(r);
@@ -814,7 +815,7 @@ int main(void)
     test_focus_threads();
     test_focus_unbiased();
     test_focus_roulette();
-    test_sky_two_samples();
+    test_sky_samples();
     test_studio();
     test_focus_bounce();
     test_focus_oblique();
