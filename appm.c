@@ -9326,8 +9326,10 @@ static void appm__env_grid_guide(const double *c, uint32_t w, uint32_t h, uint32
         appm__cdf_guide(c + (h + 1) + (size_t)y * (w + 1), (int)w, g + (size_t)(y + 1) * (APPM__CDF_G + 1));
 }
 
-/* A direction *d from (u1, u2) with its solid-angle density (0: none). */
-static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v3 *d)
+/* A direction *d from (u1, u2) with its solid-angle density (0: none), and
+ * its place (*eu, *ev) in the map: the caller looks L up there, not at
+ * appm__env_uv(*d), which would cost an acos and an atan2 to find it again. */
+static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v3 *d, double *eu, double *ev)
 {
     int y, x;
     float u, v;
@@ -9335,6 +9337,8 @@ static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v
     appm__env_grid_invert(e->cdf, e->guide, e->w, e->h, u1, u2, &u, &v, &x, &y);
     st = sin(APPM__PI * (double)v);
     *d = appm__env_dir(e, u, v);
+    *eu = u;
+    *ev = v;
     if (!(st > 0.0)) return 0.0f;
     return (float)appm__env_cell_pdf(e->cdf, e->w, e->h, (uint32_t)x, (uint32_t)y, st);
 }
@@ -9417,14 +9421,18 @@ static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double 
     return appm__env_grid_pdf(appm__env_prod_cdf(e, bin), e->pw, e->ph, u, v, st);
 }
 
-/* A direction *d drawn from bin `bin`'s product density (which must exist). */
-static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1, float u2, appm__v3 *d)
+/* A direction *d drawn from bin `bin`'s product density (which must exist),
+ * and its place (*eu, *ev) in the map (as appm__env_sample). */
+static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1, float u2, appm__v3 *d, double *eu,
+                                  double *ev)
 {
     int y, x;
     float u, v;
     appm__env_grid_invert(appm__env_prod_cdf(e, bin), appm__env_prod_guide(e, bin), e->pw, e->ph, u1, u2, &u, &v,
                           &x, &y);
     *d = appm__env_dir(e, u, v);
+    *eu = u;
+    *ev = v;
 }
 
 /* The product densities of every bin, from e->rgb; a bin whose hemisphere
@@ -9996,14 +10004,19 @@ static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, ap
         if (!(r > 0.0f)) return 0;
         if (s->envmap.rgb) { /* the direction light arrives from by the map's density; the photon travels against it */
             appm__v3 wl;
-            float pdf = APPM_ENV_UNIFORM ? (float)(0.25 * APPM__INV_PI) : appm__env_sample(&s->envmap, u1, u2, &wl);
-            if (APPM_ENV_UNIFORM) wl = appm__uniform_sphere(u1, u2);
+            double eu = 0.0, ev = 0.0; /* its place in the map */
+            float pdf = APPM_ENV_UNIFORM ? (float)(0.25 * APPM__INV_PI)
+                                         : appm__env_sample(&s->envmap, u1, u2, &wl, &eu, &ev);
+            if (APPM_ENV_UNIFORM) {
+                wl = appm__uniform_sphere(u1, u2);
+                appm__env_uv(&s->envmap, wl, &eu, &ev);
+            }
             if (!(pdf > 0.0f)) return 0;
             d = appm__neg(wl);
             appm__basis(d, &t, &b);
             if (s->focus_r > 0.0f) area = appm__focus_disk(s, d, t, b, u3, u4, &px, &py);
             /* gamma = L(wl) / (pick * p(wl) * (1/area)), area = pi R^2 without a focus */
-            ps->gamma = appm__scale(appm__env_lookup(&s->envmap, wl), (float)(area / (l->pick * pdf)));
+            ps->gamma = appm__scale(appm__env_lookup_uv(&s->envmap, eu, ev), (float)(area / (l->pick * pdf)));
         } else {
             d = appm__uniform_sphere(u1, u2);
             appm__basis(d, &t, &b);
@@ -10063,13 +10076,16 @@ static int appm__sample_light_k(const appm_scene *s, uint32_t li, double pick, c
             const float a = prod ? (float)APPM__ENV_MIX_COS : 0.5f;                  /* [0, a): the cosine */
             const float b = prod ? (float)(1.0 - APPM__ENV_MIX_PROD) : 1.0f;         /* [a, b): the map */
             double eu = 0.0, ev = 0.0; /* the direction's place in the map */
-            if (APPM_ENV_UNIFORM) ls->wi = appm__cosine_dir(n, u1, u2);
-            else if (u1 < a) ls->wi = appm__cosine_dir(n, u1 / a, u2);
-            else if (u1 < b) appm__env_sample(e, (u1 - a) / (b - a), u2, &ls->wi);
-            else appm__env_prod_sample(e, bin, (u1 - b) / (1.0f - b), u2, &ls->wi);
+            if (APPM_ENV_UNIFORM || u1 < a) { /* the cosine: its place in the map from the direction */
+                ls->wi = APPM_ENV_UNIFORM ? appm__cosine_dir(n, u1, u2) : appm__cosine_dir(n, u1 / a, u2);
+                appm__env_uv(e, ls->wi, &eu, &ev);
+            } else if (u1 < b) {
+                appm__env_sample(e, (u1 - a) / (b - a), u2, &ls->wi, &eu, &ev);
+            } else {
+                appm__env_prod_sample(e, bin, (u1 - b) / (1.0f - b), u2, &ls->wi, &eu, &ev);
+            }
             c = appm__dot(ls->wi, n);
             if (!(c > 0.0f)) return 0;
-            appm__env_uv(e, ls->wi, &eu, &ev);
             ls->pdf = (float)(pick * appm__env_mix_pdf(e, bin, eu, ev, c));
             if (!(ls->pdf > 0.0f)) return 0;
             ls->li = appm__scale(appm__env_lookup_uv(e, eu, ev), 1.0f / ls->pdf);

@@ -501,16 +501,27 @@ static void test_env_guides(void)
     CHECK(m.live == 0);
 }
 
+/* Whether (du, dv), the place a sampler returns, is (u, v) = appm__env_uv of the
+ * direction it returns, to float rounding (u wraps around at 1; at the poles u
+ * is any). */
+static int same_place(double u, double v, double du, double dv)
+{
+    double w = fabs(u - du);
+    w = w > 0.5 ? 1.0 - w : w;
+    return fabs(v - dv) < 1e-5 && (w < 1e-5 || dv < 1e-4 || dv > 1.0 - 1e-4);
+}
+
 /* The sampler draws directions with the density appm__env_pdf says (chi-square
- * over the texels), the density it returns is that density, and the density
- * integrates to 1 over the sphere. */
+ * over the texels), the density it returns is that density and the place in
+ * the map it returns is the direction's, and the density integrates to 1 over
+ * the sphere. */
 static void test_env_sampler(void)
 {
     appm__mem m;
     appm__envmap e;
     const uint32_t W = 16, H = 8, N = check_quick() ? 200000 : 1000000;
     double *count, chi2 = 0.0, integral = 0.0, expect_sum = 0.0;
-    uint32_t i, x, y, mismatch = 0;
+    uint32_t i, x, y, mismatch = 0, misplaced = 0;
     int dof = 0;
     appm__mem_init(&m, NULL);
     CHECK(make_env(&m, &e, W, H, 11, 2, 0.0));
@@ -519,11 +530,12 @@ static void test_env_sampler(void)
     for (i = 0; i < N; ++i) {
         appm__v3 d;
         float u1 = (float)((i + 0.5) / N), u2 = (float)vdc(i), p;
-        double u, v;
-        p = appm__env_sample(&e, u1, u2, &d);
+        double u, v, du, dv;
+        p = appm__env_sample(&e, u1, u2, &d, &du, &dv);
         if (!(p > 0.0f)) continue;
         if (fabsf(appm__env_pdf(&e, d) - p) > 1e-3f * p) mismatch++;
         appm__env_uv(&e, d, &u, &v);
+        if (!same_place(u, v, du, dv)) misplaced++;
         x = (uint32_t)(u * W);
         y = (uint32_t)(v * H);
         if (x >= W) x = W - 1;
@@ -531,6 +543,7 @@ static void test_env_sampler(void)
         count[(size_t)y * W + x] += 1.0;
     }
     CHECK_MSG(mismatch == 0, "%u samples whose returned density is not appm__env_pdf's", mismatch);
+    CHECK_MSG(misplaced == 0, "%u samples whose returned place is not their direction's", misplaced);
     for (y = 0; y < H; ++y)
         for (x = 0; x < W; ++x) { /* expected count: the texel's probability, N (cdf steps) */
             const double *cr = e.cdf + (H + 1) + (size_t)y * (W + 1);
@@ -565,7 +578,7 @@ static void test_env_product(void)
     appm__mem m;
     appm__envmap e;
     const uint32_t N = check_quick() ? 200000 : 1000000;
-    uint32_t b, i, x, y, bad_bin = 0, stray = 0;
+    uint32_t b, i, x, y, bad_bin = 0, stray = 0, misplaced = 0;
     double *count, chi2 = 0.0;
     int dof = 0;
     appm__mem_init(&m, NULL);
@@ -593,9 +606,10 @@ static void test_env_product(void)
     b = (APPM__ENV_BINS - 1) / 2;
     for (i = 0; i < N; ++i) {
         appm__v3 d;
-        double u, v;
-        appm__env_prod_sample(&e, b, (float)((i + 0.5) / N), (float)vdc(i), &d);
+        double u, v, du, dv;
+        appm__env_prod_sample(&e, b, (float)((i + 0.5) / N), (float)vdc(i), &d, &du, &dv);
         appm__env_uv(&e, d, &u, &v);
+        if (!same_place(u, v, du, dv)) misplaced++;
         x = (uint32_t)(u * e.pw);
         y = (uint32_t)(v * e.ph);
         count[(size_t)(y < e.ph ? y : e.ph - 1) * e.pw + (x < e.pw ? x : e.pw - 1)] += 1.0;
@@ -611,6 +625,7 @@ static void test_env_product(void)
         }
     CHECK_MSG(dof > 1000 && chi2 < dof + 4.0 * sqrt(2.0 * dof), "chi2 %g with %d degrees of freedom", chi2, dof);
     CHECK_MSG(stray == 0, "%u cells of density 0 drawn", stray);
+    CHECK_MSG(misplaced == 0, "%u draws whose returned place is not their direction's", misplaced);
     free(count);
     appm__envmap_free(&m, &e);
     CHECK(m.live == 0);
