@@ -9261,10 +9261,31 @@ static appm__v3 appm__env_lookup(const appm__envmap *e, appm__v3 d)
     return appm__env_lookup_uv(e, u, v);
 }
 
+/* The direction at (u, v), whose sin theta = sin(pi v) is st. */
+static appm__v3 appm__env_dir_st(const appm__envmap *e, double u, double v, double st)
+{
+    double theta = APPM__PI * v, phi = 2.0 * APPM__PI * u + e->rot;
+    return appm__v((float)(st * sin(phi)), (float)cos(theta), (float)(-st * cos(phi)));
+}
+
 static appm__v3 appm__env_dir(const appm__envmap *e, double u, double v)
 {
-    double theta = APPM__PI * v, phi = 2.0 * APPM__PI * u + e->rot, st = sin(theta);
-    return appm__v((float)(st * sin(phi)), (float)cos(theta), (float)(-st * cos(phi)));
+    return appm__env_dir_st(e, u, v, sin(APPM__PI * v));
+}
+
+/* A direction's place in the map, (u, v) of appm__env_uv, and st = sin(pi v):
+ * what its radiance and every density of it read.  A sampler returns the place
+ * it drew, so that none of them is found again from the direction (an acos,
+ * an atan2 and sines). */
+typedef struct appm__env_place {
+    double u, v, st;
+} appm__env_place;
+
+/* The place of direction d. */
+static void appm__env_place_of(const appm__envmap *e, appm__v3 d, appm__env_place *pl)
+{
+    appm__env_uv(e, d, &pl->u, &pl->v);
+    pl->st = sin(APPM__PI * pl->v);
 }
 
 /* The solid-angle density of (u, v) under the piecewise-constant density
@@ -9327,18 +9348,18 @@ static void appm__env_grid_guide(const double *c, uint32_t w, uint32_t h, uint32
 }
 
 /* A direction *d from (u1, u2) with its solid-angle density (0: none), and
- * its place (*eu, *ev) in the map: the caller looks L up there, not at
- * appm__env_uv(*d), which would cost an acos and an atan2 to find it again. */
-static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v3 *d, double *eu, double *ev)
+ * its place *pl in the map. */
+static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v3 *d, appm__env_place *pl)
 {
     int y, x;
     float u, v;
     double st;
     appm__env_grid_invert(e->cdf, e->guide, e->w, e->h, u1, u2, &u, &v, &x, &y);
     st = sin(APPM__PI * (double)v);
-    *d = appm__env_dir(e, u, v);
-    *eu = u;
-    *ev = v;
+    *d = appm__env_dir_st(e, u, v, st);
+    pl->u = u;
+    pl->v = v;
+    pl->st = st;
     if (!(st > 0.0)) return 0.0f;
     return (float)appm__env_cell_pdf(e->cdf, e->w, e->h, (uint32_t)x, (uint32_t)y, st);
 }
@@ -9422,17 +9443,18 @@ static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double 
 }
 
 /* A direction *d drawn from bin `bin`'s product density (which must exist),
- * and its place (*eu, *ev) in the map (as appm__env_sample). */
-static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1, float u2, appm__v3 *d, double *eu,
-                                  double *ev)
+ * and its place *pl in the map. */
+static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1, float u2, appm__v3 *d,
+                                  appm__env_place *pl)
 {
     int y, x;
     float u, v;
     appm__env_grid_invert(appm__env_prod_cdf(e, bin), appm__env_prod_guide(e, bin), e->pw, e->ph, u1, u2, &u, &v,
                           &x, &y);
-    *d = appm__env_dir(e, u, v);
-    *eu = u;
-    *ev = v;
+    pl->u = u;
+    pl->v = v;
+    pl->st = sin(APPM__PI * pl->v);
+    *d = appm__env_dir_st(e, u, v, pl->st);
 }
 
 /* The product densities of every bin, from e->rgb; a bin whose hemisphere
@@ -9693,15 +9715,14 @@ static double appm__env_pinpoint(const appm__envmap *e, double omega)
  * cosine to n. */
 #define APPM__ENV_MIX_COS 0.125 /* the cosine's share, where n's bin has a product density */
 #define APPM__ENV_MIX_PROD 0.5  /* the product density's; the map's is the rest */
-static double appm__env_mix_pdf(const appm__envmap *e, uint32_t bin, double u, double v, float cos_n)
+static double appm__env_mix_pdf(const appm__envmap *e, uint32_t bin, const appm__env_place *pl, float cos_n)
 {
-    double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm, st;
+    double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm;
     if (APPM_ENV_UNIFORM) return pc;
-    st = sin(APPM__PI * v); /* once, for the map's grid and the product's */
-    pm = appm__env_pdf_uv(e, u, v, st);
+    pm = appm__env_pdf_uv(e, pl->u, pl->v, pl->st);
     if (e->pcdf && e->pok[bin])
         return APPM__ENV_MIX_COS * pc + (1.0 - APPM__ENV_MIX_COS - APPM__ENV_MIX_PROD) * pm +
-               APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, u, v, st);
+               APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, pl->u, pl->v, pl->st);
     return 0.5 * pm + 0.5 * pc;
 }
 
@@ -10004,19 +10025,18 @@ static int appm__emit_light(const appm_scene *s, uint32_t li, const float *u, ap
         if (!(r > 0.0f)) return 0;
         if (s->envmap.rgb) { /* the direction light arrives from by the map's density; the photon travels against it */
             appm__v3 wl;
-            double eu = 0.0, ev = 0.0; /* its place in the map */
-            float pdf = APPM_ENV_UNIFORM ? (float)(0.25 * APPM__INV_PI)
-                                         : appm__env_sample(&s->envmap, u1, u2, &wl, &eu, &ev);
+            appm__env_place pl; /* its place in the map */
+            float pdf = APPM_ENV_UNIFORM ? (float)(0.25 * APPM__INV_PI) : appm__env_sample(&s->envmap, u1, u2, &wl, &pl);
             if (APPM_ENV_UNIFORM) {
                 wl = appm__uniform_sphere(u1, u2);
-                appm__env_uv(&s->envmap, wl, &eu, &ev);
+                appm__env_place_of(&s->envmap, wl, &pl);
             }
             if (!(pdf > 0.0f)) return 0;
             d = appm__neg(wl);
             appm__basis(d, &t, &b);
             if (s->focus_r > 0.0f) area = appm__focus_disk(s, d, t, b, u3, u4, &px, &py);
             /* gamma = L(wl) / (pick * p(wl) * (1/area)), area = pi R^2 without a focus */
-            ps->gamma = appm__scale(appm__env_lookup_uv(&s->envmap, eu, ev), (float)(area / (l->pick * pdf)));
+            ps->gamma = appm__scale(appm__env_lookup_uv(&s->envmap, pl.u, pl.v), (float)(area / (l->pick * pdf)));
         } else {
             d = appm__uniform_sphere(u1, u2);
             appm__basis(d, &t, &b);
@@ -10075,20 +10095,20 @@ static int appm__sample_light_k(const appm_scene *s, uint32_t li, double pick, c
             const int prod = e->pcdf && e->pok[bin];
             const float a = prod ? (float)APPM__ENV_MIX_COS : 0.5f;                  /* [0, a): the cosine */
             const float b = prod ? (float)(1.0 - APPM__ENV_MIX_PROD) : 1.0f;         /* [a, b): the map */
-            double eu = 0.0, ev = 0.0; /* the direction's place in the map */
+            appm__env_place pl; /* the direction's place in the map */
             if (APPM_ENV_UNIFORM || u1 < a) { /* the cosine: its place in the map from the direction */
                 ls->wi = APPM_ENV_UNIFORM ? appm__cosine_dir(n, u1, u2) : appm__cosine_dir(n, u1 / a, u2);
-                appm__env_uv(e, ls->wi, &eu, &ev);
+                appm__env_place_of(e, ls->wi, &pl);
             } else if (u1 < b) {
-                appm__env_sample(e, (u1 - a) / (b - a), u2, &ls->wi, &eu, &ev);
+                appm__env_sample(e, (u1 - a) / (b - a), u2, &ls->wi, &pl);
             } else {
-                appm__env_prod_sample(e, bin, (u1 - b) / (1.0f - b), u2, &ls->wi, &eu, &ev);
+                appm__env_prod_sample(e, bin, (u1 - b) / (1.0f - b), u2, &ls->wi, &pl);
             }
             c = appm__dot(ls->wi, n);
             if (!(c > 0.0f)) return 0;
-            ls->pdf = (float)(pick * appm__env_mix_pdf(e, bin, eu, ev, c));
+            ls->pdf = (float)(pick * appm__env_mix_pdf(e, bin, &pl, c));
             if (!(ls->pdf > 0.0f)) return 0;
-            ls->li = appm__scale(appm__env_lookup_uv(e, eu, ev), 1.0f / ls->pdf);
+            ls->li = appm__scale(appm__env_lookup_uv(e, pl.u, pl.v), 1.0f / ls->pdf);
         } else { /* a constant: by the cosine, the product's best */
             ls->wi = appm__cosine_dir(n, u1, u2);
             c = appm__dot(ls->wi, n);
@@ -14471,16 +14491,16 @@ static float appm__pt_env(const appm_scene *s, appm__v3 d, int prev_specular, fl
                           appm__v3 *Le)
 {
     float w = 1.0f;
-    double eu = 0.0, ev = 0.0; /* the map's place of d, for its density and its radiance */
-    if (s->envmap.rgb) appm__env_uv(&s->envmap, d, &eu, &ev);
+    appm__env_place pl = {0.0, 0.0, 0.0}; /* the map's place of d, for its density and its radiance */
+    if (s->envmap.rgb) appm__env_place_of(&s->envmap, d, &pl);
     if (!prev_specular) {
         float c = appm__dot(d, prev_ns);
         if (s->envmap.rgb)
             w = appm__mis(prev_pdf, (float)(s->light[s->env].nee[1] *
-                                            appm__env_mix_pdf(&s->envmap, appm__env_bin(prev_ns), eu, ev, c)));
+                                            appm__env_mix_pdf(&s->envmap, appm__env_bin(prev_ns), &pl, c)));
         /* else a constant environment, which the light samples leave to this ray (6.4): w = 1 */
     }
-    *Le = s->envmap.rgb ? appm__env_lookup_uv(&s->envmap, eu, ev) : s->light[s->env].value;
+    *Le = s->envmap.rgb ? appm__env_lookup_uv(&s->envmap, pl.u, pl.v) : s->light[s->env].value;
     return w;
 }
 

@@ -501,14 +501,15 @@ static void test_env_guides(void)
     CHECK(m.live == 0);
 }
 
-/* Whether (du, dv), the place a sampler returns, is (u, v) = appm__env_uv of the
+/* Whether pl, the place a sampler returns, is (u, v) = appm__env_uv of the
  * direction it returns, to float rounding (u wraps around at 1; at the poles u
- * is any). */
-static int same_place(double u, double v, double du, double dv)
+ * is any), with st = sin(pi v) to the bit. */
+static int same_place(double u, double v, const appm__env_place *pl)
 {
-    double w = fabs(u - du);
+    double w = fabs(u - pl->u);
     w = w > 0.5 ? 1.0 - w : w;
-    return fabs(v - dv) < 1e-5 && (w < 1e-5 || dv < 1e-4 || dv > 1.0 - 1e-4);
+    return fabs(v - pl->v) < 1e-5 && (w < 1e-5 || pl->v < 1e-4 || pl->v > 1.0 - 1e-4) &&
+           pl->st == sin(CHECK_PI * pl->v);
 }
 
 /* The sampler draws directions with the density appm__env_pdf says (chi-square
@@ -530,12 +531,13 @@ static void test_env_sampler(void)
     for (i = 0; i < N; ++i) {
         appm__v3 d;
         float u1 = (float)((i + 0.5) / N), u2 = (float)vdc(i), p;
-        double u, v, du, dv;
-        p = appm__env_sample(&e, u1, u2, &d, &du, &dv);
+        double u, v;
+        appm__env_place pl;
+        p = appm__env_sample(&e, u1, u2, &d, &pl);
         if (!(p > 0.0f)) continue;
         if (fabsf(appm__env_pdf(&e, d) - p) > 1e-3f * p) mismatch++;
         appm__env_uv(&e, d, &u, &v);
-        if (!same_place(u, v, du, dv)) misplaced++;
+        if (!same_place(u, v, &pl)) misplaced++;
         x = (uint32_t)(u * W);
         y = (uint32_t)(v * H);
         if (x >= W) x = W - 1;
@@ -606,10 +608,11 @@ static void test_env_product(void)
     b = (APPM__ENV_BINS - 1) / 2;
     for (i = 0; i < N; ++i) {
         appm__v3 d;
-        double u, v, du, dv;
-        appm__env_prod_sample(&e, b, (float)((i + 0.5) / N), (float)vdc(i), &d, &du, &dv);
+        double u, v;
+        appm__env_place pl;
+        appm__env_prod_sample(&e, b, (float)((i + 0.5) / N), (float)vdc(i), &d, &pl);
         appm__env_uv(&e, d, &u, &v);
-        if (!same_place(u, v, du, dv)) misplaced++;
+        if (!same_place(u, v, &pl)) misplaced++;
         x = (uint32_t)(u * e.pw);
         y = (uint32_t)(v * e.ph);
         count[(size_t)(y < e.ph ? y : e.ph - 1) * e.pw + (x < e.pw ? x : e.pw - 1)] += 1.0;
