@@ -9883,50 +9883,53 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
  * A one-sample mixture is importance sampling with the mixture's density
  * (Veach's balance heuristic), so the photon's weight divided by that density
  * keeps every estimate unbiased, and the defensive shares keep every path
- * that was possible possible, with at most 1/share the weight.  Russian
+ * that can light what is seen possible, with at most 1/share the weight.  Russian
  * roulette decides on the weight the cosine lobe would have given, so that
  * aimed photons are not killed for their small weights.  Every other scene has
  * no focus and takes the lights' and materials' own distributions. */
 #define APPM__FOCUS_DISK 0.5f /* emission: the plate's share of the mixture (0.25, 0.75: 1.03x, 1.01x the RMSE) */
 #define APPM__FOCUS_COS 0.25f /* bounces: the cosine lobe's share of the mixture */
 
-/* The point on the emission disk (radius R, frame t, b around the scene's
+/* The point (*px, *py) on the emission disk (frame t, b around the scene's
  * centre, facing the photon's direction d) for (u3, u4), and 1 / its area
  * density.  A photon travelling down takes a share APPM__FOCUS_DISK of its
  * points uniform over the plate's shadow on the disk (a parallelogram, the
  * plate's area times |d.y|), the rest over the focus sphere's; one travelling
- * up can meet the plate only from below, where it lights nothing that is seen,
+ * up can meet the plate only from below, where its bounce leaves the scene,
  * and takes the focus sphere's alone.  The studio holds the plate and the
  * model, and the model lies in the focus sphere, so no photon that could
- * reach either is left out. */
+ * light what is seen is left out.  A point counts as in the shadow it was
+ * drawn from even where rounding would put it a hair outside (the plate's,
+ * seen almost edge on, would otherwise lose most of its points); the other
+ * shadow is tested in double. */
 static float appm__focus_disk(const appm_scene *s, appm__v3 d, appm__v3 t, appm__v3 b, float u3, float u4,
                               float *px, float *py)
 {
     const double e = s->plate_e, rf = s->focus_r;
     const double a = d.y < 0.0f ? APPM__FOCUS_DISK : 0.0; /* the plate's share */
     appm__v3 rel = appm__sub(s->focus, s->center), pc = appm__sub(s->plate, s->center);
-    double fx = appm__dot(rel, t), fy = appm__dot(rel, b), dx, dy, p = 0.0, hx, hz, k;
-    appm__v3 q;
-    if (u3 < a) { /* a point of the plate, moved along d onto the disk */
-        q = appm__add(pc, appm__v((float)(e * (2.0 * u3 / a - 1.0)), 0.0f, (float)(e * (2.0 * u4 - 1.0))));
-        *px = appm__dot(q, t);
-        *py = appm__dot(q, b);
+    double fx = appm__dot(rel, t), fy = appm__dot(rel, b), x, y, p = 0.0;
+    int plate = u3 < a, focus = !plate;
+    if (plate) { /* a point of the plate, moved along d onto the disk */
+        double qx = pc.x + e * (2.0 * u3 / a - 1.0), qz = pc.z + e * (2.0 * u4 - 1.0);
+        x = qx * t.x + (double)pc.y * t.y + qz * t.z;
+        y = qx * b.x + (double)pc.y * b.y + qz * b.z;
+        focus = (x - fx) * (x - fx) + (y - fy) * (y - fy) <= rf * rf;
     } else {
         double rr = rf * sqrt((u3 - a) / (1.0 - a)), phi = 2.0 * APPM__PI * u4;
-        *px = (float)(fx + rr * cos(phi));
-        *py = (float)(fy + rr * sin(phi));
+        x = fx + rr * cos(phi);
+        y = fy + rr * sin(phi);
+        if (a > 0.0) { /* where the line from (x, y) along d meets the plate's plane */
+            double qx = x * t.x + y * b.x, qy = x * t.y + y * b.y, qz = x * t.z + y * b.z;
+            double k = ((double)pc.y - qy) / d.y;
+            plate = fabs(qx + k * d.x - pc.x) <= e && fabs(qz + k * d.z - pc.z) <= e;
+        }
     }
-    dx = *px - fx;
-    dy = *py - fy;
-    if (dx * dx + dy * dy <= rf * rf) p += (1.0 - a) / (APPM__PI * rf * rf);
-    if (a > 0.0) { /* where the line from the disk's point along d meets the plate's plane */
-        q = appm__add(appm__scale(t, *px), appm__scale(b, *py));
-        k = ((double)pc.y - q.y) / d.y;
-        hx = q.x + k * d.x - pc.x;
-        hz = q.z + k * d.z - pc.z;
-        if (fabs(hx) <= e && fabs(hz) <= e) p += a / (4.0 * e * e * -(double)d.y);
-    }
-    return p > 0.0 && p < 1e30 ? (float)(1.0 / p) : 0.0f; /* 0: rounding put it outside both */
+    if (focus) p += (1.0 - a) / (APPM__PI * rf * rf);
+    if (plate) p += a / (4.0 * e * e * -(double)d.y);
+    *px = (float)x;
+    *py = (float)y;
+    return p < 1e30 ? (float)(1.0 / p) : 0.0f; /* 0: the plate so nearly edge on that its density overflows */
 }
 
 /* Whether a photon's bounce off material m at sf is aimed (the studio's focus,

@@ -310,11 +310,12 @@ typedef enum appm_stand_in {
                                * environment map), a grey ground plate (albedo 0.5) under
                                * the model's bounding box, 2 of its bounding radii each
                                * way, and the camera 20 degrees above, framing the model;
-                               * its photons are aimed at the model and the plate (half
-                               * the sky's emission at the model, half at the plate, none
-                               * elsewhere; three quarters of the bounces off the plate at
-                               * the model), with weights that keep every estimate
-                               * unbiased (appm.c 6.3)                                    */
+                               * its photons are aimed at the model and the plate (of the
+                               * sky's photons travelling down half at the model, half at
+                               * the plate, none elsewhere; those travelling up at the
+                               * model; three quarters of the bounces off the plate at the
+                               * model), with weights that keep every estimate unbiased
+                               * (appm.c 6.3)                                              */
     APPM_STAND_IN_WHITE       /* a constant white environment of radiance 1 and the camera
                                * looking along -z: a furnace, as earlier versions lit it   */
 } appm_stand_in;

@@ -387,10 +387,15 @@ static void test_studio(void)
     CHECK(in.shadow_rays_samples == APPM__SKY_SAMPLES); /* the sky's four a shading point (appm__direct) */
     for (t = 0; t < s->ntri; ++t)
         if (s->info[t].ng.y > 0.999f && s->tri[t].p0.y < -1.0f && s->tri[t].p0.y > -1.01f) {
+            const appm__v3 p[3] = {s->tri[t].p0, s->tri[t].p1, s->tri[t].p2};
+            int k;
             plate++;
             CHECK(s->mat[s->info[t].mat].color.x == 0.5f && s->info[t].area > 3.9f);
+            for (k = 0; k < 3; ++k) /* the plate the emission aims at (appm__focus_disk) is this one */
+                CHECK(p[k].y == s->plate.y && fabsf(fabsf(p[k].x - s->plate.x) - s->plate_e) < 1e-5f &&
+                      fabsf(fabsf(p[k].z - s->plate.z) - s->plate_e) < 1e-5f);
         }
-    CHECK(plate == 2);
+    CHECK(plate == 2 && s->plate_e > 2.0f * s->focus_r - 1e-5f);
     CHECK(s->cam.forward.y < -0.33f && s->cam.forward.y > -0.35f); /* 20 degrees down */
     {
         appm__v3 up = appm__env_radiance(s, appm__v(0, 1, 0)), down = appm__env_radiance(s, appm__v(0, -1, 0));
@@ -593,6 +598,22 @@ static void test_focus_disk(void)
         } else {
             CHECK(only == 0.0 && uni == focus);
         }
+    }
+    { /* a sun on the horizon: the plate's shadow a sliver 4e-6 wide, whose points
+       * must keep their density (the whole: the sphere's shadow and the sliver) */
+        appm__v3 d = appm__normalize(appm__v(0.6f, -1e-6f, 0.8f)), t, b;
+        double all = 0.0, want = APPM__PI * 0.25;
+        int i, k, zero = 0;
+        appm__basis(d, &t, &b);
+        for (i = 0; i < n; ++i)
+            for (k = 0; k < n; ++k) {
+                float x, y, area = appm__focus_disk(&sc, d, t, b, (i + 0.5f) / n, (k + 0.5f) / n, &x, &y);
+                zero += !(area > 0.0f);
+                all += area;
+            }
+        all /= (double)n * n;
+        CHECK(zero == 0);
+        CHECK_MSG(all > 0.997 * want && all < 1.003 * want + 4e-6, "edge on: %g against %g", all, want);
     }
 }
 

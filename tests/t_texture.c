@@ -512,6 +512,46 @@ static int same_place(double u, double v, const appm__env_place *pl)
            pl->st == sin(CHECK_PI * pl->v);
 }
 
+/* On a map turned by 33 degrees the place each draw returns (the map's own,
+ * unturned (u, v)) is still its direction's, and the radiance read there is
+ * the direction's: the map's draws and those of three product bins. */
+static void test_env_place_rotated(void)
+{
+    appm__mem m;
+    appm__envmap e;
+    const uint32_t N = 100000;
+    uint32_t i, b, misplaced = 0, off = 0;
+    appm__mem_init(&m, NULL);
+    if (!make_env(&m, &e, 32, 16, 23, 5, 33.0)) {
+        CHECK(0);
+        return;
+    }
+    for (b = 0; b < 4; ++b) /* b 0: the map; then bins 0, the middle one and the last */
+        for (i = 0; i < N; ++i) {
+            appm__v3 d, L, Ld;
+            double u, v;
+            appm__env_place pl;
+            uint32_t bin = b == 1 ? 0 : (b == 2 ? (APPM__ENV_BINS - 1) / 2 : APPM__ENV_BINS - 1);
+            float u1 = (float)((i + 0.5) / N), u2 = (float)vdc(i);
+            if (b == 0) {
+                if (!(appm__env_sample(&e, u1, u2, &d, &pl) > 0.0f)) continue;
+            } else {
+                if (!e.pok[bin]) continue;
+                appm__env_prod_sample(&e, bin, u1, u2, &d, &pl);
+            }
+            appm__env_uv(&e, d, &u, &v);
+            misplaced += !same_place(u, v, &pl);
+            L = appm__env_lookup_uv(&e, pl.u, pl.v);
+            Ld = appm__env_lookup(&e, d);
+            off += fabsf(L.x - Ld.x) > 1e-3f * (Ld.x + 1e-3f);
+        }
+    CHECK_MSG(misplaced == 0 && off == 0, "turned map: %u places not their direction's, %u radiances off", misplaced,
+              off);
+    appm__envmap_free(&m, &e);
+    CHECK(m.live == 0);
+}
+
+
 /* The sampler draws directions with the density appm__env_pdf says (chi-square
  * over the texels), the density it returns is that density and the place in
  * the map it returns is the direction's, and the density integrates to 1 over
@@ -985,6 +1025,7 @@ int main(void)
     test_cdf_invert();
     test_env_guides();
     test_env_sampler();
+    test_env_place_rotated();
     test_env_product();
     test_env_irradiance();
     test_env_orientation();
