@@ -9872,7 +9872,8 @@ static void appm__light_power(const appm_scene *s, const appm__light *l, double 
  * which the shadow rays count) and bounce back into the sky, and 1.5-2 % of
  * the paths are stored.  Most of the picture's photon noise is on the model
  * and on the plate around it.  So the studio's photons are aimed at the
- * model's bounding sphere (appm_scene.focus, focus_r) twice:
+ * model's bounding sphere (appm_scene.focus, focus_r) twice, and at the plate
+ * (appm_scene.plate, plate_e) once:
  *   emission   the environment's point on the disk facing its direction is
  *              drawn from a mixture: the plate's shadow on it (a share
  *              APPM__FOCUS_DISK) and the focus sphere's (a disk of radius
