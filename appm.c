@@ -9261,18 +9261,6 @@ static appm__v3 appm__env_lookup(const appm__envmap *e, appm__v3 d)
     return appm__env_lookup_uv(e, u, v);
 }
 
-/* The direction at (u, v), whose sin theta = sin(pi v) is st. */
-static appm__v3 appm__env_dir_st(const appm__envmap *e, double u, double v, double st)
-{
-    double theta = APPM__PI * v, phi = 2.0 * APPM__PI * u + e->rot;
-    return appm__v((float)(st * sin(phi)), (float)cos(theta), (float)(-st * cos(phi)));
-}
-
-static appm__v3 appm__env_dir(const appm__envmap *e, double u, double v)
-{
-    return appm__env_dir_st(e, u, v, sin(APPM__PI * v));
-}
-
 /* A direction's place in the map, (u, v) of appm__env_uv, and st = sin(pi v):
  * what its radiance and every density of it read.  A sampler returns the place
  * it drew, so that none of them is found again from the direction (an acos,
@@ -9280,6 +9268,22 @@ static appm__v3 appm__env_dir(const appm__envmap *e, double u, double v)
 typedef struct appm__env_place {
     double u, v, st;
 } appm__env_place;
+
+/* The direction at (u, v), and its place in *pl. */
+static appm__v3 appm__env_at(const appm__envmap *e, double u, double v, appm__env_place *pl)
+{
+    double theta = APPM__PI * v, phi = 2.0 * APPM__PI * u + e->rot, st = sin(theta);
+    pl->u = u;
+    pl->v = v;
+    pl->st = st;
+    return appm__v((float)(st * sin(phi)), (float)cos(theta), (float)(-st * cos(phi)));
+}
+
+static appm__v3 appm__env_dir(const appm__envmap *e, double u, double v)
+{
+    appm__env_place pl;
+    return appm__env_at(e, u, v, &pl);
+}
 
 /* The place of direction d. */
 static void appm__env_place_of(const appm__envmap *e, appm__v3 d, appm__env_place *pl)
@@ -9299,8 +9303,8 @@ static double appm__env_cell_pdf(const double *c, uint32_t w, uint32_t h, uint32
     return (c[y + 1] - c[y]) * (cr[x + 1] - cr[x]) * w * h / (2.0 * APPM__PI * APPM__PI * st);
 }
 
-/* st: sin(pi v), which a shadow ray's mixture (appm__env_mix_pdf) takes once
- * for the map's grid and the product's at the same (u, v). */
+/* st = sin(pi v), from the place (appm__env_place) that the map's grid and the
+ * product's both read in a shadow ray's mixture (appm__env_mix_pdf). */
 static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double u, double v, double st)
 {
     uint32_t x, y;
@@ -9313,18 +9317,18 @@ static double appm__env_grid_pdf(const double *c, uint32_t w, uint32_t h, double
 }
 
 /* The solid-angle density with which appm__env_sample draws the direction at
- * (u, v) of appm__env_uv (st = sin(pi v)). */
-static float appm__env_pdf_uv(const appm__envmap *e, double u, double v, double st)
+ * place pl. */
+static float appm__env_pdf_at(const appm__envmap *e, const appm__env_place *pl)
 {
-    return (float)appm__env_grid_pdf(e->cdf, e->w, e->h, u, v, st);
+    return (float)appm__env_grid_pdf(e->cdf, e->w, e->h, pl->u, pl->v, pl->st);
 }
 
 /* The same of direction d (the tests' entry: the library finds (u, v) once for both). */
 APPM__UNUSED static float appm__env_pdf(const appm__envmap *e, appm__v3 d)
 {
-    double u, v;
-    appm__env_uv(e, d, &u, &v);
-    return appm__env_pdf_uv(e, u, v, sin(APPM__PI * v));
+    appm__env_place pl;
+    appm__env_place_of(e, d, &pl);
+    return appm__env_pdf_at(e, &pl);
 }
 
 /* (u1, u2) to the place (*u, *v) of the grid density c of appm__env_grid_pdf:
@@ -9353,15 +9357,10 @@ static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v
 {
     int y, x;
     float u, v;
-    double st;
     appm__env_grid_invert(e->cdf, e->guide, e->w, e->h, u1, u2, &u, &v, &x, &y);
-    st = sin(APPM__PI * (double)v);
-    *d = appm__env_dir_st(e, u, v, st);
-    pl->u = u;
-    pl->v = v;
-    pl->st = st;
-    if (!(st > 0.0)) return 0.0f;
-    return (float)appm__env_cell_pdf(e->cdf, e->w, e->h, (uint32_t)x, (uint32_t)y, st);
+    *d = appm__env_at(e, u, v, pl);
+    if (!(pl->st > 0.0)) return 0.0f;
+    return (float)appm__env_cell_pdf(e->cdf, e->w, e->h, (uint32_t)x, (uint32_t)y, pl->st);
 }
 
 /* Product sampling.  A shading point's light from the map is the integral of
@@ -9435,11 +9434,11 @@ static uint32_t *appm__env_prod_guide(const appm__envmap *e, uint32_t bin)
 }
 
 /* The solid-angle density with which bin `bin`'s product density draws the
- * direction at (u, v) of appm__env_uv (0 where the bin has none; st = sin(pi v)). */
-static double appm__env_prod_pdf_uv(const appm__envmap *e, uint32_t bin, double u, double v, double st)
+ * direction at place pl (0 where the bin has none). */
+static double appm__env_prod_pdf_at(const appm__envmap *e, uint32_t bin, const appm__env_place *pl)
 {
     if (!e->pcdf || !e->pok[bin]) return 0.0;
-    return appm__env_grid_pdf(appm__env_prod_cdf(e, bin), e->pw, e->ph, u, v, st);
+    return appm__env_grid_pdf(appm__env_prod_cdf(e, bin), e->pw, e->ph, pl->u, pl->v, pl->st);
 }
 
 /* A direction *d drawn from bin `bin`'s product density (which must exist),
@@ -9451,10 +9450,7 @@ static void appm__env_prod_sample(const appm__envmap *e, uint32_t bin, float u1,
     float u, v;
     appm__env_grid_invert(appm__env_prod_cdf(e, bin), appm__env_prod_guide(e, bin), e->pw, e->ph, u1, u2, &u, &v,
                           &x, &y);
-    pl->u = u;
-    pl->v = v;
-    pl->st = sin(APPM__PI * pl->v);
-    *d = appm__env_dir_st(e, u, v, pl->st);
+    *d = appm__env_at(e, u, v, pl);
 }
 
 /* The product densities of every bin, from e->rgb; a bin whose hemisphere
@@ -9719,10 +9715,10 @@ static double appm__env_mix_pdf(const appm__envmap *e, uint32_t bin, const appm_
 {
     double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm;
     if (APPM_ENV_UNIFORM) return pc;
-    pm = appm__env_pdf_uv(e, pl->u, pl->v, pl->st);
+    pm = appm__env_pdf_at(e, pl);
     if (e->pcdf && e->pok[bin])
         return APPM__ENV_MIX_COS * pc + (1.0 - APPM__ENV_MIX_COS - APPM__ENV_MIX_PROD) * pm +
-               APPM__ENV_MIX_PROD * appm__env_prod_pdf_uv(e, bin, pl->u, pl->v, pl->st);
+               APPM__ENV_MIX_PROD * appm__env_prod_pdf_at(e, bin, pl);
     return 0.5 * pm + 0.5 * pc;
 }
 

@@ -594,7 +594,8 @@ static void test_focus_disk(void)
         if (dir == 0) {
             CHECK_NEAR(plate, want_plate, 3e-3 * want_plate);
             CHECK_NEAR(uni, grid, 3e-3 * grid);
-            CHECK_MSG(grid > want_plate + 0.1 && grid < want_plate + want_focus - 0.1, "union %g", grid); /* the two overlap in part */
+            /* the two shadows overlap in part */
+            CHECK_MSG(grid > want_plate + 0.1 && grid < want_plate + want_focus - 0.1, "union %g", grid);
         } else {
             CHECK(only == 0.0 && uni == focus);
         }
