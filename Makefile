@@ -12,7 +12,7 @@
 #                     make bench-sampler: --sampler qmc against random on every scene
 #                     make bench-envmap: environment-map sampling against uniform directions
 #                     make bench-errbar: est_relerr against the true error, every scene and method
-#                     make bench-studio: the bare bunny's studio (form and noise at 10 s)
+#                     make bench-studio: the bare bunny's studio (form, noise and grain at 10 s)
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time; make fuzz-long:
 #                     10 million executions each (hours)
