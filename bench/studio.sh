@@ -34,9 +34,9 @@ if [ ! -f "$out/ref.pfm" ]; then
     echo "studio: reference, $refp passes of pt at 256x256"
     "$APPM" render "$bunny" --size 256x256 --method pt --seed 99 --passes "$refp" -q -o "$out/ref.pfm" >/dev/null || exit 1
 fi
-if [ ! -f "$out/ref512.pfm" ]; then
+if [ ! -f "$out/ref512-$ref512.pfm" ]; then
     echo "studio: reference, $ref512 passes of pt at 512x512"
-    "$APPM" render "$bunny" --method pt --seed 98 --passes "$ref512" -q -o "$out/ref512.pfm" >/dev/null || exit 1
+    "$APPM" render "$bunny" --method pt --seed 98 --passes "$ref512" -q -o "$out/ref512-$ref512.pfm" >/dev/null || exit 1
 fi
 echo "kind,seed,diff,rmse,relerr" >"$out/results.csv"
 echo "method,seed,codes,over4" >"$out/grain.csv"
@@ -57,7 +57,7 @@ for seed in $seeds; do
             for m in appm pt; do
                 img="$out/grain-pt-$seed.pfm"
                 [ "$m" = appm ] && img="$out/studio-$seed.pfm"
-                g=$("$out/studio" "$img" "$out/ref512.pfm")
+                g=$("$out/studio" "$img" "$out/ref512-$ref512.pfm")
                 echo "$m,$seed,$(echo "$g" | field codes),$(echo "$g" | field over4)" >>"$out/grain.csv"
             done
         fi
