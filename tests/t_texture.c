@@ -678,11 +678,14 @@ static void test_env_product(void)
  * L(w) max(0, n.w), through appm__sample_light's mixture (map, cosine and the
  * product density of n's bin), matches a quadrature within 1 % for normals at
  * a bin's centre and off it, up and down, under a sky brighter above with a
- * small bright patch (visibility aside: the samples are not traced). */
-static void test_env_irradiance(void)
+ * small bright patch (visibility aside: the samples are not traced).  Twice:
+ * a W x H = 96 x 48 map, which the product densities hold texel for texel
+ * (the map's share of the mixture 1/8), and a 288 x 144 one, finer than they
+ * are (3/8); the patch covers the same solid angle in both. */
+static void test_env_irradiance_at(uint32_t W, uint32_t H, double mix_map)
 {
     static const float nrm[5][3] = {{0, 1, 0}, {0.3f, 0.9f, 0.2f}, {1, 0, 0}, {-0.2f, -0.7f, 0.5f}, {0, -1, 0}};
-    const uint32_t W = 96, H = 48, K = check_quick() ? 160 : 400;
+    const uint32_t K = check_quick() ? 160 : 400, f = W / 96;
     char map[256], scn[256], obj[256];
     float *px = (float *)malloc((size_t)W * H * 3 * sizeof(float));
     appm_scene *s = NULL;
@@ -696,7 +699,7 @@ static void test_env_irradiance(void)
     for (y = 0; y < H; ++y)
         for (x = 0; x < W; ++x) {
             float v = y < H / 2 ? 1.0f - 0.8f * (float)y / (float)H : 0.15f;
-            if (x >= 60 && x < 63 && y >= 10 && y < 13) v = 60.0f; /* a patch of 3 x 3 texels */
+            if (x >= 60 * f && x < 63 * f && y >= 10 * f && y < 13 * f) v = 60.0f; /* 3 x 3 texels at 96 x 48 */
             px[3 * ((size_t)y * W + x)] = v;
             px[3 * ((size_t)y * W + x) + 1] = v;
             px[3 * ((size_t)y * W + x) + 2] = v;
@@ -707,6 +710,7 @@ static void test_env_irradiance(void)
     CHECK(check_write_file(scn, "mesh texture-sky-floor.obj\nenvironment map texture-sky.pfm\n"));
     CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
     if (!s) return;
+    CHECK_MSG(s->envmap.mix_map == mix_map, "%ux%u: the map's share %g, want %g", W, H, s->envmap.mix_map, mix_map);
     {
         appm__ray ray;
         appm__hit h;
@@ -717,13 +721,14 @@ static void test_env_irradiance(void)
     for (k = 0; k < 5; ++k) {
         const appm__v3 n = appm__normalize(appm__v(nrm[k][0], nrm[k][1], nrm[k][2]));
         double est = 0.0, want = 0.0;
-        for (y = 0; y < 240; ++y) /* 5 x 5 points a texel */
-            for (x = 0; x < 480; ++x) {
-                double th = CHECK_PI * (y + 0.5) / 240, ph = 2 * CHECK_PI * (x + 0.5) / 480, c;
+        for (y = 0; y < 240 * f; ++y) /* 5 x 5 points a texel */
+            for (x = 0; x < 480 * f; ++x) {
+                double th = CHECK_PI * (y + 0.5) / (240 * f), ph = 2 * CHECK_PI * (x + 0.5) / (480 * f), c;
                 appm__v3 w = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
                 c = appm__dot(n, w);
                 if (c > 0.0)
-                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / 240) * (2 * CHECK_PI / 480);
+                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / (240 * f)) *
+                            (2 * CHECK_PI / (480 * f));
             }
         for (j = 0; j < K; ++j)
             for (i = 0; i < K; ++i) {
@@ -733,9 +738,16 @@ static void test_env_irradiance(void)
                     est += (double)ls.li.x * appm__dot(ls.wi, n);
             }
         est /= (double)K * K;
-        CHECK_MSG(fabs(est / want - 1.0) < 0.01, "normal %u: irradiance %.5f, the quadrature's %.5f", k, est, want);
+        CHECK_MSG(fabs(est / want - 1.0) < 0.01, "%ux%u, normal %u: irradiance %.5f, the quadrature's %.5f", W, H, k,
+                  est, want);
     }
     appm_scene_destroy(s);
+}
+
+static void test_env_irradiance(void)
+{
+    test_env_irradiance_at(96, 48, 0.125);
+    test_env_irradiance_at(288, 144, 0.375);
 }
 
 /* The contract's orientation: row 0 is +y, column 0 looks along -z, columns
