@@ -9373,8 +9373,9 @@ static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v
  * shadow ray a pass, kept the grain of that mismatch.  So the map also keeps,
  * for each of APPM__ENV_BINS bins of shading normals (an octahedral grid, y
  * up, whose centre bin is +y: a flat ground's normal exactly), a density over
- * a coarse grid of at most APPM__ENV_PW x APPM__ENV_PH cells (each the mean
- * RGB of its texels) proportional to
+ * a coarse grid of at most APPM__ENV_PW x APPM__ENV_PH cells (L_cell: the
+ * mean RGB of L's bilinear reconstruction over the cell, which a bright texel
+ * spills into its neighbours' cells, appm__env_texel_lerp_mean) proportional to
  *      L_cell max(0, n_b . w_cell) sin theta_cell,
  * n_b the bin's centre normal and w_cell the cell's centre direction, drawn
  * as the map's own (rows, then a column, by inverting CDFs) and uniformly
@@ -9387,7 +9388,9 @@ static float appm__env_sample(const appm__envmap *e, float u1, float u2, appm__v
 /* A shadow ray's mixture (appm__env_mix_pdf): */
 #define APPM__ENV_MIX_COS 0.125      /* the cosine's share, where n's bin has a product density */
 #define APPM__ENV_MIX_MAP 0.375      /* the map's; the product density's is the rest */
-#define APPM__ENV_MIX_MAP_FULL 0.125 /* the map's where the product densities hold every texel */
+#define APPM__ENV_MIX_MAP_FULL 0.125 /* the map's where the product densities hold every texel, and no sun */
+#define APPM__ENV_SUN_OMEGA (0.04 * APPM__PI) /* 1 % of the sphere: a sun is a light this small... */
+#define APPM__ENV_SUN_SHARE 0.4              /* ...that holds this share of the map's power */
 
 /* The bin of unit normal n: its place (a, b) on the octahedral map, the
  * lower hemisphere folded over the diagonals, on a PB x PB grid. */
@@ -9422,6 +9425,106 @@ static appm__v3 appm__env_bin_normal(uint32_t bin)
         a = fa;
     }
     return appm__normalize(appm__v(a, y, b));
+}
+
+/* The mean over texel (x, y)'s own cell of the bilinear L of
+ * appm__env_lookup_uv, as a mean of RGB: within the cell L leans half-way
+ * towards each neighbour, so in each direction the texel weighs 3/4 and its
+ * two neighbours 1/8 each (wrapping in u; at a pole, where L is held
+ * constant, the missing row is the texel's own).  A product density built
+ * from the texels themselves would miss the light a bright texel spills into
+ * its neighbours' cells: a sun of one texel sends 1 - (3/4)^2 = 44 % of its
+ * light there, which only the map's own density (dilated, 6.2) then found,
+ * with 3.3x the variance of a shadow ray at the 1/8 share of a full-size
+ * product (docs/algorithm.md 5.9). */
+static double appm__env_texel_lerp_mean(const appm__envmap *e, uint32_t x, uint32_t y)
+{
+    static const double wt[3] = {0.125, 0.75, 0.125};
+    const uint32_t xs[3] = {x ? x - 1 : e->w - 1, x, x + 1 < e->w ? x + 1 : 0};
+    const uint32_t ys[3] = {y ? y - 1 : 0, y, y + 1 < e->h ? y + 1 : y};
+    double sum = 0.0;
+    int a, b;
+    for (b = 0; b < 3; ++b)
+        for (a = 0; a < 3; ++a) {
+            const float *t = appm__env_texel(e, xs[a], ys[b]);
+            sum += wt[a] * wt[b] * (((double)t[0] + t[1] + t[2]) / 3.0);
+        }
+    return sum;
+}
+
+/* The solid angle of a texel of row y: 2 pi / w in phi times cos theta_y -
+ * cos theta_y+1. */
+static double appm__env_texel_omega(const appm__envmap *e, uint32_t y)
+{
+    return 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
+}
+
+/* The mean of texel (x, y)'s RGB radiance. */
+static double appm__env_texel_mean(const appm__envmap *e, uint32_t x, uint32_t y)
+{
+    const float *t = appm__env_texel(e, x, y);
+    return ((double)t[0] + t[1] + t[2]) / 3.0;
+}
+
+/* Integral of L over the sphere (W / m^2 / sr times sr), RGB, texel by
+ * texel (appm__env_texel_omega). */
+static void appm__env_integral(const appm__envmap *e, double *out)
+{
+    uint32_t x, y;
+    int k;
+    out[0] = out[1] = out[2] = 0.0;
+    for (y = 0; y < e->h; ++y) {
+        double dw = appm__env_texel_omega(e, y);
+        for (x = 0; x < e->w; ++x)
+            for (k = 0; k < 3; ++k) out[k] += dw * appm__env_texel(e, x, y)[k];
+    }
+}
+
+/* The share of the map's power (the mean of its RGB integral) that its
+ * brightest texels hold within a solid angle of `omega` steradians: a sun's
+ * share, if the sun is smaller than omega.  The texels' mean radiances are
+ * binned by their logarithm (APPM__ENV_PIN_BINS bins a stop, down to 2^-40
+ * of the brightest; dimmer ones cannot make a pinpoint), the bins are taken
+ * from the brightest down while their solid angle fits, and the bin that
+ * overflows counts in proportion.  O(texels), no allocation. */
+#define APPM__ENV_PIN_STOPS 40
+#define APPM__ENV_PIN_BINS 16
+static double appm__env_pinpoint(const appm__envmap *e, double omega)
+{
+    enum { NB = APPM__ENV_PIN_STOPS * APPM__ENV_PIN_BINS };
+    double bw[NB], bp[NB], lmax = 0.0, total = 0.0, got = 0.0, left = omega;
+    uint32_t x, y;
+    int b;
+    for (y = 0; y < e->h; ++y)
+        for (x = 0; x < e->w; ++x) {
+            const double l = appm__env_texel_mean(e, x, y);
+            lmax = l > lmax ? l : lmax;
+        }
+    if (!(lmax > 0.0 && lmax < HUGE_VAL)) return 0.0;
+    memset(bw, 0, sizeof bw);
+    memset(bp, 0, sizeof bp);
+    for (y = 0; y < e->h; ++y) {
+        const double dw = appm__env_texel_omega(e, y);
+        for (x = 0; x < e->w; ++x) {
+            const double l = appm__env_texel_mean(e, x, y), f = l > 0.0 ? -log2(l / lmax) * APPM__ENV_PIN_BINS : NB;
+            total += dw * l;
+            if (f < (double)NB) { /* f >= 0: lmax is the brightest */
+                b = (int)f;
+                bw[b] += dw;
+                bp[b] += dw * l;
+            }
+        }
+    }
+    for (b = 0; b < NB && left > 0.0; ++b) {
+        if (bw[b] <= left) {
+            got += bp[b];
+            left -= bw[b];
+        } else {
+            got += bp[b] * left / bw[b];
+            left = 0.0;
+        }
+    }
+    return total > 0.0 ? got / total : 0.0;
 }
 
 /* Doubles of one bin's CDFs: rows (ph + 1), then each row's columns (pw + 1). */
@@ -9471,7 +9574,9 @@ static appm_status appm__env_prod_build(appm__mem *m, appm__envmap *e, const cha
     size_t S;
     e->pw = pw;
     e->ph = ph;
-    e->mix_map = pw < w || ph < h ? APPM__ENV_MIX_MAP : APPM__ENV_MIX_MAP_FULL;
+    e->mix_map = pw < w || ph < h || appm__env_pinpoint(e, APPM__ENV_SUN_OMEGA) >= APPM__ENV_SUN_SHARE
+                     ? APPM__ENV_MIX_MAP
+                     : APPM__ENV_MIX_MAP_FULL;
     S = appm__env_prod_size(e);
     e->pcdf = (double *)appm__alloc(m, (size_t)APPM__ENV_BINS * S, sizeof(double));
     e->pguide = (uint32_t *)appm__alloc(m, (size_t)APPM__ENV_BINS * (ph + 1), (APPM__CDF_G + 1) * sizeof(uint32_t));
@@ -9483,9 +9588,8 @@ static appm_status appm__env_prod_build(appm__mem *m, appm__envmap *e, const cha
     memset(mean, 0, (size_t)pw * ph * 2 * sizeof(double));
     for (y = 0; y < h; ++y) /* every texel into its cell: cell (x pw / w, y ph / h) */
         for (x = 0; x < w; ++x) {
-            const float *t = appm__env_texel(e, x, y);
             size_t c = (size_t)((uint64_t)y * ph / h) * pw + (size_t)((uint64_t)x * pw / w);
-            mean[2 * c] += ((double)t[0] + t[1] + t[2]) / 3.0;
+            mean[2 * c] += appm__env_texel_lerp_mean(e, x, y);
             mean[2 * c + 1] += 1.0;
         }
     for (bin = 0; bin < APPM__ENV_BINS; ++bin) {
@@ -9622,81 +9726,6 @@ static appm_status appm__env_build(appm__mem *m, appm__envmap *e, const char *na
     return appm__env_prod_build(m, e, name, diag);
 }
 
-/* The solid angle of a texel of row y: 2 pi / w in phi times cos theta_y -
- * cos theta_y+1. */
-static double appm__env_texel_omega(const appm__envmap *e, uint32_t y)
-{
-    return 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
-}
-
-/* The mean of texel (x, y)'s RGB radiance. */
-static double appm__env_texel_mean(const appm__envmap *e, uint32_t x, uint32_t y)
-{
-    const float *t = appm__env_texel(e, x, y);
-    return ((double)t[0] + t[1] + t[2]) / 3.0;
-}
-
-/* Integral of L over the sphere (W / m^2 / sr times sr), RGB, texel by
- * texel (appm__env_texel_omega). */
-static void appm__env_integral(const appm__envmap *e, double *out)
-{
-    uint32_t x, y;
-    int k;
-    out[0] = out[1] = out[2] = 0.0;
-    for (y = 0; y < e->h; ++y) {
-        double dw = appm__env_texel_omega(e, y);
-        for (x = 0; x < e->w; ++x)
-            for (k = 0; k < 3; ++k) out[k] += dw * appm__env_texel(e, x, y)[k];
-    }
-}
-
-/* The share of the map's power (the mean of its RGB integral) that its
- * brightest texels hold within a solid angle of `omega` steradians: a sun's
- * share, if the sun is smaller than omega.  The texels' mean radiances are
- * binned by their logarithm (APPM__ENV_PIN_BINS bins a stop, down to 2^-40
- * of the brightest; dimmer ones cannot make a pinpoint), the bins are taken
- * from the brightest down while their solid angle fits, and the bin that
- * overflows counts in proportion.  O(texels), no allocation. */
-#define APPM__ENV_PIN_STOPS 40
-#define APPM__ENV_PIN_BINS 16
-static double appm__env_pinpoint(const appm__envmap *e, double omega)
-{
-    enum { NB = APPM__ENV_PIN_STOPS * APPM__ENV_PIN_BINS };
-    double bw[NB], bp[NB], lmax = 0.0, total = 0.0, got = 0.0, left = omega;
-    uint32_t x, y;
-    int b;
-    for (y = 0; y < e->h; ++y)
-        for (x = 0; x < e->w; ++x) {
-            const double l = appm__env_texel_mean(e, x, y);
-            lmax = l > lmax ? l : lmax;
-        }
-    if (!(lmax > 0.0 && lmax < HUGE_VAL)) return 0.0;
-    memset(bw, 0, sizeof bw);
-    memset(bp, 0, sizeof bp);
-    for (y = 0; y < e->h; ++y) {
-        const double dw = appm__env_texel_omega(e, y);
-        for (x = 0; x < e->w; ++x) {
-            const double l = appm__env_texel_mean(e, x, y), f = l > 0.0 ? -log2(l / lmax) * APPM__ENV_PIN_BINS : NB;
-            total += dw * l;
-            if (f < (double)NB) { /* f >= 0: lmax is the brightest */
-                b = (int)f;
-                bw[b] += dw;
-                bp[b] += dw * l;
-            }
-        }
-    }
-    for (b = 0; b < NB && left > 0.0; ++b) {
-        if (bw[b] <= left) {
-            got += bp[b];
-            left -= bw[b];
-        } else {
-            got += bp[b] * left / bw[b];
-            left = 0.0;
-        }
-    }
-    return total > 0.0 ? got / total : 0.0;
-}
-
 /* bench/envmap.sh builds appm with APPM_ENV_UNIFORM=1 to measure what the
  * map's density buys: shadow rays then take the cosine alone and photons
  * uniform directions, as for a constant environment. */
@@ -9705,22 +9734,26 @@ static double appm__env_pinpoint(const appm__envmap *e, double omega)
 #endif
 
 /* Shadow rays towards a map draw their direction from a mixture: 1/8 from
- * the cosine about the shading normal n, 3/8 from the map's density (a sun
- * gets its samples) and half from the product density of n's bin (6.2: a
- * smooth sky times the cosine); where the bin has none, half from each of
- * the first two, as before the product.  The mixture's density is their
- * weighted mean, so no strategy's failure case (a small sun for the cosine
- * and the coarse product, a dim sky behind a bright horizon for the map)
+ * the cosine about the shading normal n, a share mix_map from the map's
+ * density (a sun gets its samples) and the rest from the product density of
+ * n's bin (6.2: a smooth sky times the cosine); where the bin has none, half
+ * from each of the first two, as before the product.  The mixture's density
+ * is their weighted mean, so no strategy's failure case (a small sun for the
+ * cosine and a coarse product, a dim sky behind a bright horizon for the map)
  * costs more than a bounded factor of the variance of another; the cosine
- * keeps every direction above the surface possible.  Measured at equal passes
- * (docs/algorithm.md 5.9): a quarter each for the cosine and the map took 2-4 %
- * more error on a sun that holds three quarters of the light.  Where the
- * product densities are as fine as the map itself (a map of at most
- * APPM__ENV_PW x APPM__ENV_PH texels, the studio's sky among them), no sun
- * hides inside a product cell, and the map's share drops to 1/8, the
- * product's rising to 3/4: the studio at 32 passes, 0.97x the RMSE (5.9).
- * bin: n's (appm__env_bin); pl: the direction's place in the map; cos_n: its
- * cosine to n. */
+ * keeps every direction above the surface possible.
+ *   mix_map 3/8 (product 1/2): a map finer than its product densities, where a
+ *     sun can hide inside a product cell, and a map with a sun (at least 40 %
+ *     of its power within 1 % of the sphere, appm__env_pinpoint): a 128 x 64
+ *     sky whose one-texel sun held 60 % of the light rendered 0.84x the RMSE
+ *     of the 1/8 share, suns of 3 x 3 and 7 x 7 texels 0.92x and 0.96x;
+ *   mix_map 1/8 (product 3/4): a map of at most APPM__ENV_PW x APPM__ENV_PH
+ *     texels, which the product densities hold texel for texel, without a sun,
+ *     as the studio's sky is (0.94x the RMSE of 3/8 at 32 passes).
+ * Measured at equal passes (docs/algorithm.md 5.9): a quarter each for the
+ * cosine and the map took 2-4 % more error on a sun that holds three quarters
+ * of the light.  bin: n's (appm__env_bin); pl: the direction's place in the
+ * map; cos_n: its cosine to n. */
 static double appm__env_mix_pdf(const appm__envmap *e, uint32_t bin, const appm__env_place *pl, float cos_n)
 {
     double pc = (cos_n > 0.0f ? cos_n : 0.0f) * APPM__INV_PI, pm;

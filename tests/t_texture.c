@@ -750,6 +750,86 @@ static void test_env_irradiance(void)
     test_env_irradiance_at(288, 144, 0.375);
 }
 
+/* A sun of one texel in a sky of at most APPM__ENV_PW x APPM__ENV_PH texels,
+ * whose product densities hold every texel (the map's share 1/8): the
+ * bilinear L of a bright texel spills 44 % of its light into its neighbours'
+ * cells, which the product density must hold too (appm__env_texel_lerp_mean).
+ * Built from the texels alone it left that light to the map's 1/8 share, and
+ * one shadow ray's relative spread read 1.9-2.3 (docs/algorithm.md 5.9).  The
+ * irradiance of K x K stratified draws against the quadrature, and the spread
+ * of one draw about it. */
+static void test_env_sun_spread_at(float sun, double mix_map, double bound)
+{
+    static const float nrm[3][3] = {{0, 1, 0}, {0.3f, 0.9f, 0.2f}, {-0.5f, 0.8f, 0.1f}};
+    const uint32_t W = 128, H = 64, K = 256;
+    char map[256], scn[256], obj[256];
+    float *px = (float *)malloc((size_t)W * H * 3 * sizeof(float));
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm__surf sf;
+    uint32_t x, y, i, j, k;
+    if (!px) return;
+    tpath(map, "sun.pfm");
+    tpath(obj, "sun-floor.obj");
+    tpath(scn, "sun.scene");
+    for (y = 0; y < H; ++y)
+        for (x = 0; x < W; ++x) {
+            float v = y < H / 2 ? 0.2f : 0.05f;
+            if (x == 40 && y == 12) v = sun;
+            px[3 * ((size_t)y * W + x)] = px[3 * ((size_t)y * W + x) + 1] = px[3 * ((size_t)y * W + x) + 2] = v;
+        }
+    CHECK(write_pfm(map, W, H, px));
+    free(px);
+    CHECK(check_write_file(obj, "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n"));
+    CHECK(check_write_file(scn, "mesh texture-sun-floor.obj\nenvironment map texture-sun.pfm\n"));
+    CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
+    if (!s) return;
+    CHECK_MSG(s->envmap.mix_map == mix_map, "sun %g: the map's share %g, want %g", sun, s->envmap.mix_map, mix_map);
+    {
+        appm__ray ray;
+        appm__hit h;
+        appm__ray_init(&ray, appm__v(0.1f, 1.0f, 0.2f), appm__v(0, -1, 0), FLT_MAX);
+        CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
+        appm__surface(s, &h, &sf);
+    }
+    for (k = 0; k < 3; ++k) {
+        const appm__v3 n = appm__normalize(appm__v(nrm[k][0], nrm[k][1], nrm[k][2]));
+        double sum = 0.0, sum2 = 0.0, want = 0.0, mean, spread;
+        for (y = 0; y < 4 * H; ++y) /* 4 x 4 points a texel */
+            for (x = 0; x < 4 * W; ++x) {
+                double th = CHECK_PI * (y + 0.5) / (4 * H), ph = 2 * CHECK_PI * (x + 0.5) / (4 * W), c;
+                appm__v3 w = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
+                c = appm__dot(n, w);
+                if (c > 0.0)
+                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / (4 * H)) *
+                            (2 * CHECK_PI / (4 * W));
+            }
+        for (j = 0; j < K; ++j)
+            for (i = 0; i < K; ++i) {
+                appm__light_sample ls;
+                double v = 0.0;
+                if (appm__sample_light(s, 0, &sf, n, 0.5f, ((float)i + 0.5f) / (float)K, ((float)j + 0.5f) / (float)K,
+                                       &ls))
+                    v = (double)ls.li.x * appm__dot(ls.wi, n);
+                sum += v;
+                sum2 += v * v;
+            }
+        mean = sum / ((double)K * K);
+        spread = sqrt(fmax(sum2 / ((double)K * K) - mean * mean, 0.0)) / mean;
+        CHECK_MSG(fabs(mean / want - 1.0) < 0.01, "sun %g, normal %u: irradiance %.5f, the quadrature's %.5f", sun, k, mean, want);
+        CHECK_MSG(spread < bound, "sun %g, normal %u: one shadow ray's relative spread %.3f", sun, k, spread);
+        printf("sun of one texel %g, normal %u: irradiance %.4f (quadrature %.4f), one ray's spread %.3f\n", sun, k,
+               mean, want, spread);
+    }
+    appm_scene_destroy(s);
+}
+
+static void test_env_sun_spread(void)
+{
+    test_env_sun_spread_at(400.0f, APPM__ENV_MIX_MAP_FULL, 0.85);
+    test_env_sun_spread_at(2000.0f, APPM__ENV_MIX_MAP, 1.0);
+}
+
 /* The contract's orientation: row 0 is +y, column 0 looks along -z, columns
  * advance towards +x; rotate 90 turns column 0 to +x. */
 static void test_env_orientation(void)
@@ -1040,6 +1120,7 @@ int main(void)
     test_env_place_rotated();
     test_env_product();
     test_env_irradiance();
+    test_env_sun_spread();
     test_env_orientation();
     test_env_furnace();
     test_env_pinpoint();
