@@ -388,8 +388,9 @@ static void test_env_small_maps(void)
                         for (dy = -1; dy <= 1; ++dy)
                             for (dx = -1; dx <= 1; ++dx) {
                                 int yy = (int)y + dy, xx = ((int)x + dx + (int)w) % (int)w;
-                                const float *t = e.rgb + 3 * ((size_t)yy * w + (size_t)xx);
+                                const float *t;
                                 if (yy < 0 || yy >= (int)h) continue;
+                                t = e.rgb + 3 * ((size_t)yy * w + (size_t)xx);
                                 if ((t[0] + t[1] + t[2]) / 3.0f > best) best = (t[0] + t[1] + t[2]) / 3.0f;
                             }
                         f[y * w + x] = best;
@@ -674,6 +675,76 @@ static void test_env_product(void)
     CHECK(m.live == 0);
 }
 
+/* A W x H sky map of grey values grey[] (row 0 at the top) over a floor, as
+ * tests/out/texture-NAME.{pfm,scene} and texture-NAME-floor.obj, loaded, and
+ * the floor's surface at (0.1, 0, 0.2) in *sf (NULL on failure). */
+static appm_scene *load_sky(const char *name, uint32_t W, uint32_t H, const float *grey, appm__surf *sf)
+{
+    char map[256], scn[256], obj[256], text[256];
+    float *px = (float *)malloc((size_t)W * H * 3 * sizeof(float));
+    appm_scene *s = NULL;
+    appm_diag d;
+    appm__ray ray;
+    appm__hit h;
+    size_t i;
+    if (!px) return NULL;
+    for (i = 0; i < (size_t)W * H; ++i) px[3 * i] = px[3 * i + 1] = px[3 * i + 2] = grey[i];
+    snprintf(text, sizeof text, "%s.pfm", name);
+    tpath(map, text);
+    snprintf(text, sizeof text, "%s-floor.obj", name);
+    tpath(obj, text);
+    snprintf(text, sizeof text, "%s.scene", name);
+    tpath(scn, text);
+    CHECK(write_pfm(map, W, H, px));
+    free(px);
+    CHECK(check_write_file(obj, "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n"));
+    snprintf(text, sizeof text, "mesh texture-%s-floor.obj\nenvironment map texture-%s.pfm\n", name, name);
+    CHECK(check_write_file(scn, text));
+    CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
+    if (!s) return NULL;
+    appm__ray_init(&ray, appm__v(0.1f, 1.0f, 0.2f), appm__v(0, -1, 0), FLT_MAX);
+    CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
+    appm__surface(s, &h, sf);
+    return s;
+}
+
+/* The irradiance of the scene's map at normal n by the midpoint rule on a
+ * grid of `rows` x 2 `rows` points over the sphere. */
+static double sky_quadrature(const appm_scene *s, appm__v3 n, uint32_t rows)
+{
+    double sum = 0.0;
+    uint32_t x, y;
+    for (y = 0; y < rows; ++y)
+        for (x = 0; x < 2 * rows; ++x) {
+            double th = CHECK_PI * (y + 0.5) / rows, ph = CHECK_PI * (x + 0.5) / rows, c;
+            appm__v3 w = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
+            c = appm__dot(n, w);
+            if (c > 0.0) sum += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / rows) * (CHECK_PI / rows);
+        }
+    return sum;
+}
+
+/* K x K stratified shadow-ray draws at surface sf with normal n: the mean of
+ * their irradiance estimates, and in *spread (if not NULL) the relative spread
+ * of one draw about it. */
+static double sky_draws(const appm_scene *s, const appm__surf *sf, appm__v3 n, uint32_t K, double *spread)
+{
+    double sum = 0.0, sum2 = 0.0, mean;
+    uint32_t i, j;
+    for (j = 0; j < K; ++j)
+        for (i = 0; i < K; ++i) {
+            appm__light_sample ls;
+            double v = 0.0;
+            if (appm__sample_light(s, 0, sf, n, 0.5f, ((float)i + 0.5f) / (float)K, ((float)j + 0.5f) / (float)K, &ls))
+                v = (double)ls.li.x * appm__dot(ls.wi, n);
+            sum += v;
+            sum2 += v * v;
+        }
+    mean = sum / ((double)K * K);
+    if (spread) *spread = sqrt(fmax(sum2 / ((double)K * K) - mean * mean, 0.0)) / mean;
+    return mean;
+}
+
 /* A shadow ray's estimate of the irradiance from a map, E(n) = integral of
  * L(w) max(0, n.w), through appm__sample_light's mixture (map, cosine and the
  * product density of n's bin), matches a quadrature within 1 % for normals at
@@ -686,58 +757,24 @@ static void test_env_irradiance_at(uint32_t W, uint32_t H, double mix_map)
 {
     static const float nrm[5][3] = {{0, 1, 0}, {0.3f, 0.9f, 0.2f}, {1, 0, 0}, {-0.2f, -0.7f, 0.5f}, {0, -1, 0}};
     const uint32_t K = check_quick() ? 160 : 400, f = W / 96;
-    char map[256], scn[256], obj[256];
-    float *px = (float *)malloc((size_t)W * H * 3 * sizeof(float));
-    appm_scene *s = NULL;
-    appm_diag d;
+    float *grey = (float *)malloc((size_t)W * H * sizeof(float));
+    appm_scene *s;
     appm__surf sf;
-    uint32_t x, y, i, j, k;
-    if (!px) return;
-    tpath(map, "sky.pfm");
-    tpath(obj, "sky-floor.obj");
-    tpath(scn, "sky.scene");
+    uint32_t x, y, k;
+    if (!grey) return;
     for (y = 0; y < H; ++y)
         for (x = 0; x < W; ++x) {
             float v = y < H / 2 ? 1.0f - 0.8f * (float)y / (float)H : 0.15f;
             if (x >= 60 * f && x < 63 * f && y >= 10 * f && y < 13 * f) v = 60.0f; /* 3 x 3 texels at 96 x 48 */
-            px[3 * ((size_t)y * W + x)] = v;
-            px[3 * ((size_t)y * W + x) + 1] = v;
-            px[3 * ((size_t)y * W + x) + 2] = v;
+            grey[(size_t)y * W + x] = v;
         }
-    CHECK(write_pfm(map, W, H, px));
-    free(px);
-    CHECK(check_write_file(obj, "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n"));
-    CHECK(check_write_file(scn, "mesh texture-sky-floor.obj\nenvironment map texture-sky.pfm\n"));
-    CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
+    s = load_sky("sky", W, H, grey, &sf);
+    free(grey);
     if (!s) return;
     CHECK_MSG(s->envmap.mix_map == mix_map, "%ux%u: the map's share %g, want %g", W, H, s->envmap.mix_map, mix_map);
-    {
-        appm__ray ray;
-        appm__hit h;
-        appm__ray_init(&ray, appm__v(0.1f, 1.0f, 0.2f), appm__v(0, -1, 0), FLT_MAX);
-        CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
-        appm__surface(s, &h, &sf);
-    }
     for (k = 0; k < 5; ++k) {
         const appm__v3 n = appm__normalize(appm__v(nrm[k][0], nrm[k][1], nrm[k][2]));
-        double est = 0.0, want = 0.0;
-        for (y = 0; y < 240 * f; ++y) /* 5 x 5 points a texel */
-            for (x = 0; x < 480 * f; ++x) {
-                double th = CHECK_PI * (y + 0.5) / (240 * f), ph = 2 * CHECK_PI * (x + 0.5) / (480 * f), c;
-                appm__v3 w = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
-                c = appm__dot(n, w);
-                if (c > 0.0)
-                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / (240 * f)) *
-                            (2 * CHECK_PI / (480 * f));
-            }
-        for (j = 0; j < K; ++j)
-            for (i = 0; i < K; ++i) {
-                appm__light_sample ls;
-                if (appm__sample_light(s, 0, &sf, n, 0.5f, ((float)i + 0.5f) / (float)K, ((float)j + 0.5f) / (float)K,
-                                       &ls))
-                    est += (double)ls.li.x * appm__dot(ls.wi, n);
-            }
-        est /= (double)K * K;
+        double want = sky_quadrature(s, n, 240 * f), est = sky_draws(s, &sf, n, K, NULL); /* 5 x 5 points a texel */
         CHECK_MSG(fabs(est / want - 1.0) < 0.01, "%ux%u, normal %u: irradiance %.5f, the quadrature's %.5f", W, H, k,
                   est, want);
     }
@@ -762,61 +799,22 @@ static void test_env_sun_spread_at(float sun, double mix_map, double bound)
 {
     static const float nrm[3][3] = {{0, 1, 0}, {0.3f, 0.9f, 0.2f}, {-0.5f, 0.8f, 0.1f}};
     const uint32_t W = 128, H = 64, K = 256;
-    char map[256], scn[256], obj[256];
-    float *px = (float *)malloc((size_t)W * H * 3 * sizeof(float));
-    appm_scene *s = NULL;
-    appm_diag d;
+    float *grey = (float *)malloc((size_t)W * H * sizeof(float));
+    appm_scene *s;
     appm__surf sf;
-    uint32_t x, y, i, j, k;
-    if (!px) return;
-    tpath(map, "sun.pfm");
-    tpath(obj, "sun-floor.obj");
-    tpath(scn, "sun.scene");
+    uint32_t x, y, k;
+    if (!grey) return;
     for (y = 0; y < H; ++y)
-        for (x = 0; x < W; ++x) {
-            float v = y < H / 2 ? 0.2f : 0.05f;
-            if (x == 40 && y == 12) v = sun;
-            px[3 * ((size_t)y * W + x)] = px[3 * ((size_t)y * W + x) + 1] = px[3 * ((size_t)y * W + x) + 2] = v;
-        }
-    CHECK(write_pfm(map, W, H, px));
-    free(px);
-    CHECK(check_write_file(obj, "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n"));
-    CHECK(check_write_file(scn, "mesh texture-sun-floor.obj\nenvironment map texture-sun.pfm\n"));
-    CHECK_MSG(appm_scene_load(scn, NULL, &s, &d) == APPM_OK, "%s", d.message);
+        for (x = 0; x < W; ++x) grey[(size_t)y * W + x] = x == 40 && y == 12 ? sun : (y < H / 2 ? 0.2f : 0.05f);
+    s = load_sky("sun", W, H, grey, &sf);
+    free(grey);
     if (!s) return;
     CHECK_MSG(s->envmap.mix_map == mix_map, "sun %g: the map's share %g, want %g", sun, s->envmap.mix_map, mix_map);
-    {
-        appm__ray ray;
-        appm__hit h;
-        appm__ray_init(&ray, appm__v(0.1f, 1.0f, 0.2f), appm__v(0, -1, 0), FLT_MAX);
-        CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
-        appm__surface(s, &h, &sf);
-    }
     for (k = 0; k < 3; ++k) {
         const appm__v3 n = appm__normalize(appm__v(nrm[k][0], nrm[k][1], nrm[k][2]));
-        double sum = 0.0, sum2 = 0.0, want = 0.0, mean, spread;
-        for (y = 0; y < 4 * H; ++y) /* 4 x 4 points a texel */
-            for (x = 0; x < 4 * W; ++x) {
-                double th = CHECK_PI * (y + 0.5) / (4 * H), ph = 2 * CHECK_PI * (x + 0.5) / (4 * W), c;
-                appm__v3 w = appm__v((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
-                c = appm__dot(n, w);
-                if (c > 0.0)
-                    want += appm__env_lookup(&s->envmap, w).x * c * sin(th) * (CHECK_PI / (4 * H)) *
-                            (2 * CHECK_PI / (4 * W));
-            }
-        for (j = 0; j < K; ++j)
-            for (i = 0; i < K; ++i) {
-                appm__light_sample ls;
-                double v = 0.0;
-                if (appm__sample_light(s, 0, &sf, n, 0.5f, ((float)i + 0.5f) / (float)K, ((float)j + 0.5f) / (float)K,
-                                       &ls))
-                    v = (double)ls.li.x * appm__dot(ls.wi, n);
-                sum += v;
-                sum2 += v * v;
-            }
-        mean = sum / ((double)K * K);
-        spread = sqrt(fmax(sum2 / ((double)K * K) - mean * mean, 0.0)) / mean;
-        CHECK_MSG(fabs(mean / want - 1.0) < 0.01, "sun %g, normal %u: irradiance %.5f, the quadrature's %.5f", sun, k, mean, want);
+        double spread, want = sky_quadrature(s, n, 4 * H), mean = sky_draws(s, &sf, n, K, &spread); /* 4 x 4 a texel */
+        CHECK_MSG(fabs(mean / want - 1.0) < 0.01, "sun %g, normal %u: irradiance %.5f, the quadrature's %.5f", sun, k,
+                  mean, want);
         CHECK_MSG(spread < bound, "sun %g, normal %u: one shadow ray's relative spread %.3f", sun, k, spread);
         printf("sun of one texel %g, normal %u: irradiance %.4f (quadrature %.4f), one ray's spread %.3f\n", sun, k,
                mean, want, spread);
