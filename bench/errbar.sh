@@ -9,7 +9,9 @@
 # against the true relative error
 #     true = sqrt(relmse - ref_relmse)
 # (ref_relmse: the reference's own noise in the same measure, bench/refmix.c),
-# as the median over the seeds of est / true: 1 is honest.  ERRBAR_OLD=BINARY
+# as the median over the seeds of est / true: 1 is honest; and, since `--until-error` and
+# `--time` stop at any pass, the lowest and highest of those medians over every pass from 16
+# (bench/errbar_every.sh).  ERRBAR_OLD=BINARY
 # runs a second build the same way and puts its ratios beside (in brackets).
 #
 # References (bench/refs.sh): pt, 16384 passes in two halves, except where a
@@ -116,5 +118,9 @@ rm -f "$out/last.pfm"
             print line " |"
         }
     }' "$out/results.csv"
+    echo
+    echo "est_relerr / true at every pass from 16 (median over the seeds at each; bench/errbar_every.sh)"
+    echo
+    sh bench/errbar_every.sh "$out"
 } > "$out/errbar.md"
 cat "$out/errbar.md"
