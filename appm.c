@@ -5651,7 +5651,8 @@ typedef struct appm__envmap {
     unsigned char pok[APPM__ENV_BINS]; /* the bin's density exists (its hemisphere is not black) */
     double mix_map;    /* the map's own density's share of a shadow ray's mixture where a bin has a
                         * product density (appm__env_mix_pdf): APPM__ENV_MIX_MAP, or
-                        * APPM__ENV_MIX_MAP_FULL where the product densities hold every texel */
+                        * APPM__ENV_MIX_MAP_FULL where the product densities hold every texel
+                        * and no sun holds APPM__ENV_SUN_SHARE of the power */
     double scale, rotate; /* as written; rotate in degrees */
     float rot;         /* rotate in radians */
     uint64_t hash;     /* of the file's samples, scale and rotate (checkpoints) */

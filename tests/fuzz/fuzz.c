@@ -14,7 +14,8 @@
  *   image       every image format appm reads (PNG, JPEG, OpenEXR, TGA, PGM/PPM,
  *               Radiance HDR, PFM) through appm__image_decode; the first byte
  *               picks the name (bit 0: x.tga, else x.img) and, bit 1 clear,
- *               makes a PNG's chunk CRCs right
+ *               makes a PNG's chunk CRCs right; an image of at most 65,536
+ *               texels then becomes an environment map, sampled
  * The entry code and its checks are in targets.h; tests/t_fuzz_regress.c replays
  * the corpus without libFuzzer.  By hand:
  *   clang -g -O1 -fsanitize=fuzzer,address,undefined tests/fuzz/fuzz.c -o fuzz_obj -lm -pthread

@@ -17,7 +17,8 @@
  *                   one saves back to the same bytes and renders a pass
  *   fuzz_image_one  appm__image_decode (every image format appm reads); the
  *                   first byte picks the name (x.tga or x.img) and whether a
- *                   PNG's chunk CRCs are made right; pixels and memory checked
+ *                   PNG's chunk CRCs are made right; pixels and memory checked;
+ *                   a small image also built and sampled as an environment map
  *
  * Each returns the status of its main call (>= 0) when everything the library
  * promises held, or FUZZ_BAD (-1) after printing what did not:
@@ -709,24 +710,78 @@ static void fuzz__png_fix_crcs(unsigned char *p, size_t n)
     }
 }
 
+/* A decoded image of at most 65,536 texels as an environment map
+ * (appm__envmap_take: radiances, the map's CDFs, the product densities and
+ * their mixture share): refused only as not finite or black (PARSE, naming the
+ * file) or out of memory; built, its share is one of the two, and a direction
+ * drawn from the map's density or from a bin's product density is finite, of
+ * unit length and has a density > 0 and finite there under the density that
+ * drew it, with a finite radiance >= 0.  Every block is freed. */
+static int fuzz__envmap_check(appm__mem *m, appm__pixels *px, const char *name, appm_diag *diag, appm_status *out)
+{
+    appm__envmap from, e;
+    appm_status st;
+    int bad = 0, k;
+    uint32_t bin;
+    memset(&from, 0, sizeof from);
+    from.px = *px;
+    from.scale = 1.0;
+    px->data = NULL; /* taken */
+    st = appm__envmap_take(m, &e, &from, name, diag);
+    *out = st;
+    if (st != APPM_OK) {
+        if (st != APPM_ERR_PARSE && st != APPM_ERR_NOMEM) bad = fuzz__bad("image", "environment map: status neither PARSE nor NOMEM");
+        if (st == APPM_ERR_PARSE && strcmp(diag->file, name) != 0)
+            bad = fuzz__bad("image", "environment map: the refusal names another file");
+        appm__envmap_free(m, &e);
+        return bad;
+    }
+    if (e.mix_map != APPM__ENV_MIX_MAP && e.mix_map != APPM__ENV_MIX_MAP_FULL)
+        bad = fuzz__bad("image", "environment map: a mixture share of neither kind");
+    for (k = 0; k < 16 && !bad; ++k) {
+        const float u1 = ((float)(k % 4) + 0.37f) / 4.0f, u2 = ((float)(k / 4) + 0.61f) / 4.0f;
+        appm__env_place pl;
+        appm__v3 d, L;
+        float pdf = appm__env_sample(&e, u1, u2, &d, &pl), len = appm__dot(d, d);
+        L = appm__env_lookup_uv(&e, pl.u, pl.v);
+        if (!(pdf > 0.0f && pdf <= FLT_MAX) || !(fabsf(len - 1.0f) < 1e-3f))
+            bad = fuzz__bad("image", "environment map: a drawn direction without a finite density > 0");
+        if (!(L.x >= 0.0f && L.x <= FLT_MAX && L.y >= 0.0f && L.y <= FLT_MAX && L.z >= 0.0f && L.z <= FLT_MAX))
+            bad = fuzz__bad("image", "environment map: a radiance not finite and >= 0");
+        for (bin = (uint32_t)k; bin < APPM__ENV_BINS && !bad; bin += 16) {
+            double p;
+            if (!e.pcdf || !e.pok[bin]) continue;
+            appm__env_prod_sample(&e, bin, u1, u2, &d, &pl);
+            p = appm__env_prod_pdf_at(&e, bin, &pl);
+            len = appm__dot(d, d);
+            if (!(p > 0.0 && p < HUGE_VAL) || !(fabsf(len - 1.0f) < 1e-3f))
+                bad = fuzz__bad("image", "environment map: a product draw without a finite density > 0");
+        }
+    }
+    appm__envmap_free(m, &e);
+    return bad;
+}
+
 /* appm__image_decode: a refusal leaves no pixels and names the file; out of
  * memory only when an allocation was refused (every decoder bounds what a
  * file of n bytes can make it allocate); a decoded image has a valid size,
  * depth and channel count, only its pixel block stays allocated, every byte
  * of it is readable, 8- and 16-bit samples give linear values in [0,1], and a
- * Radiance HDR's are finite and >= 0. */
+ * Radiance HDR's are finite and >= 0; a small one then makes an environment
+ * map (fuzz__envmap_check). */
 static int fuzz__image_run(const void *ctx, fuzz_env *e)
 {
     const fuzz__img *in = (const fuzz__img *)ctx;
     appm__mem m;
     appm__pixels px;
-    appm_status st;
+    appm_status st, ret;
     int bad = 0;
     appm__mem_init(&m, &e->cfg);
     m.diag = &e->diag;
     appm__diag_clear(&e->diag);
     memset(&px, 0x5A, sizeof px);
     st = appm__image_decode(&m, in->p, in->n, in->name, &px, &e->diag);
+    ret = st;
     if (fuzz__check_diag("image", &e->diag, st)) bad = 1;
     if (st != APPM_OK) {
         if (px.data) bad = fuzz__bad("image", "pixels left after a failure");
@@ -755,10 +810,18 @@ static int fuzz__image_run(const void *ctx, fuzz_env *e)
                 if (hdr && !(v >= 0.0f && v <= FLT_MAX)) bad = fuzz__bad("image", "a Radiance HDR value not finite and >= 0");
             }
     }
-    if (st == APPM_OK) appm__free(&m, px.data);
+    if (st == APPM_OK && !bad && (size_t)px.w * px.h <= 65536) {
+        appm_status est = APPM_OK;
+        if (fuzz__envmap_check(&m, &px, in->name, &e->diag, &est)) bad = 1;
+        if (est == APPM_ERR_NOMEM) { /* the map's allocations count as the decoder's */
+            if (!e->a.failed) bad = fuzz__bad("image", "environment map: out of memory though no allocation was refused");
+            ret = APPM_ERR_NOMEM;
+        }
+    }
+    if (st == APPM_OK) appm__free(&m, px.data); /* NULL once the map took it */
     if (m.live != 0) bad = fuzz__bad("image", "memory counter not back at 0");
     if (fuzz__check_env("image", e)) bad = 1;
-    return bad ? FUZZ_BAD : (int)st;
+    return bad ? FUZZ_BAD : (int)ret;
 }
 
 static int fuzz_image_one(const unsigned char *data, size_t size)
