@@ -23,6 +23,14 @@ static void tpath(char *buf, const char *name)
     snprintf(buf, 256, "%s", check_path("texture", name));
 }
 
+/* tests/out/texture-NAMESUFFIX into buf. */
+static void tpath2(char *buf, const char *name, const char *suffix)
+{
+    char text[256];
+    snprintf(text, sizeof text, "%s%s", name, suffix);
+    tpath(buf, text);
+}
+
 /* A w x h PFM of linear RGB from rgb[] (row 0 at the top) at path. */
 static int write_pfm(const char *path, uint32_t w, uint32_t h, const float *rgb)
 {
@@ -56,12 +64,9 @@ static appm_scene *load_plane(const char *name, const char *mtl_text)
     char mtl[256], obj[256], scn[256], text[512];
     appm_scene *s = NULL;
     appm_diag d;
-    snprintf(text, sizeof text, "%s.mtl", name);
-    tpath(mtl, text);
-    snprintf(text, sizeof text, "%s.obj", name);
-    tpath(obj, text);
-    snprintf(text, sizeof text, "%s.scene", name);
-    tpath(scn, text);
+    tpath2(mtl, name, ".mtl");
+    tpath2(obj, name, ".obj");
+    tpath2(scn, name, ".scene");
     CHECK(check_write_file(mtl, mtl_text));
     snprintf(text, sizeof text, "texture-%s.mtl", name);
     write_plane(obj, text);
@@ -689,12 +694,9 @@ static appm_scene *load_sky(const char *name, uint32_t W, uint32_t H, const floa
     size_t i;
     if (!px) return NULL;
     for (i = 0; i < (size_t)W * H; ++i) px[3 * i] = px[3 * i + 1] = px[3 * i + 2] = grey[i];
-    snprintf(text, sizeof text, "%s.pfm", name);
-    tpath(map, text);
-    snprintf(text, sizeof text, "%s-floor.obj", name);
-    tpath(obj, text);
-    snprintf(text, sizeof text, "%s.scene", name);
-    tpath(scn, text);
+    tpath2(map, name, ".pfm");
+    tpath2(obj, name, "-floor.obj");
+    tpath2(scn, name, ".scene");
     CHECK(write_pfm(map, W, H, px));
     free(px);
     CHECK(check_write_file(obj, "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n"));
