@@ -9428,6 +9428,13 @@ static appm__v3 appm__env_bin_normal(uint32_t bin)
     return appm__normalize(appm__v(a, y, b));
 }
 
+/* The mean of texel (x, y)'s RGB radiance. */
+static double appm__env_texel_mean(const appm__envmap *e, uint32_t x, uint32_t y)
+{
+    const float *t = appm__env_texel(e, x, y);
+    return ((double)t[0] + t[1] + t[2]) / 3.0;
+}
+
 /* The mean over texel (x, y)'s own cell of the bilinear L of
  * appm__env_lookup_uv, as a mean of RGB: within the cell L leans half-way
  * towards each neighbour, so in each direction the texel weighs 3/4 and its
@@ -9446,10 +9453,7 @@ static double appm__env_texel_lerp_mean(const appm__envmap *e, uint32_t x, uint3
     double sum = 0.0;
     int a, b;
     for (b = 0; b < 3; ++b)
-        for (a = 0; a < 3; ++a) {
-            const float *t = appm__env_texel(e, xs[a], ys[b]);
-            sum += wt[a] * wt[b] * (((double)t[0] + t[1] + t[2]) / 3.0);
-        }
+        for (a = 0; a < 3; ++a) sum += wt[a] * wt[b] * appm__env_texel_mean(e, xs[a], ys[b]);
     return sum;
 }
 
@@ -9458,13 +9462,6 @@ static double appm__env_texel_lerp_mean(const appm__envmap *e, uint32_t x, uint3
 static double appm__env_texel_omega(const appm__envmap *e, uint32_t y)
 {
     return 2.0 * APPM__PI / e->w * (cos(APPM__PI * y / e->h) - cos(APPM__PI * (y + 1.0) / e->h));
-}
-
-/* The mean of texel (x, y)'s RGB radiance. */
-static double appm__env_texel_mean(const appm__envmap *e, uint32_t x, uint32_t y)
-{
-    const float *t = appm__env_texel(e, x, y);
-    return ((double)t[0] + t[1] + t[2]) / 3.0;
 }
 
 /* Integral of L over the sphere (W / m^2 / sr times sr), RGB, texel by
