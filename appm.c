@@ -12922,6 +12922,8 @@ typedef struct appm__sums { /* one photon component's sums over a gather's photo
     double eg[3];        /* glossy: sum of K-weighted lobe(wi) gamma */
     double s;            /* sum of K lum(Psi)^2 */
     double dl;           /* sum of D_h lum(Psi) */
+    double ei;           /* biweight: sum of K(|d| / R') lum(Psi) at the inner radius R' = R / sqrt 2,
+                          * the photons of the same gather: appm's bias estimate (appm__gather_inner) */
     uint64_t count;      /* photons inside the kernel */
 } appm__sums;
 
@@ -13049,6 +13051,21 @@ static void appm__gather_finish(const appm__gather *g, int c, double invM, doubl
 {
     int caustic = c == APPM__COMP_CAUSTIC;
     appm__sums_finish(g, caustic ? g->Rc : g->R, caustic ? g->hc : g->h, &g->sum[c], invM, e, s, dl);
+}
+
+/* The luminance of component c's biweight estimate at the inner radius
+ * R' = R / sqrt 2 from the same photons (appm__sums.ei), normalised as
+ * appm__sums_finish normalises the one at R: by its kernel's mass on the
+ * surface at R', where the gather has cut lines.  A kernel estimate's bias is
+ * (mu2 / 2) R^2 Delta L to second order, so the difference of the two,
+ * D = lum(e) - this, is half the bias at R: appm's error bar measures its bias
+ * from D instead of modelling it from the Laplacian (docs/algorithm.md 7.2). */
+static double appm__gather_inner(const appm__gather *g, int c, double invM)
+{
+    double R = c == APPM__COMP_CAUSTIC ? g->Rc : g->R, Ri2 = 0.5 * R * R;
+    const appm__sums *sum = &g->sum[c];
+    if (!g->biweight || sum->count == 0 || !(R > 0.0)) return 0.0;
+    return sum->ei * 3.0 / (APPM__PI * Ri2 * appm__cut_mass(g, sqrt(Ri2))) * invM;
 }
 
 /* The caustic component's Laplacian bandwidth (10.4, step 2), given the
@@ -13526,7 +13543,11 @@ static double appm__paper_aux(const appm_renderer *r, const void *state, appm_au
  *           seams of a box were 8 % dark; equal-pass RMSE 0.73x on
  *           CornellBox-Original (5.6).
  * The pixel's photon term is the sum of the components', and so is its bias
- * (mu2 / 2) sum_c r_c^2 dI_c (the biases add before they are squared). */
+ * (mu2 / 2) sum_c r_c^2 dI_c (the biases add before they are squared).  The
+ * error bar measures that bias rather than modelling it: D_j, the pass's photon
+ * term at r less the same photons' at r / sqrt 2, is half the bias of the pass
+ * to second order (appm__gather_inner), and the pixel keeps the mean and the
+ * spread of the D_j over all its passes. */
 typedef struct appm__adaptive_stats { /* the statistics of one photon component */
     double I[3];    /* running mean I_j of the photon term */
     double S;       /* running mean of the kernel second moment s_j */
@@ -13534,13 +13555,13 @@ typedef struct appm__adaptive_stats { /* the statistics of one photon component 
     double dI_w;    /* sum of their weights (h_j / r_auto)^6 */
     double dI_m2;   /* weighted Welford M2 of the per-pass Laplacians (their spread, step 3) */
     double R;       /* radius r_j of the last gather */
-    double R2sum;   /* sum of r_j^2, for the bias estimate */
     uint64_t N;     /* photons found so far */
     double dI2p;    /* step 3: dI^2 pooled over neighbours after the last Laplacian pass (0: none) */
 } appm__adaptive_stats;
 
 typedef struct appm__adaptive_px { /* appm's per-pixel state: one record per photon component (step 1) */
     appm__adaptive_stats comp[APPM__NCOMP]; /* [APPM__COMP_DIFFUSE], [APPM__COMP_CAUSTIC] */
+    double D, D_m2; /* Welford mean and M2 over the passes of D_j, summed over the components */
 } appm__adaptive_px;
 
 #define APPM__KOFF(c, f) \
@@ -13548,10 +13569,10 @@ typedef struct appm__adaptive_px { /* appm's per-pixel state: one record per pho
 #define APPM__KFIELDS(c, x) \
     {"I" x, APPM__KOFF(c, I), 3, 0}, {"S" x, APPM__KOFF(c, S), 1, 0}, {"dI" x, APPM__KOFF(c, dI), 1, 0}, \
         {"dI_w" x, APPM__KOFF(c, dI_w), 1, 0}, {"dI_m2" x, APPM__KOFF(c, dI_m2), 1, 0}, \
-        {"R" x, APPM__KOFF(c, R), 1, 0}, {"R2sum" x, APPM__KOFF(c, R2sum), 1, 0}, {"N" x, APPM__KOFF(c, N), 1, 1}, \
-        {"dI2p" x, APPM__KOFF(c, dI2p), 1, 0}
-static const appm__field appm__adaptive_fields[] = {APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"),
-                                                    APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c")};
+        {"R" x, APPM__KOFF(c, R), 1, 0}, {"N" x, APPM__KOFF(c, N), 1, 1}, {"dI2p" x, APPM__KOFF(c, dI2p), 1, 0}
+static const appm__field appm__adaptive_fields[] = {
+    APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"), APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c"),
+    {"D", offsetof(appm__adaptive_px, D), 1, 0}, {"D_m2", offsetof(appm__adaptive_px, D_m2), 1, 0}};
 
 /* -- Step 1: two components.  I = I_c + I_d, the caustic and diffuse photons
  * gathered with radii r_c, r_d; independent noise, so MSE = sum_k A_k / r_k^2 +
@@ -13600,19 +13621,10 @@ static double appm__adaptive_bandwidth(const appm_renderer *r)
 
 /* The statistics after pass j: the mean I and likewise S, as in 10.3; dI the
  * weighted mean over the passes that estimate the Laplacian (weight dl_weight,
- * 0 on the others); the photon count and the sum of r_j^2 of the bias estimate,
- * each r_j taken at most at rcap, the component's upper bound.  Only the
- * caustic component ever exceeds its own (2 max(r1, r_auto) j^(-1/6)): it
- * gathers at the diffuse radius (bound 3) until it has seen 32 photons, and
- * there the quadratic model (mu2/2) r^2 dI, with dI measured at the narrower
- * h_c, grows past anything a filament of light can lose to the blur: on
- * caustic-glass it read 1.86x the true squared bias, capped 0.57x, while the
- * true one of the capped images was that of these within 2 %
- * (docs/algorithm.md 7.3). */
+ * 0 on the others); the photon count. */
 static void appm__adaptive_update(appm__adaptive_stats *p, uint64_t pass, const double *e, double s, double dl,
-                                  double dl_weight, uint64_t count, double rcap)
+                                  double dl_weight, uint64_t count)
 {
-    double rb = p->R < rcap ? p->R : rcap;
     double j = (double)pass;
     appm__mean_update(p->I, pass, e);
     p->S += (s - p->S) / j;
@@ -13626,7 +13638,6 @@ static void appm__adaptive_update(appm__adaptive_stats *p, uint64_t pass, const 
         p->dI_m2 += dl_weight * d * (dl - p->dI);
     }
     p->N += count;
-    p->R2sum += rb * rb;
 }
 
 /* -- Step 3: dI^2 without its noise, pooled.  Var(dI), the variance of the
@@ -13821,15 +13832,20 @@ static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state
     appm__adaptive_px *a = (appm__adaptive_px *)state;
     double e[APPM__NCOMP][3], s[APPM__NCOMP], dl[APPM__NCOMP], hr = g->h / r->r_auto;
     double w = g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0; /* step 2's weight (h / r_auto)^6 */
+    double D = 0.0, d;
     int c;
     a->comp[APPM__COMP_DIFFUSE].R = vp->R;
     a->comp[APPM__COMP_CAUSTIC].R = vp->Rc;
-    for (c = 0; c < APPM__NCOMP; ++c) appm__gather_estimates(r, g, c, worker, e[c], &s[c], &dl[c]);
     for (c = 0; c < APPM__NCOMP; ++c) {
-        double lo, hi;
-        appm__adaptive_bounds(r->r1, r->r_auto, appm__pass_shrink(r), appm__comp_rhi(c), &lo, &hi);
-        appm__adaptive_update(&a->comp[c], r->pass, e[c], s[c], dl[c], w, g->sum[c].count, hi);
+        appm__gather_estimates(r, g, c, worker, e[c], &s[c], &dl[c]);
+        appm__adaptive_update(&a->comp[c], r->pass, e[c], s[c], dl[c], w, g->sum[c].count);
+        /* D_j (7.2); a pass whose estimates were dropped (all 0) adds none */
+        d = appm__lumd(e[c]) - appm__gather_inner(g, c, 1.0 / (double)r->M);
+        if (d - d == 0.0 && (e[c][0] != 0.0 || e[c][1] != 0.0 || e[c][2] != 0.0 || s[c] != 0.0)) D += d;
     }
+    d = D - a->D; /* Welford, over every pass: the image's bias is the mean of the passes' */
+    a->D += d / (double)r->pass;
+    a->D_m2 += d * (D - a->D);
     appm__pass_value(r, px,
                      (double)appm__lum(vp->ld) + appm__lumd(e[APPM__COMP_DIFFUSE]) +
                          appm__lumd(e[APPM__COMP_CAUSTIC]));
@@ -13867,25 +13883,16 @@ static int appm__adaptive_term(const appm_renderer *r, const void *state, double
     return 1;
 }
 
-/* The bias terms of the components add (before any squaring: step 1).  Each
- * rests on a mean of noisy per-pass Laplacians; *noise gets the variance of the
- * sum from theirs (step 3: the spread over the Laplacian passes), taken as
- * independent between the components, so that b^2 - noise estimates the
- * squared bias without the Laplacian's noise in it. */
+/* The bias of the image, measured (docs/algorithm.md 7.2): the mean of the
+ * passes' biases (mu2 / 2) r_j^2 Delta L, summed over the components, is twice
+ * the mean of the D_j, whatever r_j each pass took; *noise is the variance of
+ * that estimate, from the spread of the D_j, so that b^2 - noise estimates the
+ * squared bias without the noise of D in it. */
 static double appm__adaptive_bias(const void *state, double j, double *noise)
 {
     const appm__adaptive_px *a = (const appm__adaptive_px *)state;
-    uint64_t n = appm__lap_count((uint64_t)j);
-    double b = 0.0;
-    int c;
-    *noise = 0.0;
-    for (c = 0; c < APPM__NCOMP; ++c) {
-        const appm__adaptive_stats *p = &a->comp[c];
-        double beta = 0.5 * APPM__MU2 * (p->R2sum / j);
-        b += beta * p->dI;
-        *noise += beta * beta * appm__di_var(p, n);
-    }
-    return b;
+    *noise = j > 1.0 ? 4.0 * a->D_m2 / ((j - 1.0) * j) : 0.0;
+    return 2.0 * a->D;
 }
 
 static double appm__adaptive_aux(const appm_renderer *r, const void *state, appm_aux which)
@@ -14189,6 +14196,10 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             double u = 1.0 - (double)d2 / R2;
             k = u * u;
             sum->s += k * q * q;
+            if (d2 < 0.5f * R2) { /* the same kernel at R' = R / sqrt 2 */
+                double ui = 1.0 - 2.0 * (double)d2 / R2;
+                sum->ei += ui * ui * q;
+            }
         }
         sum->e[0] += k * p->power[0];
         sum->e[1] += k * p->power[1];
