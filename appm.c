@@ -14196,8 +14196,8 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             double u = 1.0 - (double)d2 / R2;
             k = u * u;
             sum->s += k * q * q;
-            if (d2 < 0.5f * R2) { /* the same kernel at R' = R / sqrt 2 */
-                double ui = 1.0 - 2.0 * (double)d2 / R2;
+            if (u > 0.5) { /* within R' = R / sqrt 2, where 1 - d^2 / R'^2 = 2 u - 1 */
+                double ui = 2.0 * u - 1.0;
                 sum->ei += ui * ui * q;
             }
         }
