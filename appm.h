@@ -566,8 +566,11 @@ typedef struct appm_stats {
     uint64_t dropped_samples;       /* NaN/inf contributions discarded (never in image)  */
     double est_relerr;              /* appm, pt: estimated image relative error, the     */
                                     /* root mean over pixels of (bias^2 + var) /         */
-                                    /* (I^2 + 0.01) (where one pass holds a pixel that   */
-                                    /* shows no light, I is its 3x3 median if lower);    */
+                                    /* (I^2 + 0.01) (appm's bias measured from its       */
+                                    /* photons at radii r and r / sqrt 2, appm-paper's   */
+                                    /* the model (mu2/2) r^2 dI; where one pass holds a  */
+                                    /* pixel that shows no light, I is its 3x3 median if */
+                                    /* lower);                                           */
                                     /* var from the spread between the                   */
                                     /* chains (chains >= 2) or the passes (one chain:    */
                                     /* scaled by the sequence's halves); < 0: none (ppm, */
