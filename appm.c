@@ -14196,7 +14196,9 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             double u = 1.0 - (double)d2 / R2;
             k = u * u;
             sum->s += k * q * q;
-            if (u > 0.5) { /* within R' = R / sqrt 2, where 1 - d^2 / R'^2 = 2 u - 1 */
+            /* within R' = R / sqrt 2, where 1 - d^2 / R'^2 = 2 u - 1; the test reads d2 and R2,
+             * not u, so that it does not wait for u's division (nor does a mispredicted branch) */
+            if (d2 < 0.5f * R2) {
                 double ui = 2.0 * u - 1.0;
                 sum->ei += ui * ui * q;
             }
