@@ -11679,6 +11679,7 @@ struct appm_renderer {
                           * step 6); an array of its own, as the cut's window reads it for 9 rows */
     double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
     double var_scale;    /* the spread of the passes times this is the variance (appm__var_scale) */
+    double noise_scale;  /* likewise for the noise of the bias estimate (appm__noise_scale) */
     double *err_w;       /* per pixel, the error estimate's parts (12, appm__estimate_error): the weight
                           * w of its relative error, then its term w (bias^2 + Var) */
     double *err_b2;      /* per pixel, the method's bias^2 less its noise (appm__bias2's input) */
@@ -12945,6 +12946,7 @@ typedef struct appm__gather {
     const appm__pmap *map; /* the map being queried (its side[] array), set by the query */
     unsigned max_p;      /* longest photon path that still counts */
     int biweight;
+    int inner;           /* biweight: also sum the photons at R / sqrt 2 (appm__sums.ei) */
     /* [APPM__COMP_DIFFUSE]: every photon, or with Rc > 0 the diffuse ones only;
      * [APPM__COMP_CAUSTIC]: with Rc > 0 the caustic photons, gathered with radius Rc */
     appm__sums sum[APPM__NCOMP];
@@ -13064,7 +13066,7 @@ static double appm__gather_inner(const appm__gather *g, int c, double invM)
 {
     double R = c == APPM__COMP_CAUSTIC ? g->Rc : g->R, Ri2 = 0.5 * R * R;
     const appm__sums *sum = &g->sum[c];
-    if (!g->biweight || sum->count == 0 || !(R > 0.0)) return 0.0;
+    if (!g->inner || sum->count == 0 || !(R > 0.0)) return 0.0;
     return sum->ei * 3.0 / (APPM__PI * Ri2 * appm__cut_mass(g, sqrt(Ri2))) * invM;
 }
 
@@ -13106,7 +13108,8 @@ enum {
     APPM__CAP_BIWEIGHT = 2,  /* biweight kernel (else uniform)                       */
     APPM__CAP_CUT = 4,       /* the kernel cut at a corner (10.4, step 6)            */
     APPM__CAP_ERROR = 8,     /* keeps an error estimate (appm_stats.est_relerr)      */
-    APPM__CAP_MASS = 16      /* finds the cut's lines, to measure the mass it loses (gather.mass) */
+    APPM__CAP_MASS = 16,     /* finds the cut's lines, to measure the mass it loses (gather.mass) */
+    APPM__CAP_INNER = 32     /* sums its photons at R / sqrt 2 too, to measure its bias (7.2, gather.inner) */
 };
 
 typedef struct appm__field { /* one field of a method's per-pixel state */
@@ -14161,7 +14164,8 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
                                 sizeof appm__paper_fields / sizeof appm__paper_fields[0], NULL,
                                 appm__paper_bandwidth, appm__paper_radius, NULL, appm__paper_commit,
                                 appm__paper_pass_end, appm__mean_term, appm__paper_bias, appm__paper_aux},
-    [APPM_METHOD_APPM] = {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_CUT | APPM__CAP_ERROR,
+    [APPM_METHOD_APPM] = {"appm", APPM__CAP_PHOTONS | APPM__CAP_BIWEIGHT | APPM__CAP_CUT | APPM__CAP_ERROR |
+                                      APPM__CAP_INNER,
                           APPM__AUX_BIT(APPM_AUX_RADIUS) | APPM__AUX_BIT(APPM_AUX_VARIANCE) |
                               APPM__AUX_BIT(APPM_AUX_LAPLACIAN) | APPM__AUX_BIT(APPM_AUX_ERROR) |
                               APPM__AUX_BIT(APPM_AUX_RADIUS_CAUSTIC) | APPM__AUX_BIT(APPM_AUX_RADIUS_DIFFUSE),
@@ -14198,7 +14202,7 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             sum->s += k * q * q;
             /* within R' = R / sqrt 2, where 1 - d^2 / R'^2 = 2 u - 1; the test reads d2 and R2,
              * not u, so that it does not wait for u's division (nor does a mispredicted branch) */
-            if (d2 < 0.5f * R2) {
+            if (g->inner && d2 < 0.5f * R2) {
                 double ui = 2.0 * u - 1.0;
                 sum->ei += ui * ui * q;
             }
@@ -14421,6 +14425,7 @@ static void appm__gather_task(void *arg, uint32_t row, unsigned worker)
             g.ns = vp->ns;
             g.max_p = r->max_depth - vp->segs;
             g.biweight = (est->caps & APPM__CAP_BIWEIGHT) != 0;
+            g.inner = (est->caps & APPM__CAP_INNER) != 0;
             g.R = vp->R;
             g.Rc = vp->Rc;
             g.h = (float)r->lap_h;
@@ -14931,7 +14936,7 @@ APPM_API appm_status appm_renderer_create(const appm_scene *scene, const appm_co
     }
     r->stats.threads = r->threads;
     r->stats.est_relerr = -1.0;
-    r->var_scale = 1.0;
+    r->var_scale = r->noise_scale = 1.0;
     r->stats.clamped = -1.0;
     r->stats.memory_bytes = r->mem.live; /* what appm info reports before any pass */
     r->stats.peak_bytes = r->mem.peak;
@@ -15113,6 +15118,26 @@ static double appm__var_scale(const appm_renderer *r)
     return c < 1.0 ? c : 1.0;
 }
 
+/* The factor that turns the spread of a bias estimate's passes into its noise
+ * (appm__err_b2_task): var_scale with one chain.  With K >= 2 chains a pixel's
+ * variance comes from the spread between its chains, and var_scale is 1; the
+ * passes within each chain are one sequence's, negatively correlated, so their
+ * spread overstates as it does with one chain (7.3), and the image's ratio of
+ * the chains' variance to the passes' spread, at most 1, scales it instead. */
+static double appm__noise_scale(const appm_renderer *r)
+{
+    size_t i, npix = (size_t)r->w * r->h;
+    double a = 0.0, b = 0.0, c;
+    if (r->chains < 2 || !r->chain_sum || r->pass < 2) return r->var_scale;
+    for (i = 0; i < npix; ++i) {
+        const appm__pixel *p = &r->pix[i];
+        a += r->err_w[i] * appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass);
+        b += r->err_w[i] * appm__mean_var(p, NULL, 1, r->pass);
+    }
+    c = b > 0.0 ? a / b : 1.0;
+    return c < 1.0 ? c : 1.0;
+}
+
 /* The squared bias of pixel i after j passes, as the error estimate takes it:
  * of the (up to) 3 x 3 pixels around i, the mean of the method's bias^2 with the
  * largest left out.  A kernel estimate's bias is a field as smooth as the
@@ -15123,7 +15148,7 @@ static double appm__var_scale(const appm_renderer *r)
  * 1.05x at 256 passes.  A band two pixels wide or more, as a shadow's edge
  * leaves, keeps its bias (docs/algorithm.md 7.3).  Each pixel's bias^2 is taken
  * less the noise of its own estimate (the method's bias hook), scaled as the
- * variance is by the halves (var_scale, set before this is called); the mean
+ * variance is by the halves (noise_scale, set before this is called); the mean
  * is floored at 0. */
 static double appm__bias2(const appm_renderer *r, size_t i)
 {
@@ -15164,7 +15189,7 @@ static void appm__err_w_task(void *arg, uint32_t row, unsigned worker)
 }
 
 /* Each pixel's bias^2 less the noise of its own estimate, scaled as the
- * variance is (var_scale, set before). */
+ * variance is (noise_scale, set before). */
 static void appm__err_b2_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;
@@ -15172,7 +15197,7 @@ static void appm__err_b2_task(void *arg, uint32_t row, unsigned worker)
     (void)worker;
     for (; i < end; ++i) {
         double noise, b = r->est->bias(appm__state(r, i), (double)r->pass, &noise);
-        r->err_b2[i] = b * b - r->var_scale * noise;
+        r->err_b2[i] = b * b - r->noise_scale * noise;
     }
 }
 
@@ -15212,7 +15237,7 @@ static void appm__estimate_error(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     double sum = 0.0;
-    r->var_scale = 1.0;
+    r->var_scale = r->noise_scale = 1.0;
     if (r->pass < 2 || !(r->est->caps & APPM__CAP_ERROR)) {
         r->stats.est_relerr = -1.0;
         return;
@@ -15220,6 +15245,7 @@ static void appm__estimate_error(appm_renderer *r)
     appm__parallel_for(r->threads, r->h, appm__err_lum_task, r);
     appm__parallel_for(r->threads, r->h, appm__err_w_task, r);
     r->var_scale = appm__var_scale(r);
+    r->noise_scale = appm__noise_scale(r);
     r->err_pass = 0;
     appm__err_b2_fill(r);
     appm__parallel_for(r->threads, r->h, appm__err_term_task, r);

@@ -467,9 +467,12 @@ static void test_paper_mass_mean(appm_scene *s)
  * Every pixel gets the mean d of its passes' differences D_j between the
  * estimates at r_j and r_j / sqrt 2 (docs/algorithm.md 7.2), of spread m2
  * (Welford's M2): b = 2 d, and the noise of b is 4 m2 / ((j - 1) j), scaled by
- * the halves' factor of the variance (var_scale), as the sequence's passes are
- * not independent.  A uniform field keeps b^2 - that; more noise than b^2
- * gives 0, never a negative square. */
+ * the halves' factor of the variance (noise_scale = var_scale with one chain),
+ * as the sequence's passes are not independent.  A uniform field keeps b^2 -
+ * that; more noise than b^2 gives 0, never a negative square.  With 4 chains
+ * the variance is the chains' (var_scale 1) and the noise is scaled by the
+ * image's ratio of the chains' variance to the passes' spread, at most 1,
+ * recomputed here from the pixels' fields. */
 static void set_noisy_bias(appm_renderer *r, double d, double m2)
 {
     size_t i, n = (size_t)r->w * r->h;
@@ -487,8 +490,8 @@ static void test_bias2_noise(appm_scene *s)
     double c, noise;
     if (!r) return;
     appm__error_update(r); /* var_scale of pass 3 */
-    c = r->var_scale;
-    CHECK_MSG(c > 0.0 && c <= 1.0, "var_scale %g", c);
+    c = r->noise_scale;
+    CHECK_MSG(c > 0.0 && c <= 1.0 && c == r->var_scale, "noise_scale %g, var_scale %g", c, r->var_scale);
     set_noisy_bias(r, d, 0.0);
     CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
     CHECK_NEAR(noise, 0.0, 1e-15);
@@ -503,6 +506,35 @@ static void test_bias2_noise(appm_scene *s)
     set_noisy_bias(r, d, 2.0 * b * b / (c * unit));
     CHECK(bias2_now(r, 3 * r->w + 3) == 0.0);
     appm_renderer_destroy(r);
+    {
+        appm_config cfg;
+        size_t i, n;
+        double a = 0.0, v = 0.0, want, j8 = 8.0, u8 = 4.0 / ((j8 - 1.0) * j8);
+        appm_config_init(&cfg);
+        cfg.width = 24;
+        cfg.height = 16;
+        cfg.photons = 4000;
+        cfg.threads = 2;
+        cfg.chains = 4;
+        r = check_renderer(s, &cfg);
+        if (!r) return;
+        if (check_passes(r, 8)) {
+            appm__error_update(r);
+            n = (size_t)r->w * r->h;
+            for (i = 0; i < n; ++i) {
+                double w = appm__err_weight(r, i); /* err_w holds the terms by now */
+                a += w * appm__mean_var(&r->pix[i], appm__chain_sums(r, i), 4, 8);
+                v += w * appm__mean_var(&r->pix[i], NULL, 1, 8);
+            }
+            want = a / v < 1.0 ? a / v : 1.0;
+            CHECK_MSG(r->var_scale == 1.0 && want > 0.0 && fabs(r->noise_scale - want) <= 1e-12 * want,
+                      "4 chains: var_scale %g (must be 1), noise_scale %.15g against %.15g by hand", r->var_scale,
+                      r->noise_scale, want);
+            set_noisy_bias(r, d, 0.5 * b * b / (want * u8));
+            CHECK_NEAR(bias2_now(r, 3 * r->w + 3), 0.5 * b * b, 1e-12);
+        }
+        appm_renderer_destroy(r);
+    }
 }
 
 static int cmp_float(const void *a, const void *b)
