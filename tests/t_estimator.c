@@ -305,6 +305,73 @@ static void test_appm_start(appm_scene *s)
     }
 }
 
+/* appm's D_j as the commit forms it (docs/algorithm.md 7.4), on gathers made
+ * by hand at one pixel, M photon paths a pass, wf = 1 (so lum(Psi) = P):
+ *   the diffuse component, R = 1/8: one photon of power P1 at x itself, whose
+ *       weight is 1 in both kernels, so the estimate at R' = R / sqrt 2 is twice
+ *       the one at R, 3 P1 / (pi R^2 M), and D_d = -3 P1 / (pi R^2 M);
+ *   the caustic component, Rc = 1/16: one photon of power P2 at d^2 = 0.75 Rc^2,
+ *       beyond Rc', so D_c = its estimate at Rc, (1 - 0.75)^2 3 P2 / (pi Rc^2 M).
+ * Pass 1 has both, pass 2 the same with the diffuse photon's power NaN (that
+ * component is dropped, and adds nothing to D), pass 3 gathers nothing: the
+ * pixel's D is the mean of D_c + D_d, D_c and 0, its D_m2 their M2, and the
+ * dropped estimate is counted. */
+static void test_bias_commit(appm_scene *s)
+{
+    appm_renderer *r = appm_small(s, 0.0);
+    const double P1 = 2.0, P2 = 3.0, R = 0.125, Rc = 0.0625; /* exact in float, as vp and g hold them */
+    double M, Dd, Dc, v[3], mean, m2;
+    size_t i;
+    int k, pass;
+    uint64_t dropped = 0;
+    appm__adaptive_px *a;
+    if (!r) return;
+    if (check_passes(r, 1)) {
+        M = (double)r->M;
+        Dd = -3.0 * P1 / (APPM__PI * R * R * M);
+        Dc = 0.0625 * 3.0 * P2 / (APPM__PI * Rc * Rc * M);
+        v[0] = Dd + Dc, v[1] = Dc, v[2] = 0.0;
+        mean = (v[0] + v[1] + v[2]) / 3.0;
+        m2 = (v[0] - mean) * (v[0] - mean) + (v[1] - mean) * (v[1] - mean) + mean * mean;
+        i = (size_t)(r->h / 2) * r->w + r->w / 2;
+        a = (appm__adaptive_px *)appm__state(r, i);
+        memset(a, 0, sizeof *a);
+        memset(&r->pix[i], 0, sizeof r->pix[i]);
+        for (k = 0; k < (int)APPM__MAX_THREADS; ++k) dropped += r->dropped[k];
+        for (pass = 1; pass <= 3; ++pass) {
+            appm__gather g;
+            appm__vp vp;
+            memset(&g, 0, sizeof g);
+            memset(&vp, 0, sizeof vp);
+            vp.R = (float)R;
+            vp.Rc = (float)Rc;
+            if (pass < 3) {
+                double p1 = pass == 1 ? P1 : nan("");
+                g.R = (float)R;
+                g.Rc = (float)Rc;
+                g.biweight = g.inner = 1;
+                g.wf = appm__v(1, 1, 1);
+                g.sum[APPM__COMP_DIFFUSE].e[0] = g.sum[APPM__COMP_DIFFUSE].e[1] = p1;
+                g.sum[APPM__COMP_DIFFUSE].e[2] = p1;
+                g.sum[APPM__COMP_DIFFUSE].s = p1 * p1;
+                g.sum[APPM__COMP_DIFFUSE].ei = p1;
+                g.sum[APPM__COMP_DIFFUSE].count = 1;
+                g.sum[APPM__COMP_CAUSTIC].e[0] = g.sum[APPM__COMP_CAUSTIC].e[1] = 0.0625 * P2;
+                g.sum[APPM__COMP_CAUSTIC].e[2] = 0.0625 * P2;
+                g.sum[APPM__COMP_CAUSTIC].s = 0.0625 * P2 * P2;
+                g.sum[APPM__COMP_CAUSTIC].count = 1;
+            }
+            r->pass = (uint64_t)pass;
+            r->est->commit(r, &r->pix[i], a, &vp, &g, 0);
+        }
+        for (k = 0; k < (int)APPM__MAX_THREADS; ++k) dropped -= r->dropped[k];
+        CHECK_MSG(fabs(a->D - mean) <= 1e-12 * fabs(Dd) && fabs(a->D_m2 - m2) <= 1e-9 * m2 && dropped == (uint64_t)-1,
+                  "D %.15g against %.15g, D_m2 %.15g against %.15g (dropped %d)", a->D, mean, a->D_m2, m2,
+                  (int)-dropped);
+    }
+    appm_renderer_destroy(r);
+}
+
 /* appm's pooled dI^2 (5.3) takes a neighbour's estimate only once that
  * neighbour has seen 32 photons of the component (APPM__KMIN_APPM): the same
  * neighbour, given a Laplacian 100 times its pixel's, moves the pooled value
@@ -968,6 +1035,7 @@ int main(void)
         test_appm_pool_kmin(s);
         test_bias2(s);
         test_bias2_noise(s);
+        test_bias_commit(s);
         test_seam_bias(s);
         test_paper_mass_mean(s);
         test_error_parts(s);
