@@ -91,12 +91,13 @@ static void test_entries(void)
     }
 }
 
-static appm_renderer *render(appm_scene *s, appm_method m, int passes)
+static appm_renderer *render_chains(appm_scene *s, appm_method m, int passes, unsigned chains)
 {
     appm_config cfg;
     appm_renderer *r;
     appm_config_init(&cfg);
     cfg.method = m;
+    cfg.chains = chains;
     cfg.width = 24;
     cfg.height = 16;
     cfg.photons = 4000;
@@ -108,6 +109,11 @@ static appm_renderer *render(appm_scene *s, appm_method m, int passes)
         r = NULL;
     }
     return r;
+}
+
+static appm_renderer *render(appm_scene *s, appm_method m, int passes)
+{
+    return render_chains(s, m, passes, 1);
 }
 
 static void test_aux(appm_scene *s)
@@ -573,33 +579,22 @@ static void test_bias2_noise(appm_scene *s)
     set_noisy_bias(r, d, 2.0 * b * b / (c * unit));
     CHECK(bias2_now(r, 3 * r->w + 3) == 0.0);
     appm_renderer_destroy(r);
-    {
-        appm_config cfg;
-        size_t i, n;
+    r = render_chains(s, APPM_METHOD_APPM, 8, 4);
+    if (r) {
+        size_t i, n = (size_t)r->w * r->h;
         double a = 0.0, v = 0.0, want, j8 = 8.0, u8 = 4.0 / ((j8 - 1.0) * j8);
-        appm_config_init(&cfg);
-        cfg.width = 24;
-        cfg.height = 16;
-        cfg.photons = 4000;
-        cfg.threads = 2;
-        cfg.chains = 4;
-        r = check_renderer(s, &cfg);
-        if (!r) return;
-        if (check_passes(r, 8)) {
-            appm__error_update(r);
-            n = (size_t)r->w * r->h;
-            for (i = 0; i < n; ++i) {
-                double w = appm__err_weight(r, i); /* err_w holds the terms by now */
-                a += w * appm__mean_var(&r->pix[i], appm__chain_sums(r, i), 4, 8);
-                v += w * appm__mean_var(&r->pix[i], NULL, 1, 8);
-            }
-            want = a / v < 1.0 ? a / v : 1.0;
-            CHECK_MSG(r->var_scale == 1.0 && want > 0.0 && fabs(r->noise_scale - want) <= 1e-12 * want,
-                      "4 chains: var_scale %g (must be 1), noise_scale %.15g against %.15g by hand", r->var_scale,
-                      r->noise_scale, want);
-            set_noisy_bias(r, d, 0.5 * b * b / (want * u8));
-            CHECK_NEAR(bias2_now(r, 3 * r->w + 3), 0.5 * b * b, 1e-12);
+        appm__error_update(r);
+        for (i = 0; i < n; ++i) {
+            double w = appm__err_weight(r, i); /* err_w holds the terms by now */
+            a += w * appm__mean_var(&r->pix[i], appm__chain_sums(r, i), 4, 8);
+            v += w * appm__mean_var(&r->pix[i], NULL, 1, 8);
         }
+        want = a / v < 1.0 ? a / v : 1.0;
+        CHECK_MSG(r->var_scale == 1.0 && want > 0.0 && fabs(r->noise_scale - want) <= 1e-12 * want,
+                  "4 chains: var_scale %g (must be 1), noise_scale %.15g against %.15g by hand", r->var_scale,
+                  r->noise_scale, want);
+        set_noisy_bias(r, d, 0.5 * b * b / (want * u8));
+        CHECK_NEAR(bias2_now(r, 3 * r->w + 3), 0.5 * b * b, 1e-12);
         appm_renderer_destroy(r);
     }
 }
