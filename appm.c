@@ -11600,7 +11600,7 @@ typedef struct appm__pixel { /* listed field by field for checkpoints: appm__pix
     double ld[3];      /* sum over passes of emission + direct light (pt: of the whole path) */
     double wmean, wm2; /* Welford mean and M2 of the per-pass estimates' luminance */
     double lh[2];      /* the luminance summed over the first P/2 and the first P passes, P the
-                        * last power of two passed: the halves of appm__var_scale */
+                        * last power of two passed: the halves of appm__var_scales */
     uint64_t lit;      /* passes whose eye path met a light or the environment through specular
                         * vertices only: a pixel that shows a light (appm__err_weight) */
 } appm__pixel;
@@ -11678,8 +11678,8 @@ struct appm_renderer {
                           * with a neighbour on another surface (0: this one; 255: none near; 10.4,
                           * step 6); an array of its own, as the cut's window reads it for 9 rows */
     double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
-    double var_scale;    /* the spread of the passes times this is the variance (appm__var_scale) */
-    double noise_scale;  /* likewise for the noise of the bias estimate (appm__noise_scale) */
+    double var_scale;    /* the spread of the passes times this is the variance (appm__var_scales) */
+    double noise_scale;  /* likewise for the noise of the bias estimate (appm__var_scales) */
     double *err_w;       /* per pixel, the error estimate's parts (12, appm__estimate_error): the weight
                           * w of its relative error, then its term w (bias^2 + Var) */
     double *err_b2;      /* per pixel, the method's bias^2 less its noise (appm__bias2's input) */
@@ -13186,7 +13186,7 @@ static double *appm__chain_sums(const appm_renderer *r, size_t i)
 
 /* The per-pass estimate v of pixel px in this pass, for the noise estimate:
  * its Welford statistics, its chain's sum and, after a power of two of
- * passes, the sums of the two halves (appm__var_scale). */
+ * passes, the sums of the two halves (appm__var_scales). */
 static void appm__pass_value(appm_renderer *r, appm__pixel *px, double v)
 {
     appm__welford(px, r->pass, v);
@@ -13202,7 +13202,7 @@ static void appm__pass_value(appm_renderer *r, appm__pixel *px, double v)
  *   one sequence (qmc, 1 chain): the same formula.  Successive passes are then
  *           negatively correlated (that is the point of the sequence), so it
  *           overstates the error where the sequence helps: an upper bound,
- *           which appm__var_scale brings down to size.
+ *           which appm__var_scales brings down to size.
  *   K >= 2 chains (sums, section 2.3): independent randomizations.  With n_c
  *           passes and mean m_c in chain c and the overall mean m,
  *           sum_c n_c (m_c - m)^2 has expectation (K - 1) sigma^2, sigma^2 / n_c
@@ -15098,44 +15098,33 @@ static double appm__err_weight(const appm_renderer *r, size_t i)
  * sequence's gain has run out at that scale: the variance falls as 1/j there),
  * w_i the weight of pixel i in the relative error.  At most 1, the spread's
  * bound; 1 with random numbers (independent passes: the spread is right and
- * has j - 1 degrees of freedom a pixel) and with chains (their spread is
- * honest), and before 2 passes. */
-static double appm__var_scale(const appm_renderer *r)
+ * has j - 1 degrees of freedom a pixel) and before 2 passes.
+ *   With K >= 2 chains a pixel's variance is the spread between its chains,
+ * honest, and var_scale is 1.  The passes within each chain are still one
+ * sequence's, so the spread of a bias estimate's passes overstates its noise
+ * as with one chain; that noise is scaled by the same ratio with the chains'
+ * variance in the numerator (appm__err_b2_task's noise_scale; with one chain
+ * noise_scale is var_scale). */
+static void appm__var_scales(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
     uint64_t P = r->pass;
     double j = (double)r->pass, a = 0.0, b = 0.0, c;
-    if (!r->sobol || r->chains >= 2 || r->pass < 2) return 1.0;
+    int chains = r->chains >= 2 && r->chain_sum;
+    r->var_scale = r->noise_scale = 1.0;
+    if ((!r->sobol && !chains) || r->pass < 2) return;
     while (P & (P - 1)) P &= P - 1; /* the largest power of two <= j */
     for (i = 0; i < npix; ++i) {
         const appm__pixel *p = &r->pix[i];
         double w = r->err_w[i], h = 0.5 * (double)P; /* appm__err_weight, filled by appm__err_w_task */
         double d = p->lh[0] / h - (p->lh[1] - p->lh[0]) / h;
-        a += w * 0.25 * d * d * ((double)P / j);
+        a += chains ? w * appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass)
+                    : w * 0.25 * d * d * ((double)P / j);
         b += w * appm__mean_var(p, NULL, 1, r->pass);
     }
     c = b > 0.0 ? a / b : 1.0;
-    return c < 1.0 ? c : 1.0;
-}
-
-/* The factor that turns the spread of a bias estimate's passes into its noise
- * (appm__err_b2_task): var_scale with one chain.  With K >= 2 chains a pixel's
- * variance comes from the spread between its chains, and var_scale is 1; the
- * passes within each chain are one sequence's, negatively correlated, so their
- * spread overstates as it does with one chain (7.3), and the image's ratio of
- * the chains' variance to the passes' spread, at most 1, scales it instead. */
-static double appm__noise_scale(const appm_renderer *r)
-{
-    size_t i, npix = (size_t)r->w * r->h;
-    double a = 0.0, b = 0.0, c;
-    if (r->chains < 2 || !r->chain_sum || r->pass < 2) return r->var_scale;
-    for (i = 0; i < npix; ++i) {
-        const appm__pixel *p = &r->pix[i];
-        a += r->err_w[i] * appm__mean_var(p, appm__chain_sums(r, i), r->chains, r->pass);
-        b += r->err_w[i] * appm__mean_var(p, NULL, 1, r->pass);
-    }
-    c = b > 0.0 ? a / b : 1.0;
-    return c < 1.0 ? c : 1.0;
+    r->noise_scale = c < 1.0 ? c : 1.0;
+    if (!chains) r->var_scale = r->noise_scale;
 }
 
 /* The squared bias of pixel i after j passes, as the error estimate takes it:
@@ -15231,7 +15220,7 @@ APPM_API int appm_renderer_keeps_error(const appm_renderer *r)
  *   1 / (I~^2 + 0.01); none (-1) where the renderer keeps none
  *   (appm_renderer_keeps_error),
  * bias^2 from appm__bias2, Var from the Welford spread of the per-pass
- * estimates divided by j, scaled by appm__var_scale, or from the spread between
+ * estimates divided by j, scaled by appm__var_scales, or from the spread between
  * the chains (appm__mean_var). */
 static void appm__estimate_error(appm_renderer *r)
 {
@@ -15244,8 +15233,7 @@ static void appm__estimate_error(appm_renderer *r)
     }
     appm__parallel_for(r->threads, r->h, appm__err_lum_task, r);
     appm__parallel_for(r->threads, r->h, appm__err_w_task, r);
-    r->var_scale = appm__var_scale(r);
-    r->noise_scale = appm__noise_scale(r);
+    appm__var_scales(r);
     r->err_pass = 0;
     appm__err_b2_fill(r);
     appm__parallel_for(r->threads, r->h, appm__err_term_task, r);

@@ -391,7 +391,7 @@ done:
     appm_scene_destroy(s);
 }
 
-/* The halves of appm__var_scale are state: the path tracer on the bunny, 24 x 24,
+/* The halves of appm__var_scales are state: the path tracer on the bunny, 24 x 24,
  * saved after 20 passes without them, resumes to 40 passes with another error
  * estimate (the scale of pass 40 reads the halves of pass 32: S(16) was saved),
  * and with them to the same one. */

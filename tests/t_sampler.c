@@ -584,7 +584,7 @@ static void test_mean_var(void)
     }
 }
 
-/* The halves of one sequence (appm__var_scale): r's var_scale recomputed from
+/* The halves of one sequence (appm__var_scales): r's var_scale recomputed from
  * its pixels' fields, independently of the library's loop, with the library's
  * weights (appm__err_weight, tested in tests/t_estimator.c). */
 static double halves_scale(const appm_renderer *r)
