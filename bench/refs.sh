@@ -1,9 +1,10 @@
 # bench/refs.sh - the references, built in one place: sourced by bench/run.sh, bench/sampler.sh
 # and bench/eqcurve.sh, which set APPM (the command line tool) and threads (its --threads).
 #
-# reference NAME SCENE SIZE PASSES [METHOD [EXTRA]]: bench/ref/NAME.pfm, the mean of two
+# reference NAME SCENE SIZE PASSES [METHOD [EXTRA [K]]]: bench/ref/NAME.pfm, the mean of two
 # independent renders (seeds 1000003 and 1000004) of PASSES passes each with METHOD (default pt)
-# and the options EXTRA (one string that starts with a space, e.g. " --sampler random"), cached
+# and the options EXTRA (one string that starts with a space, e.g. " --sampler random"), each
+# rendered at K times SIZE and reduced to it by refmix (default 1; bench/refmix.c says why), cached
 # with the commands that made it in bench/ref/NAME.cmd: it is rendered again only when they
 # change.  refmix also measures the reference's own noise, ref_mse = E[(A - B)^2] / 4, in
 # bench/ref/NAME.mse, which is subtracted from every measured MSE: a method's error and the
@@ -12,14 +13,22 @@
 # itself).
 #
 # A scene whose light a path tracer cannot reach (a spot light seen through glass, a tiny light
-# under water) gets ppm halves instead, which lean toward ppm's kernel.
+# under water) gets ppm halves instead, which lean toward ppm's kernel: at K times the size its
+# kernel is K times narrower.
+
+# ref_size SIZE K: SIZE (WxH) times K
+ref_size() {
+    echo "$1" | awk -F x -v k="$2" '{ print $1 * k "x" $2 * k }'
+}
 
 # ref_cached NAME SCENE SIZE PASSES [METHOD [EXTRA]]: whether bench/ref/NAME is there, made by
 # these commands (sets ref, cmd and want for reference)
 ref_cached() {
     ref=bench/ref/$1.pfm
-    cmd="$APPM render $2 --method ${5:-pt} --size $3 --passes $4 --threads $threads -q${6:-}"
-    want="$cmd --seed 1000003 -o bench/ref/$1-a.pfm; $cmd --seed 1000004 -o bench/ref/$1-b.pfm; bench/refmix bench/ref/$1-a.pfm bench/ref/$1-b.pfm $ref"
+    k=${7:-1}
+    cmd="$APPM render $2 --method ${5:-pt} --size $(ref_size "$3" "$k") --passes $4 --threads $threads -q${6:-}"
+    kx=; [ "$k" = 1 ] || kx=" $k"
+    want="$cmd --seed 1000003 -o bench/ref/$1-a.pfm; $cmd --seed 1000004 -o bench/ref/$1-b.pfm; bench/refmix bench/ref/$1-a.pfm bench/ref/$1-b.pfm $ref$kx"
     [ -f "$ref" ] && [ -f "bench/ref/$1.mse" ] && [ -f "bench/ref/$1.cmd" ] &&
         [ "$(cat "bench/ref/$1.cmd")" = "$want" ] &&
         { [ "${REF_HALVES:-0}" != 1 ] || { [ -f "bench/ref/$1-a.pfm" ] && [ -f "bench/ref/$1-b.pfm" ]; }; }
@@ -35,7 +44,7 @@ reference() {
     [ -x bench/refmix ] || ${CC:-cc} -std=c99 -O2 bench/refmix.c appm.c -o bench/refmix -lm -pthread || exit 1
     $cmd --seed 1000003 -o "bench/ref/$1-a.pfm" > /dev/null &&
         $cmd --seed 1000004 -o "bench/ref/$1-b.pfm" > /dev/null &&
-        bench/refmix "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm" "$ref" > "bench/ref/$1.mse" ||
+        bench/refmix "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm" "$ref" $kx > "bench/ref/$1.mse" ||
         { echo "bench: reference failed"; exit 1; }
     [ "${REF_HALVES:-0}" = 1 ] || rm -f "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm"
     printf '%s\n' "$want" > "bench/ref/$1.cmd"
