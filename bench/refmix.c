@@ -69,9 +69,9 @@ int main(int argc, char **argv)
     }
     n = (size_t)a.width * a.height * 3;
     for (i = 0; i < n; ++i) {
-        double d = (double)a.rgb[i] - b.rgb[i];
+        double df = (double)a.rgb[i] - b.rgb[i];
         a.rgb[i] = 0.5f * (a.rgb[i] + b.rgb[i]);
-        rel += d * d / 4.0 / ((double)a.rgb[i] * a.rgb[i] + 0.01);
+        rel += df * df / 4.0 / ((double)a.rgb[i] * a.rgb[i] + 0.01);
     }
     if (appm_image_write(argv[3], &a, 1.0, &d) != APPM_OK) {
         fprintf(stderr, "refmix: %s: %s\n", argv[3], d.message);
