@@ -16,9 +16,9 @@
 #
 # References (bench/refs.sh): pt, 16384 passes in two halves, except where a
 # path tracer cannot reach the light (a spot seen through glass, a tiny light
-# under water): ppm, 16384 passes, whose own bias is not subtracted; water-caustic's at 4x the
-# size (256x256, 4096 photon paths a pass, as at 64x64), reduced to 64x64: at 64x64 ppm's kernel,
-# uncut, read its corners 5-10 % dark (docs/testing.md).
+# under water): ppm, 16384 passes, whose own bias is not subtracted, at 4x the size with the
+# photon paths a pass of 1x (water-caustic 256x256 and 4096, caustic-glass 224x320 and 17920),
+# reduced: at 1x ppm's kernel, uncut, read water-caustic's corners 8-15 % dark (docs/testing.md).
 # ERRBAR_SCENES="name ..." restricts the run.  Results:
 # bench/out/errbar/{results.csv,errbar.md} (or ERRBAR_OUT).
 set -u
@@ -55,10 +55,10 @@ echo "scene,method,build,seed,pass,relmse,est_relerr,ref_relmse" > "$out/results
 cat "$out/meta.txt"
 
 # name, scene file, size, reference passes, reference method, extra reference options, the
-# reference's size factor (refs.sh: water-caustic's ppm at 4x, whose kernel is 4x narrower)
+# reference's size factor (refs.sh: the ppm references at 4x, whose kernel is 4x narrower)
 list='cornell-sphere-64e scenes/cornell-sphere.scene 64x64 16384 pt --sampler_random
 cornell-sphere-dof-64e scenes/cornell-sphere-dof.scene 64x64 16384 pt --sampler_random
-caustic-glass-56x80e scenes/caustic-glass.scene 56x80 16384 ppm --sampler_random
+caustic-glass-56x80e scenes/caustic-glass.scene 56x80 16384 ppm --sampler_random_--photons_17920 4
 water-caustic-64e scenes/water-caustic.scene 64x64 16384 ppm --sampler_random_--photons_4096 4
 cornell-original-64e scenes/cornell-original.scene 64x64 16384 pt --sampler_random
 cornell-mm-64e scenes/cornell-mm.scene 64x64 16384 pt --sampler_random
