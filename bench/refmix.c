@@ -17,7 +17,8 @@
  * the pixel it covers, and a photon method's automatic radius, two pixel widths,
  * is K times narrower: a kernel leans K times less towards its own bias, which
  * in water-caustic's corners, where ppm's kernel loses the wall beyond them,
- * read 5-10 % dark at K = 1. */
+ * read 8-15 % dark at K = 1 (docs/testing.md).  `refmix A A A K` reduces one
+ * half in place (refs.sh keeps its halves so with REF_HALVES=1). */
 #include "../appm.h"
 #include <stdio.h>
 #include <stdlib.h>

@@ -21,7 +21,7 @@ ref_size() {
     echo "$1" | awk -F x -v k="$2" '{ print $1 * k "x" $2 * k }'
 }
 
-# ref_cached NAME SCENE SIZE PASSES [METHOD [EXTRA]]: whether bench/ref/NAME is there, made by
+# ref_cached NAME SCENE SIZE PASSES [METHOD [EXTRA [K]]]: whether bench/ref/NAME is there, made by
 # these commands (sets ref, cmd and want for reference)
 ref_cached() {
     ref=bench/ref/$1.pfm
@@ -46,6 +46,13 @@ reference() {
         $cmd --seed 1000004 -o "bench/ref/$1-b.pfm" > /dev/null &&
         bench/refmix "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm" "$ref" $kx > "bench/ref/$1.mse" ||
         { echo "bench: reference failed"; exit 1; }
-    [ "${REF_HALVES:-0}" = 1 ] || rm -f "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm"
+    if [ "${REF_HALVES:-0}" = 1 ]; then # kept at SIZE, as their users read them beside the renders
+        for h in a b; do
+            [ "$k" = 1 ] || bench/refmix "bench/ref/$1-$h.pfm" "bench/ref/$1-$h.pfm" "bench/ref/$1-$h.pfm" "$k" \
+                > /dev/null || { echo "bench: reference failed"; exit 1; }
+        done
+    else
+        rm -f "bench/ref/$1-a.pfm" "bench/ref/$1-b.pfm"
+    fi
     printf '%s\n' "$want" > "bench/ref/$1.cmd"
 }
