@@ -134,8 +134,8 @@
 
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
-#define APPM_VERSION_PATCH 11
-#define APPM_VERSION "0.1.11"
+#define APPM_VERSION_PATCH 12
+#define APPM_VERSION "0.1.12"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,7 +165,7 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.11": the version of the implementation that was compiled (APPM_VERSION is
+/* "0.1.12": the version of the implementation that was compiled (APPM_VERSION is
  * the version of the header).  The patch number changes with every change to
  * what a pass computes (an estimator's constant, the sampler, the emission),
  * so a checkpoint never resumes under passes other than those that wrote it. */
@@ -567,7 +567,7 @@ typedef struct appm_stats {
     double est_relerr;              /* appm, pt: estimated image relative error, the     */
                                     /* root mean over pixels of (bias^2 + var) /         */
                                     /* (I^2 + 0.01) (appm's bias measured from its       */
-                                    /* photons at radii r and r / sqrt 2, appm-paper's   */
+                                    /* photons at radii r and r / sqrt 3, appm-paper's   */
                                     /* the model (mu2/2) r^2 dI; where one pass holds a  */
                                     /* pixel that shows no light, I is its 3x3 median if */
                                     /* lower);                                           */

@@ -1103,14 +1103,14 @@ static void test_cut_laplacian(void)
 }
 
 /* appm's error bar measures its bias (docs/algorithm.md 7.2): D, the biweight
- * estimate at R less the same photons' at R' = R / sqrt 2 (appm__gather_inner),
+ * estimate at R less the same photons' at R' = R / sqrt 3 (appm__gather_inner),
  * has the expectation (mu2 / 2) (R^2 - R'^2) Delta L, exactly on the toy's
  * quadratic field (a biweight's estimate of a quadratic has no higher term), so
- * 2 D estimates the estimate's bias (mu2 / 2) R^2 Delta L = 0.125 at R = 0.2.
- * On a flat field D is 0 in expectation, and it stays 0 where the photons end
- * at a line 0.3 R from x that the kernel is cut at: the estimate at R' is
- * divided by the mass its own kernel keeps (a line at 0.42 R'), not by the
- * kernel's at R, which would leave 2 D at about -0.055 here. */
+ * (3/2) D (APPM__INNER_F D) estimates the estimate's bias (mu2 / 2) R^2 Delta L
+ * = 0.125 at R = 0.2.  On a flat field D is 0 in expectation, and it stays 0
+ * where the photons end at a line 0.3 R from x that the kernel is cut at: the
+ * estimate at R' is divided by the mass its own kernel keeps (a line at
+ * 0.52 R'), not by the kernel's at R, which would leave (3/2) D at about -0.069. */
 static void test_bias_two_radii(void)
 {
     const float R = 0.2f;
@@ -1136,14 +1136,14 @@ static void test_bias_two_radii(void)
                 if (field < 2 || p.x < 0.3f * R) appm__gather_photon(&g, &p, R * R, R * R);
             }
             appm__gather_finish(&g, APPM__COMP_DIFFUSE, 1.0 / M, ev, &sv, &dl);
-            b = 2.0 * (appm__lumd(ev) - appm__gather_inner(&g, APPM__COMP_DIFFUSE, 1.0 / M));
+            b = APPM__INNER_F * (appm__lumd(ev) - appm__gather_inner(&g, APPM__COMP_DIFFUSE, 1.0 / M));
             sum += b;
             sum2 += b * b;
         }
         mean = sum / T;
         se = sqrt((sum2 / T - mean * mean) / (T - 1));
         CHECK_MSG(fabs(mean - want) < 4.0 * se && se < 0.05 * 0.125,
-                  "field %d: 2 D = %.5f (se %.5f), the bias is %.5f", field, mean, se, want);
+                  "field %d: (3/2) D = %.5f (se %.5f), the bias is %.5f", field, mean, se, want);
     }
 }
 

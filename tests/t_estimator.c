@@ -314,8 +314,8 @@ static void test_appm_start(appm_scene *s)
 /* appm's D_j as the commit forms it (docs/algorithm.md 7.4), on gathers made
  * by hand at one pixel, M photon paths a pass, wf = 1 (so lum(Psi) = P):
  *   the diffuse component, R = 1/8: one photon of power P1 at x itself, whose
- *       weight is 1 in both kernels, so the estimate at R' = R / sqrt 2 is twice
- *       the one at R, 3 P1 / (pi R^2 M), and D_d = -3 P1 / (pi R^2 M);
+ *       weight is 1 in both kernels, so the estimate at R' = R / sqrt 3 is three
+ *       times the one at R, 3 P1 / (pi R^2 M), and D_d = -6 P1 / (pi R^2 M);
  *   the caustic component, Rc = 1/16: one photon of power P2 at d^2 = 0.75 Rc^2,
  *       beyond Rc', so D_c = its estimate at Rc, (1 - 0.75)^2 3 P2 / (pi Rc^2 M).
  * Pass 1 has both, pass 2 the same with the diffuse photon's power NaN (that
@@ -334,7 +334,7 @@ static void test_bias_commit(appm_scene *s)
     if (!r) return;
     if (check_passes(r, 1)) {
         M = (double)r->M;
-        Dd = -3.0 * P1 / (APPM__PI * R * R * M);
+        Dd = -6.0 * P1 / (APPM__PI * R * R * M);
         Dc = 0.0625 * 3.0 * P2 / (APPM__PI * Rc * Rc * M);
         v[0] = Dd + Dc, v[1] = Dc, v[2] = 0.0;
         mean = (v[0] + v[1] + v[2]) / 3.0;
@@ -538,8 +538,8 @@ static void test_paper_mass_mean(appm_scene *s)
 
 /* appm: the square of its measured bias less the noise of the measurement.
  * Every pixel gets the mean d of its passes' differences D_j between the
- * estimates at r_j and r_j / sqrt 2 (docs/algorithm.md 7.2), of spread m2
- * (Welford's M2): b = 2 d, and the noise of b is 4 m2 / ((j - 1) j), scaled by
+ * estimates at r_j and r_j / sqrt 3 (docs/algorithm.md 7.2), of spread m2
+ * (Welford's M2): b = (3/2) d, and the noise of b is (9/4) m2 / ((j - 1) j), scaled by
  * the halves' factor of the variance (noise_scale = var_scale with one chain),
  * as the sequence's passes are not independent.  A uniform field keeps b^2 -
  * that; more noise than b^2 gives 0, never a negative square.  With 4 chains
@@ -559,7 +559,7 @@ static void set_noisy_bias(appm_renderer *r, double d, double m2)
 static void test_bias2_noise(appm_scene *s)
 {
     appm_renderer *r = render(s, APPM_METHOD_APPM, 3);
-    const double j = 3.0, d = 0.1, b = 2.0 * d, unit = 4.0 / ((j - 1.0) * j); /* noise of b per unit of m2 */
+    const double j = 3.0, d = 0.1, b = 1.5 * d, unit = 2.25 / ((j - 1.0) * j); /* noise of b per unit of m2 */
     double c, noise;
     if (!r) return;
     appm__error_update(r); /* var_scale of pass 3 */
@@ -582,7 +582,7 @@ static void test_bias2_noise(appm_scene *s)
     r = render_chains(s, APPM_METHOD_APPM, 8, 4);
     if (r) {
         size_t i, n = (size_t)r->w * r->h;
-        double a = 0.0, v = 0.0, want, j8 = 8.0, u8 = 4.0 / ((j8 - 1.0) * j8);
+        double a = 0.0, v = 0.0, want, j8 = 8.0, u8 = 2.25 / ((j8 - 1.0) * j8);
         appm__error_update(r);
         for (i = 0; i < n; ++i) {
             double w = appm__err_weight(r, i); /* err_w holds the terms by now */
