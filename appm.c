@@ -11679,7 +11679,8 @@ struct appm_renderer {
                           * step 6); an array of its own, as the cut's window reads it for 9 rows */
     double *chain_sum;   /* chains >= 2: per pixel, the chains' sums (appm__chain_add) */
     double var_scale;    /* the spread of the passes times this is the variance (appm__var_scales) */
-    double noise_scale;  /* likewise for the noise of the bias estimate (appm__var_scales) */
+    double noise_scale;  /* with --chains, likewise for the noise of the bias estimate (appm__var_scales; 1
+                          * with one chain) */
     double *err_w;       /* per pixel, the error estimate's parts (12, appm__estimate_error): the weight
                           * w of its relative error, then its term w (bias^2 + Var) */
     double *err_b2;      /* per pixel, the method's bias^2 less its noise (appm__bias2's input) */
@@ -12887,14 +12888,17 @@ static size_t appm__store_compact(appm_renderer *r)
 #define APPM__MU2 0.125                          /* biweight, per axis */
 /* appm's error bar (7.2, docs/algorithm.md 7.4): the inner radius R' = R / sqrt(INNER_S2)
  * at which the same photons are weighed a second time.  To second order
- * D = I(R) - I(R') = (1 - 1 / INNER_S2) bias(R), so the bias is INNER_F D.  3, not
- * 2: the bias of a feature narrower than R' (a caustic's filament) grows more
- * slowly than R^2 and D holds less of it the closer R' is to R; a smaller R'
- * costs noise (the inner kernel's photons are fewer).  Over 12 seeds the error
- * bar read 0.68 of water-caustic's true error with 2, 0.71 with 3 and 0.74 with
- * 4; the RG box's, where the true bias is 2-9 % of the error and a noisy D reads
- * as bias, 1.22 / 1.26 / 1.31 at 64 passes. */
-#define APPM__INNER_S2 3.0
+ * D = I(R) - I(R') = (1 - 1 / INNER_S2) bias(R), so the bias is INNER_F D.  8, not
+ * 0.1.11's 2: the bias of a feature narrower than R' (a caustic's filament) grows
+ * more slowly than R^2 and D holds less of it the closer R' is to R; at
+ * R / sqrt 8 the inner estimate's bias is an eighth of the outer one's to second
+ * order, and D holds most of the bias of any filament wider than R'.
+ * It costs noise (a photon's share of INNER_F D has 7.7x the variance of its share
+ * of I(R), 1.7x at sqrt 2), which b^2 - noise takes off (appm__var_scales: not
+ * scaled by the luminance's halves with one chain).  Over 12 seeds the error bar
+ * read 0.68 / 0.68 of water-caustic's true error at 64 / 256 passes with 2,
+ * 0.695 / 0.708 with 6 and 0.717 / 0.723 with 8 (docs/algorithm.md 7.4). */
+#define APPM__INNER_S2 8.0
 #define APPM__INNER_F (APPM__INNER_S2 / (APPM__INNER_S2 - 1.0))
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */
 /* The constants of the adaptive methods (algorithm.md 4.3 - 4.7 and 4.10 - );
@@ -12934,7 +12938,7 @@ typedef struct appm__sums { /* one photon component's sums over a gather's photo
     double eg[3];        /* glossy: sum of K-weighted lobe(wi) gamma */
     double s;            /* sum of K lum(Psi)^2 */
     double dl;           /* sum of D_h lum(Psi) */
-    double ei;           /* biweight: sum of K(|d| / R') lum(Psi) at the inner radius R' = R / sqrt 3,
+    double ei;           /* biweight: sum of K(|d| / R') lum(Psi) at the inner radius R' = R / sqrt 8,
                           * the photons of the same gather: appm's bias estimate (appm__gather_inner) */
     uint64_t count;      /* photons inside the kernel */
 } appm__sums;
@@ -12957,7 +12961,7 @@ typedef struct appm__gather {
     const appm__pmap *map; /* the map being queried (its side[] array), set by the query */
     unsigned max_p;      /* longest photon path that still counts */
     int biweight;
-    int inner;           /* biweight: also sum the photons at R / sqrt 3 (appm__sums.ei) */
+    int inner;           /* biweight: also sum the photons at R / sqrt 8 (appm__sums.ei) */
     /* [APPM__COMP_DIFFUSE]: every photon, or with Rc > 0 the diffuse ones only;
      * [APPM__COMP_CAUSTIC]: with Rc > 0 the caustic photons, gathered with radius Rc */
     appm__sums sum[APPM__NCOMP];
@@ -13067,11 +13071,11 @@ static void appm__gather_finish(const appm__gather *g, int c, double invM, doubl
 }
 
 /* The luminance of component c's biweight estimate at the inner radius
- * R' = R / sqrt 3 (APPM__INNER_S2) from the same photons (appm__sums.ei),
+ * R' = R / sqrt 8 (APPM__INNER_S2) from the same photons (appm__sums.ei),
  * normalised as appm__sums_finish normalises the one at R: by its kernel's mass
  * on the surface at R', where the gather has cut lines.  A kernel estimate's
  * bias is (mu2 / 2) R^2 Delta L to second order, so the difference of the two,
- * D = lum(e) - this, is 2/3 of the bias at R: appm's error bar measures its
+ * D = lum(e) - this, is 7/8 of the bias at R: appm's error bar measures its
  * bias from D instead of modelling it from the Laplacian (docs/algorithm.md 7.2). */
 static double appm__gather_inner(const appm__gather *g, int c, double invM)
 {
@@ -13120,7 +13124,7 @@ enum {
     APPM__CAP_CUT = 4,       /* the kernel cut at a corner (10.4, step 6)            */
     APPM__CAP_ERROR = 8,     /* keeps an error estimate (appm_stats.est_relerr)      */
     APPM__CAP_MASS = 16,     /* finds the cut's lines, to measure the mass it loses (gather.mass) */
-    APPM__CAP_INNER = 32     /* sums its photons at R / sqrt 3 too, to measure its bias (7.2, gather.inner) */
+    APPM__CAP_INNER = 32     /* sums its photons at R / sqrt 8 too, to measure its bias (7.2, gather.inner) */
 };
 
 typedef struct appm__field { /* one field of a method's per-pixel state */
@@ -13559,7 +13563,7 @@ static double appm__paper_aux(const appm_renderer *r, const void *state, appm_au
  * The pixel's photon term is the sum of the components', and so is its bias
  * (mu2 / 2) sum_c r_c^2 dI_c (the biases add before they are squared).  The
  * error bar measures that bias rather than modelling it: D_j, the pass's photon
- * term at r less the same photons' at r / sqrt 3, is 2/3 of the bias of the pass
+ * term at r less the same photons' at r / sqrt 8, is 7/8 of the bias of the pass
  * to second order (appm__gather_inner), and the pixel keeps the mean and the
  * spread of the D_j over all its passes. */
 typedef struct appm__adaptive_stats { /* the statistics of one photon component */
@@ -13899,7 +13903,7 @@ static int appm__adaptive_term(const appm_renderer *r, const void *state, double
 
 /* The bias of the image, measured (docs/algorithm.md 7.2): the mean of the
  * passes' biases (mu2 / 2) r_j^2 Delta L, summed over the components, is
- * APPM__INNER_F = 3/2 times the mean of the D_j, whatever r_j each pass took;
+ * APPM__INNER_F = 8/7 times the mean of the D_j, whatever r_j each pass took;
  * *noise is the variance of that estimate, from the spread of the D_j, so that
  * b^2 - noise estimates the squared bias without the noise of D in it. */
 static double appm__adaptive_bias(const void *state, double j, double *noise)
@@ -14211,7 +14215,7 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             double u = 1.0 - (double)d2 / R2;
             k = u * u;
             sum->s += k * q * q;
-            /* within R' = R / sqrt 3, where 1 - d^2 / R'^2 = 3 u - 2; the test reads d2 and R2,
+            /* within R' = R / sqrt 8, where 1 - d^2 / R'^2 = 8 u - 7; the test reads d2 and R2,
              * not u, so that it does not wait for u's division (nor does a mispredicted branch) */
             if (g->inner && d2 < (float)(1.0 / APPM__INNER_S2) * R2) {
                 double ui = APPM__INNER_S2 * u - (APPM__INNER_S2 - 1.0);
@@ -15114,8 +15118,14 @@ static double appm__err_weight(const appm_renderer *r, size_t i)
  * honest, and var_scale is 1.  The passes within each chain are still one
  * sequence's, so the spread of a bias estimate's passes overstates its noise
  * as with one chain; that noise is scaled by the same ratio with the chains'
- * variance in the numerator (appm__err_b2_task's noise_scale; with one chain
- * noise_scale is var_scale). */
+ * variance in the numerator (appm__err_b2_task's noise_scale).
+ *   With one chain the bias estimate's noise is not scaled (noise_scale 1):
+ * appm's D_j do not gain from the sequence as the image's luminance does.
+ * Measured with D's own halves, found as c is (docs/algorithm.md 7.4): their
+ * ratio was 1 (capped; 0.96 on one bunny seed) where the luminance's was
+ * 0.49-0.67 (the RG box, 64 passes), 0.75-0.84 (water-caustic, 256) and
+ * 0.56-0.65 (the bunny, 256); scaled by the luminance's c, D's noise was left
+ * in b^2 and read as bias (the RG box's squared bias 15-19x the truth). */
 static void appm__var_scales(appm_renderer *r)
 {
     size_t i, npix = (size_t)r->w * r->h;
@@ -15134,8 +15144,9 @@ static void appm__var_scales(appm_renderer *r)
         b += w * appm__mean_var(p, NULL, 1, r->pass);
     }
     c = b > 0.0 ? a / b : 1.0;
-    r->noise_scale = c < 1.0 ? c : 1.0;
-    if (!chains) r->var_scale = r->noise_scale;
+    c = c < 1.0 ? c : 1.0;
+    if (chains) r->noise_scale = c;
+    else r->var_scale = c;
 }
 
 /* The squared bias of pixel i after j passes, as the error estimate takes it:
@@ -15147,8 +15158,8 @@ static void appm__var_scales(appm_renderer *r)
  * image's squared model bias, 6x the true squared bias in all; without it,
  * 1.05x at 256 passes.  A band two pixels wide or more, as a shadow's edge
  * leaves, keeps its bias (docs/algorithm.md 7.3).  Each pixel's bias^2 is taken
- * less the noise of its own estimate (the method's bias hook), scaled as the
- * variance is by the halves (noise_scale, set before this is called); the mean
+ * less the noise of its own estimate (the method's bias hook), with --chains
+ * scaled by the chains' ratio (noise_scale, set before this is called); the mean
  * is floored at 0. */
 static double appm__bias2(const appm_renderer *r, size_t i)
 {
@@ -15188,8 +15199,8 @@ static void appm__err_w_task(void *arg, uint32_t row, unsigned worker)
     for (; i < end; ++i) r->err_w[i] = appm__err_weight(r, i);
 }
 
-/* Each pixel's bias^2 less the noise of its own estimate, scaled as the
- * variance is (noise_scale, set before). */
+/* Each pixel's bias^2 less the noise of its own estimate, times noise_scale
+ * (set before: 1 with one chain). */
 static void appm__err_b2_task(void *arg, uint32_t row, unsigned worker)
 {
     appm_renderer *r = (appm_renderer *)arg;

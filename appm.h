@@ -567,7 +567,7 @@ typedef struct appm_stats {
     double est_relerr;              /* appm, pt: estimated image relative error, the     */
                                     /* root mean over pixels of (bias^2 + var) /         */
                                     /* (I^2 + 0.01) (appm's bias measured from its       */
-                                    /* photons at radii r and r / sqrt 3, appm-paper's   */
+                                    /* photons at radii r and r / sqrt 8, appm-paper's   */
                                     /* the model (mu2/2) r^2 dI; where one pass holds a  */
                                     /* pixel that shows no light, I is its 3x3 median if */
                                     /* lower);                                           */

@@ -89,7 +89,7 @@ int main(int argc, char **argv)
             B2[k][i] = appm__bias2(r, i);
             V[k][i] = r->var_scale * appm__mean_var(&r->pix[i], NULL, 1, r->pass);
         }
-        printf("seed %d: est_relerr %.5f, halves' scale %.3f\n", k + 1, r->stats.est_relerr, r->var_scale);
+        printf("seed %d: est_relerr %.5f, halves' scale %.3f, of the bias's noise %.3f\n", k + 1, r->stats.est_relerr, r->var_scale, r->noise_scale);
         appm_renderer_destroy(r);
     }
     for (i = 0; i < EP_N; ++i) {

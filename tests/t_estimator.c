@@ -314,8 +314,8 @@ static void test_appm_start(appm_scene *s)
 /* appm's D_j as the commit forms it (docs/algorithm.md 7.4), on gathers made
  * by hand at one pixel, M photon paths a pass, wf = 1 (so lum(Psi) = P):
  *   the diffuse component, R = 1/8: one photon of power P1 at x itself, whose
- *       weight is 1 in both kernels, so the estimate at R' = R / sqrt 3 is three
- *       times the one at R, 3 P1 / (pi R^2 M), and D_d = -6 P1 / (pi R^2 M);
+ *       weight is 1 in both kernels, so the estimate at R' = R / sqrt 8 is eight
+ *       times the one at R, 3 P1 / (pi R^2 M), and D_d = -21 P1 / (pi R^2 M);
  *   the caustic component, Rc = 1/16: one photon of power P2 at d^2 = 0.75 Rc^2,
  *       beyond Rc', so D_c = its estimate at Rc, (1 - 0.75)^2 3 P2 / (pi Rc^2 M).
  * Pass 1 has both, pass 2 the same with the diffuse photon's power NaN (that
@@ -334,7 +334,7 @@ static void test_bias_commit(appm_scene *s)
     if (!r) return;
     if (check_passes(r, 1)) {
         M = (double)r->M;
-        Dd = -6.0 * P1 / (APPM__PI * R * R * M);
+        Dd = -21.0 * P1 / (APPM__PI * R * R * M);
         Dc = 0.0625 * 3.0 * P2 / (APPM__PI * Rc * Rc * M);
         v[0] = Dd + Dc, v[1] = Dc, v[2] = 0.0;
         mean = (v[0] + v[1] + v[2]) / 3.0;
@@ -538,10 +538,10 @@ static void test_paper_mass_mean(appm_scene *s)
 
 /* appm: the square of its measured bias less the noise of the measurement.
  * Every pixel gets the mean d of its passes' differences D_j between the
- * estimates at r_j and r_j / sqrt 3 (docs/algorithm.md 7.2), of spread m2
- * (Welford's M2): b = (3/2) d, and the noise of b is (9/4) m2 / ((j - 1) j), scaled by
- * the halves' factor of the variance (noise_scale = var_scale with one chain),
- * as the sequence's passes are not independent.  A uniform field keeps b^2 -
+ * estimates at r_j and r_j / sqrt 8 (docs/algorithm.md 7.2), of spread m2
+ * (Welford's M2): b = (8/7) d, and the noise of b is (64/49) m2 / ((j - 1) j),
+ * not scaled with one chain (noise_scale 1, while the luminance's var_scale is
+ * the halves'), as D's passes do not gain from the sequence.  A uniform field keeps b^2 -
  * that; more noise than b^2 gives 0, never a negative square.  With 4 chains
  * the variance is the chains' (var_scale 1) and the noise is scaled by the
  * image's ratio of the chains' variance to the passes' spread, at most 1,
@@ -558,13 +558,15 @@ static void set_noisy_bias(appm_renderer *r, double d, double m2)
 
 static void test_bias2_noise(appm_scene *s)
 {
-    appm_renderer *r = render(s, APPM_METHOD_APPM, 3);
-    const double j = 3.0, d = 0.1, b = 1.5 * d, unit = 2.25 / ((j - 1.0) * j); /* noise of b per unit of m2 */
+    appm_renderer *r = render(s, APPM_METHOD_APPM, 8);
+    const double j = 8.0, d = 0.1, b = 8.0 / 7.0 * d, unit = 64.0 / 49.0 / ((j - 1.0) * j); /* noise of b per unit of m2 */
     double c, noise;
     if (!r) return;
-    appm__error_update(r); /* var_scale of pass 3 */
+    appm__error_update(r); /* var_scale of pass 8 */
     c = r->noise_scale;
-    CHECK_MSG(c > 0.0 && c <= 1.0 && c == r->var_scale, "noise_scale %g, var_scale %g", c, r->var_scale);
+    /* one chain: the luminance's halves scale its variance (below 1 here), not D's noise */
+    CHECK_MSG(c == 1.0 && r->var_scale > 0.0 && r->var_scale < 1.0, "noise_scale %g, var_scale %g", c,
+              r->var_scale);
     set_noisy_bias(r, d, 0.0);
     CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
     CHECK_NEAR(noise, 0.0, 1e-15);
@@ -582,7 +584,7 @@ static void test_bias2_noise(appm_scene *s)
     r = render_chains(s, APPM_METHOD_APPM, 8, 4);
     if (r) {
         size_t i, n = (size_t)r->w * r->h;
-        double a = 0.0, v = 0.0, want, j8 = 8.0, u8 = 2.25 / ((j8 - 1.0) * j8);
+        double a = 0.0, v = 0.0, want, j8 = 8.0, u8 = 64.0 / 49.0 / ((j8 - 1.0) * j8);
         appm__error_update(r);
         for (i = 0; i < n; ++i) {
             double w = appm__err_weight(r, i); /* err_w holds the terms by now */
@@ -608,7 +610,8 @@ static int cmp_float(const void *a, const void *b)
 /* 6c. est_relerr from the parts the renderer keeps per pixel (err_w, err_b2,
  * filled over the threads) against the whole formula taken here from the
  * state, pixel by pixel, in one loop: sqrt(mean of (bias2 + Var) w), bias2 the
- * 3 x 3 mean of b^2 - var_scale noise without its largest, Var the spread
+ * 3 x 3 mean of b^2 - noise without its largest (one chain: the noise of a
+ * bias estimate is not scaled, docs/algorithm.md 7.4), Var the spread
  * times var_scale, w = 1 / (I~^2 + 0.01), I~ the pixel's luminance (a float)
  * or, where one pass holds the pixel (j mu^2 / (mu^2 + s^2) < 2, s^2 = M2 / j) and it shows
  * no light, the median of its 3 x 3 neighbourhood's if lower (qsort here); for
@@ -651,7 +654,7 @@ static double relerr_by_hand(const appm_renderer *r, int *lowered)
                 double noise, b;
                 if (x < 0 || y < 0 || x >= (int64_t)r->w || y >= (int64_t)r->h) continue;
                 b = r->est->bias(appm__state(r, (size_t)(y * (int64_t)r->w + x)), j, &noise);
-                b = b * b - r->var_scale * noise;
+                b = b * b - noise;
                 b2 += b;
                 if (b > top) top = b;
                 k++;
