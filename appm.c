@@ -15116,9 +15116,11 @@ static double appm__err_weight(const appm_renderer *r, size_t i)
  * has j - 1 degrees of freedom a pixel) and before 2 passes.
  *   With K >= 2 chains a pixel's variance is the spread between its chains,
  * honest, and var_scale is 1.  The passes within each chain are still one
- * sequence's, so the spread of a bias estimate's passes overstates its noise
- * as with one chain; that noise is scaled by the same ratio with the chains'
- * variance in the numerator (appm__err_b2_task's noise_scale).
+ * sequence's, and the bias estimate's noise is scaled by the same ratio with
+ * the chains' variance in the numerator (appm__err_b2_task's noise_scale), as
+ * if the spread of its passes overstated its noise as the luminance's does.
+ * That was not measured for D with chains; with one chain it does not hold
+ * (below), so with chains part of D's noise may stay in b^2.
  *   With one chain the bias estimate's noise is not scaled (noise_scale 1):
  * appm's D_j do not gain from the sequence as the image's luminance does.
  * Measured with D's own halves, found as c is (docs/algorithm.md 7.4): their

@@ -1110,7 +1110,7 @@ static void test_cut_laplacian(void)
  * = 0.125 at R = 0.2.  On a flat field D is 0 in expectation, and it stays 0
  * where the photons end at a line 0.3 R from x that the kernel is cut at: the
  * estimate at R' is divided by the mass its own kernel keeps (a line at
- * 0.85 R'), not by the kernel's at R, which would leave (8/7) D at about -0.083. */
+ * 0.85 R'), not by the kernel's at R, which would leave (8/7) D near -0.08. */
 static void test_bias_two_radii(void)
 {
     const float R = 0.2f;
