@@ -42,9 +42,10 @@
 # References (64x64, built once by bench/refs.sh, then reused): the committed sphere box
 # reference; two path-traced halves of 4096 passes for every other scene a path tracer can
 # reach; two ppm halves for caustic-glass and water-caustic (16384 photons x 3000 and x 600
-# passes, at 256x256 reduced to 64x64 since 2026-12-07; a path tracer cannot reach their spot or
-# tiny light through glass or water; these lean toward ppm's kernel, 4x less than at 64x64), and for water-cutref water-caustic's halves rendered again by the
-# build of commit 547f20b with APPM__CUT 2 (ppm with the kernel cut).  The masked RMSE leaves out the pixels
+# passes, at 256x256 reduced to 64x64 since 2026-12-07; a path tracer cannot reach their spot
+# or tiny light through glass or water; these lean toward ppm's kernel, 4x less than at
+# 64x64), and for water-cutref water-caustic's halves rendered again by the build of commit
+# 547f20b with APPM__CUT 2 (ppm with the kernel cut).  The masked RMSE leaves out the pixels
 # whose reference luminance is at least 1 (10 for water-caustic): the light seen directly.
 set -u
 CC=${CC:-cc}

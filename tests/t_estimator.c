@@ -571,14 +571,14 @@ static void test_bias2_noise(appm_scene *s)
     CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
     CHECK_NEAR(noise, 0.0, 1e-15);
     CHECK_NEAR(bias2_now(r, 3 * r->w + 3), b * b, 1e-12);
-    /* half of b^2 is noise once scaled by c */
-    set_noisy_bias(r, d, 0.5 * b * b / (c * unit));
+    /* half of b^2 is noise (unscaled: c is 1) */
+    set_noisy_bias(r, d, 0.5 * b * b / unit);
     CHECK_NEAR(r->est->bias(appm__state(r, 3 * r->w + 3), j, &noise), b, 1e-12);
-    CHECK_NEAR(noise, 0.5 * b * b / c, 1e-9 * b * b / c);
+    CHECK_NEAR(noise, 0.5 * b * b, 1e-9 * b * b);
     CHECK_NEAR(bias2_now(r, 3 * r->w + 3), 0.5 * b * b, 1e-12);
     CHECK_NEAR(bias2_now(r, 0), 0.5 * b * b, 1e-12); /* a corner's 4 pixels: the same */
     /* all noise and more: no bias, not a negative one */
-    set_noisy_bias(r, d, 2.0 * b * b / (c * unit));
+    set_noisy_bias(r, d, 2.0 * b * b / unit);
     CHECK(bias2_now(r, 3 * r->w + 3) == 0.0);
     appm_renderer_destroy(r);
     r = render_chains(s, APPM_METHOD_APPM, 8, 4);
