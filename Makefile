@@ -13,6 +13,7 @@
 #                     make bench-envmap: environment-map sampling against uniform directions
 #                     make bench-errbar: est_relerr against the true error, every scene and method
 #                     make bench-studio: the bare bunny's studio (form, noise and grain at 10 s)
+#                     make bench-fewmaps: appm against ppm's 15-point grid after 8 and 128 passes
 #   make bench-bvh    the BVH alone: binary vs wide tree, SIMD vs scalar (bench/bvh.sh)
 #   make fuzz         libFuzzer runs of the readers (clang), bounded in time; make fuzz-long:
 #                     10 million executions each (hours)
@@ -34,7 +35,7 @@ TESTS    = $(patsubst tests/%.c,build/%,$(TESTSRC))
 STESTS   = $(patsubst tests/%.c,build/san/%,$(TESTSRC))
 DEPS     = appm.c appm.h tests/check.h tests/inflate.h tests/fuzz/targets.h
 
-.PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-errbar bench-studio fuzz fuzz-long web \
+.PHONY: all mpi test-mpi bench-mpi test test-long test-crash portability dynamic bench bench-quick bench-glossy bench-bvh bench-sampler bench-envmap bench-errbar bench-studio bench-fewmaps fuzz fuzz-long web \
         test-web clean
 
 all: appm
@@ -132,6 +133,9 @@ bench-envmap:
 
 bench-studio: appm
 	sh bench/studio.sh
+
+bench-fewmaps: appm
+	sh bench/fewmaps.sh
 
 fuzz:
 	sh tests/fuzz/run.sh

@@ -1,15 +1,20 @@
 /* bench/regions.c - RMSE of an image against a reference, per region.
  *
- *   regions IMG.pfm REF.pfm REGIONS.txt
+ *   regions IMG.pfm REF.pfm REGIONS.txt [MASK]
  *
  * REGIONS.txt has one region a line, "name x0 y0 x1 y1": the pixels x0 <= x <
- * x1, y0 <= y < y1 (row 0 at the top, as the images).  Prints one line
- * "name=RMSE" per region and "all=RMSE" for the whole image, RMSE over the
- * pixels and channels of the region (no subtraction of the reference's noise:
- * the regions are small, and that noise would need the reference's two halves;
- * it makes two renders' errors look more alike, never less). */
+ * x1, y0 <= y < y1 (row 0 at the top, as the images); /dev/null for none.
+ * Prints one line "name=RMSE" per region and "all=RMSE" for the whole image,
+ * RMSE over the pixels and channels of the region (no subtraction of the
+ * reference's noise: the regions are small, and that noise would need the
+ * reference's two halves; it makes two renders' errors look more alike, never
+ * less).  With MASK, also "masked=RMSE" over the pixels whose reference
+ * luminance is under MASK: the light seen directly, whose few bright pixels
+ * would otherwise hold most of a render's error (water-caustic's lamp, and its
+ * image in the water that an eye ray meets once in thousands of passes). */
 #include "../appm.h"
 #include <stdio.h>
+#include <stdlib.h>
 #include <math.h>
 
 static void rmse(const appm_image *a, const appm_image *b, unsigned x0, unsigned y0, unsigned x1, unsigned y1,
@@ -29,6 +34,24 @@ static void rmse(const appm_image *a, const appm_image *b, unsigned x0, unsigned
     printf("%s=%.6g\n", name, n ? sqrt(s / n) : 0.0);
 }
 
+/* The RMSE over the pixels whose reference (b) luminance is under `mask`. */
+static void rmse_masked(const appm_image *a, const appm_image *b, double mask)
+{
+    double s = 0.0;
+    unsigned long n = 0, i, np = (unsigned long)a->width * a->height;
+    int c;
+    for (i = 0; i < np; ++i) {
+        const float *q = b->rgb + 3 * i;
+        if (!(0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2] < mask)) continue;
+        for (c = 0; c < 3; ++c) {
+            double d = (double)a->rgb[3 * i + c] - q[c];
+            s += d * d;
+            n++;
+        }
+    }
+    printf("masked=%.6g\n", n ? sqrt(s / n) : 0.0);
+}
+
 int main(int argc, char **argv)
 {
     appm_image a, b;
@@ -36,8 +59,8 @@ int main(int argc, char **argv)
     FILE *f;
     char name[64];
     unsigned x0, y0, x1, y1;
-    if (argc != 4) {
-        fprintf(stderr, "usage: regions IMG.pfm REF.pfm REGIONS.txt\n");
+    if (argc != 4 && argc != 5) {
+        fprintf(stderr, "usage: regions IMG.pfm REF.pfm REGIONS.txt [MASK]\n");
         return 1;
     }
     if (appm_image_read_pfm(argv[1], NULL, &a, &d) || appm_image_read_pfm(argv[2], NULL, &b, &d)) {
@@ -56,6 +79,7 @@ int main(int argc, char **argv)
     while (fscanf(f, "%63s %u %u %u %u", name, &x0, &y0, &x1, &y1) == 5) rmse(&a, &b, x0, y0, x1, y1, name);
     fclose(f);
     rmse(&a, &b, 0, 0, a.width, a.height, "all");
+    if (argc == 5) rmse_masked(&a, &b, atof(argv[4]));
     appm_image_free(NULL, &a);
     appm_image_free(NULL, &b);
     return 0;
