@@ -4,7 +4,7 @@
 #
 # At equal passes, FEW_PASSES (default 8 and 128), on the two caustic scenes, appm with its
 # defaults against every point of ppm's 15-point grid: the initial radius r0 in {1/4, 1/2, 1, 2,
-# 4} x ppm's automatic radius (its radius= after one pass of the same seed), alpha in {1/2, 2/3,
+# 4} x ppm's automatic radius (its radius= after one pass of the same seed), alpha in {0.5, 0.667,
 # 0.8}.  Both take the photon paths a pass that the budget chooses (the same for every photon
 # method), one thread a render, seeds FEW_SEEDS (default 1 2 3).  The error:
 #   caustic-glass (56x80): the RMSE of the whole image, the reference's own noise taken off
@@ -34,8 +34,10 @@ $CC -std=c99 -O2 bench/regions.c appm.c -o "$out/regions" -lm -pthread || exit 1
 # reference's noise)
 err() {
     if [ "$2" = - ]; then
+        e_n=$(sed -n 's/^ref_mse=//p' "bench/ref/$1.mse")
+        [ -n "$e_n" ] || { echo "bench: bench/ref/$1.mse has no ref_mse" >&2; return 1; }
         "$out/regions" "$3" "bench/ref/$1.pfm" /dev/null | sed -n 's/^all=//p' |
-            awk -v n="$(sed -n 's/^ref_mse=//p' "bench/ref/$1.mse")" '{ e = $1 * $1 - n; printf "%.6g\n", (e > 0 ? sqrt(e) : 0) }'
+            awk -v n="$e_n" '{ e = $1 * $1 - n; printf "%.6g\n", (e > 0 ? sqrt(e) : 0) }'
     else
         "$out/regions" "$3" "bench/ref/$1.pfm" /dev/null "$2" | sed -n 's/^masked=//p'
     fi
@@ -46,8 +48,10 @@ one() {
     o_n=$1 o_f=$2 o_s=$3 o_m=$4 o_p=$5 o_sd=$6 o_l=$7
     shift 7
     "$APPM" render "$o_f" --size "$o_s" --passes "$o_p" --threads 1 --seed "$o_sd" -q "$@" -o "$out/img.pfm" \
-        > /dev/null 2>> "$out/stderr.txt" || { cat "$out/stderr.txt"; exit 1; }
-    echo "$o_n,$o_p,$o_sd,$o_l,$(err "$o_n" "$o_m" "$out/img.pfm")" >> "$out/results.csv"
+        > /dev/null 2>> "$out/stderr.txt" || { echo "bench: $o_n $o_l seed $o_sd failed" >&2; exit 1; }
+    o_e=$(err "$o_n" "$o_m" "$out/img.pfm")
+    [ -n "$o_e" ] || { echo "bench: no error measured for $o_n $o_l seed $o_sd" >&2; exit 1; }
+    echo "$o_n,$o_p,$o_sd,$o_l,$o_e" >> "$out/results.csv"
 }
 
 echo "scene,passes,seed,point,error" > "$out/results.csv"
@@ -64,6 +68,7 @@ printf '%s\n' "$list" | while read -r name file size rp rm extra k mask; do
             # ppm's automatic radius, which depends on the seed's first pass
             r0=$("$APPM" render "$file" --size "$size" --passes 1 --threads 1 --seed "$sd" --method ppm \
                 -o "$out/img.pfm" 2>> "$out/stderr.txt" | tr ' ' '\n' | sed -n 's/^radius=//p')
+            [ -n "$r0" ] || { echo "bench: no automatic radius for $name seed $sd" >&2; exit 1; }
             one "$name" "$file" "$size" "$mask" "$p" "$sd" appm
             for f in 0.25 0.5 1 2 4; do
                 for a in 0.5 0.667 0.8; do
@@ -73,7 +78,7 @@ printf '%s\n' "$list" | while read -r name file size rp rm extra k mask; do
             done
         done
     done
-done
+done || exit 1 # the loop runs in a subshell (a pipeline): a failed render ends the bench here
 rm -f "$out/img.pfm"
 
 {

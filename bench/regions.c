@@ -59,9 +59,18 @@ int main(int argc, char **argv)
     FILE *f;
     char name[64];
     unsigned x0, y0, x1, y1;
+    double mask = 0.0;
     if (argc != 4 && argc != 5) {
         fprintf(stderr, "usage: regions IMG.pfm REF.pfm REGIONS.txt [MASK]\n");
         return 1;
+    }
+    if (argc == 5) {
+        char *end;
+        mask = strtod(argv[4], &end);
+        if (end == argv[4] || *end || !(mask > 0.0)) {
+            fprintf(stderr, "regions: MASK must be a positive luminance, not '%s'\n", argv[4]);
+            return 1;
+        }
     }
     if (appm_image_read_pfm(argv[1], NULL, &a, &d) || appm_image_read_pfm(argv[2], NULL, &b, &d)) {
         fprintf(stderr, "regions: %s: %s\n", d.file, d.message);
@@ -79,7 +88,7 @@ int main(int argc, char **argv)
     while (fscanf(f, "%63s %u %u %u %u", name, &x0, &y0, &x1, &y1) == 5) rmse(&a, &b, x0, y0, x1, y1, name);
     fclose(f);
     rmse(&a, &b, 0, 0, a.width, a.height, "all");
-    if (argc == 5) rmse_masked(&a, &b, atof(argv[4]));
+    if (argc == 5) rmse_masked(&a, &b, mask);
     appm_image_free(NULL, &a);
     appm_image_free(NULL, &b);
     return 0;
