@@ -12896,8 +12896,9 @@ static size_t appm__store_compact(appm_renderer *r)
  * It costs noise (a photon's share of INNER_F D has 7.7x the variance of its share
  * of I(R), 1.7x at sqrt 2), which b^2 - noise takes off (appm__var_scales: not
  * scaled by the luminance's halves with one chain).  Over 12 seeds the error bar
- * read 0.68 / 0.68 of water-caustic's true error at 64 / 256 passes with 2,
- * 0.695 / 0.708 with 6 and 0.717 / 0.723 with 8 (docs/algorithm.md 7.4). */
+ * read 0.68 / 0.68 of water-caustic's true error at 64 / 256 passes with 2 (0.1.11,
+ * its noise scaled by those halves) and, unscaled, 0.67 / 0.69 with 4, 0.695 / 0.708
+ * with 6 and 0.709 / 0.722 with 8 (docs/algorithm.md 7.4). */
 #define APPM__INNER_S2 8.0
 #define APPM__INNER_F (APPM__INNER_S2 / (APPM__INNER_S2 - 1.0))
 #define APPM__RK (9.0 / (5.0 * APPM__PI))        /* biweight, int K^2 */

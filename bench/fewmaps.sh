@@ -63,12 +63,12 @@ printf '%s\n' "$list" | while read -r name file size rp rm extra k mask; do
     ex=${extra:+ $(printf '%s' "$extra" | tr _ ' ')}
     reference "$name" "$file" "$size" "$rp" "$rm" "$ex" "$k"
     echo "scene $name"
-    for p in $passes; do
-        for sd in $seeds; do
-            # ppm's automatic radius, which depends on the seed's first pass
-            r0=$("$APPM" render "$file" --size "$size" --passes 1 --threads 1 --seed "$sd" --method ppm \
-                -o "$out/img.pfm" 2>> "$out/stderr.txt" | tr ' ' '\n' | sed -n 's/^radius=//p')
-            [ -n "$r0" ] || { echo "bench: no automatic radius for $name seed $sd" >&2; exit 1; }
+    for sd in $seeds; do
+        # ppm's automatic radius, which depends on the seed's first pass
+        r0=$("$APPM" render "$file" --size "$size" --passes 1 --threads 1 --seed "$sd" --method ppm \
+            -o "$out/img.pfm" 2>> "$out/stderr.txt" | tr ' ' '\n' | sed -n 's/^radius=//p')
+        [ -n "$r0" ] || { echo "bench: no automatic radius for $name seed $sd" >&2; exit 1; }
+        for p in $passes; do
             one "$name" "$file" "$size" "$mask" "$p" "$sd" appm
             for f in 0.25 0.5 1 2 4; do
                 for a in 0.5 0.667 0.8; do

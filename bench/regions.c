@@ -17,39 +17,26 @@
 #include <stdlib.h>
 #include <math.h>
 
+/* The RMSE over the pixels x0 <= x < x1, y0 <= y < y1 whose reference (b)
+ * luminance is under `mask` (HUGE_VAL: every pixel). */
 static void rmse(const appm_image *a, const appm_image *b, unsigned x0, unsigned y0, unsigned x1, unsigned y1,
-                 const char *name)
+                 double mask, const char *name)
 {
     double s = 0.0;
     unsigned long n = 0;
     unsigned x, y;
     int c;
     for (y = y0; y < y1 && y < a->height; ++y)
-        for (x = x0; x < x1 && x < a->width; ++x)
+        for (x = x0; x < x1 && x < a->width; ++x) {
+            const float *q = b->rgb + 3 * ((size_t)y * b->width + x);
+            if (mask < HUGE_VAL && !(0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2] < mask)) continue;
             for (c = 0; c < 3; ++c) {
-                double d = (double)a->rgb[3 * (y * a->width + x) + c] - b->rgb[3 * (y * b->width + x) + c];
+                double d = (double)a->rgb[3 * ((size_t)y * a->width + x) + c] - q[c];
                 s += d * d;
                 n++;
             }
-    printf("%s=%.6g\n", name, n ? sqrt(s / n) : 0.0);
-}
-
-/* The RMSE over the pixels whose reference (b) luminance is under `mask`. */
-static void rmse_masked(const appm_image *a, const appm_image *b, double mask)
-{
-    double s = 0.0;
-    unsigned long n = 0, i, np = (unsigned long)a->width * a->height;
-    int c;
-    for (i = 0; i < np; ++i) {
-        const float *q = b->rgb + 3 * i;
-        if (!(0.2126 * q[0] + 0.7152 * q[1] + 0.0722 * q[2] < mask)) continue;
-        for (c = 0; c < 3; ++c) {
-            double d = (double)a->rgb[3 * i + c] - q[c];
-            s += d * d;
-            n++;
         }
-    }
-    printf("masked=%.6g\n", n ? sqrt(s / n) : 0.0);
+    printf("%s=%.6g\n", name, n ? sqrt(s / n) : 0.0);
 }
 
 int main(int argc, char **argv)
@@ -85,10 +72,11 @@ int main(int argc, char **argv)
         fprintf(stderr, "regions: cannot open %s\n", argv[3]);
         return 2;
     }
-    while (fscanf(f, "%63s %u %u %u %u", name, &x0, &y0, &x1, &y1) == 5) rmse(&a, &b, x0, y0, x1, y1, name);
+    while (fscanf(f, "%63s %u %u %u %u", name, &x0, &y0, &x1, &y1) == 5)
+        rmse(&a, &b, x0, y0, x1, y1, HUGE_VAL, name);
     fclose(f);
-    rmse(&a, &b, 0, 0, a.width, a.height, "all");
-    if (argc == 5) rmse_masked(&a, &b, mask);
+    rmse(&a, &b, 0, 0, a.width, a.height, HUGE_VAL, "all");
+    if (argc == 5) rmse(&a, &b, 0, 0, a.width, a.height, mask, "masked");
     appm_image_free(NULL, &a);
     appm_image_free(NULL, &b);
     return 0;
