@@ -390,6 +390,47 @@ static void test_selector_guards(void)
     }
 }
 
+/* Step 3's dI^2 less its noise (appm__di2_unbiased): per-pass Laplacians
+ * dl_j = mu + e_j with Var(e_j) = c / w_j, the weights of a bandwidth that
+ * shrinks (1, 2, 4), three passes.  The weighted Welford sum has E[M2] =
+ * (n - 1) c whatever the weights, so M2 / ((n - 1) W) is the variance of the
+ * weighted mean, c / W, and dI^2 less it has mean mu^2 (4 SE), where dI^2
+ * alone reads mu^2 + c / W (mu = 1, c = 4: 1.571; dividing by n instead of
+ * n - 1 leaves c / (n W), 1.190). */
+static void test_di2_unbiased(void)
+{
+    static const double w[3] = {1.0, 2.0, 4.0};
+    const double mu = 1.0, c = 4.0;
+    const int T = check_quick() ? 20000 : 200000;
+    double sum = 0.0, sum2 = 0.0, plain = 0.0, plain2 = 0.0, mean, se, pse;
+    appm__rng rng;
+    int t, j;
+    appm__rng_seed(&rng, 17, 0, APPM__DOMAIN_TEST, 0);
+    for (t = 0; t < T; ++t) {
+        appm__adaptive_stats p;
+        double e[3] = {0.0, 0.0, 0.0}, v;
+        memset(&p, 0, sizeof p);
+        for (j = 0; j < 3; ++j) { /* Box-Muller */
+            double u1 = 1.0 - (double)appm__rng_float(&rng), u2 = appm__rng_float(&rng); /* u1 in (0, 1] */
+            double z = sqrt(-2.0 * log(u1)) * cos(2.0 * APPM__PI * u2);
+            appm__adaptive_update(&p, (uint64_t)j + 1u, e, 0.0, mu + z * sqrt(c / w[j]), w[j], 0);
+        }
+        v = appm__di2_unbiased(&p, 3);
+        sum += v;
+        sum2 += v * v;
+        plain += p.dI * p.dI;
+        plain2 += p.dI * p.dI * p.dI * p.dI;
+    }
+    mean = sum / T;
+    se = sqrt((sum2 / T - mean * mean) / (T - 1));
+    pse = sqrt((plain2 / T - (plain / T) * (plain / T)) / (T - 1));
+    printf("dI^2 less its noise: %.4f (se %.4f), dI^2 alone %.4f, mu^2 = 1\n", mean, se, plain / T);
+    CHECK_MSG(fabs(mean - mu * mu) < 4.0 * se && se < 0.03, "dI^2 less its noise has mean %.4f (se %.4f), not 1",
+              mean, se);
+    CHECK_MSG(fabs(plain / T - (mu * mu + c / 7.0)) < 4.0 * pse, "dI^2 alone has mean %.4f (se %.4f), not 1 + 4/7",
+              plain / T, pse);
+}
+
 /* appm's step 4 (docs/algorithm.md 5.4): a component that has seen fewer than
  * 32 photons widens (twice its last radius, within the bounds) whatever its
  * statistics say, and the caustic one follows the diffuse radius; from 32 on
@@ -1015,7 +1056,8 @@ static void test_cut_tail(void)
  * plane, extended, would meet the floor at the seam of kind 0, but none of its
  * pixels lies near that line); 3: a curved surface (normals turning by 35
  * degrees a pixel along x and 14 along y: no two pixels share a plane); 4: the
- * wall of kind 0 in rows 0-1 only, the floor going on beyond its end. */
+ * wall of kind 0 in rows 0-1 only, the floor going on beyond its end; 5: a wall
+ * through the same line leaning out, 70 degrees from the floor. */
 static uint8_t cut_edge_dist[70];
 
 static void cut_scene(appm_renderer *r, appm__vp *vp, int kind)
@@ -1046,6 +1088,10 @@ static void cut_scene(appm_renderer *r, appm__vp *vp, int kind)
             } else if (kind == 2) {
                 v->x = appm__v(5.0f, (float)y, 20.0f + depth);
                 v->n = appm__v(-1, 0, 0);
+            } else if (kind == 5) { /* the wall leaning out, 70 degrees from the floor */
+                const float a = 70.0f * (float)APPM__PI / 180.0f;
+                v->x = appm__v(5.0f + depth * cosf(a), (float)y, depth * sinf(a));
+                v->n = appm__v(-sinf(a), 0, cosf(a));
             } else {
                 float a = 0.61f * (float)(x - 3), b = 0.25f * (float)(y - 3);
                 v->x = appm__v(5.0f + depth * 0.3f, (float)y, depth);
@@ -1147,6 +1193,35 @@ static void test_bias_two_radii(void)
     }
 }
 
+/* The sums of a gather whose kernel a line through x halves (mass 1/2, by
+ * symmetry): the estimate is divided by the mass once, and the second moment
+ * s, a sum of the kernel's square, twice (the radius formula reads s: divided
+ * once, the radius at a seam came out up to a quarter too small). */
+static void test_sums_mass(void)
+{
+    appm__gather g;
+    appm__sums sum;
+    double e[2][3], s[2], dl[2], m;
+    int k;
+    toy_gather_init(&g, 1.0f, 0.0f, 1);
+    memset(&sum, 0, sizeof sum);
+    sum.count = 5;
+    sum.e[0] = sum.e[1] = sum.e[2] = 2.0;
+    sum.s = 3.0;
+    for (k = 0; k < 2; ++k) {
+        g.ncut = k;
+        g.cut_u[0][0] = 1.0f;
+        g.cut_u[0][1] = 0.0f;
+        g.cut_d[0] = 0.0f;
+        appm__sums_finish(&g, 1.0, 0.0, &sum, 0.25, e[k], &s[k], &dl[k]);
+    }
+    m = appm__cut_mass(&g, 1.0);
+    CHECK_NEAR(m, 0.5, 1e-9);
+    CHECK_NEAR(e[0][1], 2.0 * 3.0 / APPM__PI * 0.25, 1e-12);
+    CHECK_NEAR(e[1][1] / e[0][1], 1.0 / m, 1e-12);
+    CHECK_NEAR(s[1] / s[0], 1.0 / (m * m), 1e-12);
+}
+
 /* The cut lines of pixel i of the synthetic pass, into g (biweight). */
 static void cut_lines_at(const appm_renderer *r, size_t i, appm__gather *g)
 {
@@ -1194,6 +1269,12 @@ static void test_cut_lines(void)
         cut_lines_at(&r, 3 * 10 + 1, &g);
         CHECK(g.ncut == 0);
     }
+    /* A wall leaning out at 70 degrees: x's distance to the line is still 0.5 (the
+     * wall's plane, seen from x, is 0.47 away: a line must be measured in x's plane) */
+    cut_scene(&r, vp, 5);
+    cut_lines_at(&r, 3 * 10 + 4, &g);
+    CHECK_MSG(g.ncut == 1, "the leaning wall: %d lines, not 1", g.ncut);
+    if (g.ncut == 1) CHECK_NEAR(g.cut_d[0], 0.5, 1e-5);
 }
 
 /* A 32 x 32 renderer of s with 2 threads: appm for t = 0, 1, the path tracer for t = 2. */
@@ -1371,6 +1452,25 @@ static void test_open_lines_reach(void)
                 CHECK_MSG(g.ncut == 0, "side %g, x at %.4f Rm: %d lines, not 0", S, f[k], g.ncut);
             }
         }
+        for (k = 0; q == 0 && k < 2; ++k) { /* a line parallel to the edge, on its side, already cut */
+            /* at 0.5 Rm: the edge at 0.7 Rm leaves it, the edge at 0.3 Rm takes its place (of two
+             * parallel lines the nearer ends the surface) */
+            const float fe = k ? 0.3f : 0.7f, want = k ? 0.3f : 0.5f;
+            appm__vp v;
+            appm__gather g;
+            memset(&v, 0, sizeof v);
+            memset(&g, 0, sizeof g);
+            v.x = appm__v((float)(0.5 * S), fe * Rm, 0.0f);
+            v.n = appm__v(0.0f, 0.0f, 1.0f);
+            appm__basis(v.n, &g.t, &g.b);
+            g.ncut = 1;
+            g.cut_u[0][0] = -g.t.y; /* towards -y, the edge's outside */
+            g.cut_u[0][1] = -g.b.y;
+            g.cut_d[0] = 0.5f * Rm;
+            appm__open_lines(&r, &v, &g, Rm);
+            CHECK_MSG(g.ncut == 1, "a line at 0.5 Rm and the edge at %.1f Rm: %d lines, not 1", fe, g.ncut);
+            CHECK_NEAR(g.cut_d[0] / Rm, want, 1e-5);
+        }
         appm_scene_destroy(s);
     }
 }
@@ -1429,7 +1529,8 @@ static void test_open_edge_bias(void)
  * (with the same stored normal, 1 cm in front of x); beside the shelf, where
  * nothing covers the floor, a shelf photon as near is kept.  Without the
  * scene (no probe) the gather under the shelf keeps both: what the test
- * catches. */
+ * catches.  And the test's reach, 64 times the photon's height in front of x,
+ * from both sides. */
 static void test_covered(void)
 {
     static const char obj[] = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
@@ -1464,6 +1565,33 @@ static void test_covered(void)
         }
         CHECK_MSG(g.sum[APPM__COMP_DIFFUSE].count == want[k], "case %d: %llu photons gathered, not %llu", k,
                   (unsigned long long)g.sum[APPM__COMP_DIFFUSE].count, (unsigned long long)want[k]);
+    }
+    for (k = 0; k < 2; ++k) { /* the test's reach: 1 cm in front of x covers x out to 64 cm (o >= d / 64) */
+        /* a photon 1 cm up at 26.9 cm from x under the shelf: asked, covered, left out (a reach
+         * of 8 cm kept it); at 70 cm, beyond 64 o: not asked, kept (the probe would drop it) */
+        static const float px[2][2] = {{0.69f, 0.69f}, {1.2f, 0.5f}};
+        static const float R[2] = {0.3f, 0.8f};
+        appm__gather g;
+        appm__photon p;
+        appm__ray ray;
+        appm__hit h;
+        toy_gather_init(&g, R[k], 0.0f, 1);
+        g.x = appm__v(0.5f, 0.5f, 0.0f);
+        appm__ray_init(&ray, appm__v(0.5f, 0.5f, -1.0f), appm__v(0, 0, 1), 2.0f);
+        CHECK(appm__intersect(s, &ray, UINT32_MAX, &h));
+        g.tri = h.tri;
+        g.scene = s;
+        memset(&p, 0, sizeof p);
+        p.x = px[k][0];
+        p.y = px[k][1];
+        p.z = 0.01f;
+        p.power[0] = p.power[1] = p.power[2] = 1.0f;
+        p.segs = 1;
+        appm__gather_photon(&g, &p, R[k] * R[k], R[k] * R[k]);
+        CHECK_MSG(g.sum[APPM__COMP_DIFFUSE].count == (uint64_t)k,
+                  "a photon 1 cm up, %.3f from x under the shelf: %llu gathered, not %d",
+                  sqrt((px[k][0] - 0.5) * (px[k][0] - 0.5) + (px[k][1] - 0.5) * (px[k][1] - 0.5)),
+                  (unsigned long long)g.sum[APPM__COMP_DIFFUSE].count, k);
     }
     appm_scene_destroy(s);
 }
@@ -1538,6 +1666,7 @@ int main(void)
     test_optimal_radius();
     test_selector_guards();
     test_appm_kmin();
+    test_di2_unbiased();
     test_component_guards();
     test_progressive_toy();
     test_paper_toy();
@@ -1549,6 +1678,7 @@ int main(void)
     test_cut_laplacian();
     test_bias_two_radii();
     test_cut_lines();
+    test_sums_mass();
     test_corner_bias();
     test_open_edges();
     test_open_lines_reach();

@@ -166,6 +166,23 @@ static void test_resume(const appm_scene *s)
             CHECK_MSG(again && n2 == len[t - 1] && memcmp(again, bytes[t - 1], n2) == 0,
                       "%s: a loaded renderer saves other bytes", appm_method_name((appm_method)m));
             free(again);
+            {   /* every counter comes back as saved: the thread count and memory are b's own,
+                 * and clamped and emission_lights are set by the next pass (appm.h) */
+                appm_stats sa, sb;
+                appm_renderer_stats(a, &sa);
+                appm_renderer_stats(b, &sb);
+                CHECK_MSG(sa.passes == sb.passes && sa.photons_emitted == sb.photons_emitted &&
+                              sa.photons_stored == sb.photons_stored && sa.eye_paths == sb.eye_paths &&
+                              sa.initial_radius == sb.initial_radius && sa.seconds == sb.seconds &&
+                              sa.seconds_eye == sb.seconds_eye && sa.seconds_photons == sb.seconds_photons &&
+                              sa.seconds_grid == sb.seconds_grid && sa.seconds_gather == sb.seconds_gather &&
+                              sa.dropped_samples == sb.dropped_samples &&
+                              memcmp(&sa.est_relerr, &sb.est_relerr, sizeof(double)) == 0 &&
+                              sa.emission_guided == sb.emission_guided &&
+                              sa.photons_per_pass == sb.photons_per_pass && sa.budget_rays == sb.budget_rays,
+                          "%s, %u then %u threads: the loaded renderer's counters differ from the saved one's",
+                          appm_method_name((appm_method)m), t, 3 - t);
+            }
             CHECK(b->pass == NPASS);
             if (st == APPM_OK && check_passes(b, NPASS))
                 CHECK_MSG(same_render(whole, b), "%s, %u then %u threads: %d + save + load + %d passes differ "

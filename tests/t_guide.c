@@ -692,6 +692,50 @@ static void test_picks(void)
     picks_case(own, Ba, k1, 16.0, APPM__GUIDE_MIN, we);
 }
 
+/* A cell's importance shrunk towards the mean by the paths behind it
+ * (appm__guide_importance): (N_c V_c + n0 mean) / (N_c + n0), n0 = 16, V_c the
+ * cell's scores a pass.  Over 4 passes: cell 0 scored 2 a pass from 16 paths,
+ * cell 1 nothing from none, the rest 1 a pass from 16 paths each, so mean(V) =
+ * 1 and v = 1.5, 1 (the mean: no paths, no say), 1.  The halves
+ * (appm__guide_halves), odd and even passes 2 each, are shrunk with half the
+ * paths each (32 a cell here, so 16 a half): the same figures from either half.
+ * Without the shrinkage cell 1 reads 0 and cell 0 2; with all the paths in
+ * each half, 1.667. */
+static void test_importance(void)
+{
+    static double score[APPM__GUIDE_CELLS], odd[APPM__GUIDE_CELLS], samples[APPM__GUIDE_CELLS];
+    static double v[APPM__GUIDE_CELLS], vo[APPM__GUIDE_CELLS], ve[APPM__GUIDE_CELLS];
+    appm__guide gd;
+    uint64_t passes = 4;
+    int i, bad = 0;
+    memset(&gd, 0, sizeof gd);
+    gd.nslot = 1;
+    gd.score = score;
+    gd.score_odd = odd;
+    gd.samples = samples;
+    gd.passes = &passes;
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        score[i] = i == 0 ? 8.0 : (i == 1 ? 0.0 : 4.0);
+        samples[i] = i == 1 ? 0.0 : 16.0;
+    }
+    CHECK_NEAR(appm__guide_importance(&gd, 0, v), 1024.5, 1e-9);
+    CHECK_NEAR(v[0], 1.5, 1e-12);
+    CHECK_NEAR(v[1], 1.0, 1e-12);
+    for (i = 2; i < APPM__GUIDE_CELLS; ++i) bad += fabs(v[i] - 1.0) > 1e-12;
+    CHECK_MSG(bad == 0, "%d cells of the rest not at 1", bad);
+    for (i = 0; i < APPM__GUIDE_CELLS; ++i) {
+        odd[i] = 0.5 * score[i];
+        samples[i] *= 2.0;
+    }
+    appm__guide_halves(&gd, 0, vo, ve);
+    CHECK_NEAR(vo[0], 1.5, 1e-12);
+    CHECK_NEAR(ve[0], 1.5, 1e-12);
+    CHECK_NEAR(vo[1], 1.0, 1e-12);
+    CHECK_NEAR(ve[1], 1.0, 1e-12);
+    for (bad = 0, i = 2; i < APPM__GUIDE_CELLS; ++i) bad += fabs(vo[i] - 1.0) > 1e-12 || fabs(ve[i] - 1.0) > 1e-12;
+    CHECK_MSG(bad == 0, "%d cells of the rest not at 1 in the halves", bad);
+}
+
 int main(void)
 {
     {   /* guided is the default, and a zeroed configuration is the default */
@@ -701,6 +745,7 @@ int main(void)
         CHECK(c.emission == APPM_EMISSION_GUIDED && zero.emission == APPM_EMISSION_GUIDED);
     }
     test_select();
+    test_importance();
     test_picks();
     test_warp_chi2();
     test_weights_power();

@@ -639,6 +639,22 @@ static void test_halves(void)
                   "var_scale %.17g, by hand %.17g", r->var_scale, c);
         for (i = 0; i < W * W; ++i) sum32 += r->pix[i].lh[1];
         CHECK(sum32 > 0.0);
+        {   /* the spread's bound: with the first half's sums moved into the second the halves
+             * differ far more than the passes spread, and the scale is 1, not their ratio */
+            double a = 0.0, b = 0.0, j = (double)r->pass;
+            for (i = 0; i < W * W; ++i) {
+                const appm__pixel *p = &r->pix[i];
+                double w = r->err_w[i], d;
+                r->pix[i].lh[1] += r->pix[i].lh[0];
+                r->pix[i].lh[0] = 0.0;
+                d = p->lh[1] / 16.0; /* (H1 - H2) with H1 = 0, the halves of 32 passes */
+                a += w * 0.25 * d * d * 32.0 / j;
+                b += w * p->wm2 / ((j - 1.0) * j);
+            }
+            appm__var_scales(r);
+            CHECK_MSG(b > 0.0 && a / b > 1.5 && r->var_scale == 1.0, "halves / spread %.3f: var_scale %.17g, not 1",
+                      b > 0.0 ? a / b : 0.0, r->var_scale);
+        }
     }
     appm_renderer_destroy(r);
     for (s = 0; s < SEEDS && !check_quick(); ++s) {
