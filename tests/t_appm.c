@@ -1196,7 +1196,7 @@ static void test_bias_two_radii(void)
 /* The sums of a gather whose kernel a line through x halves (mass 1/2, by
  * symmetry): the estimate is divided by the mass once, and the second moment
  * s, a sum of the kernel's square, twice (the radius formula reads s: divided
- * once, the radius at a seam came out up to a quarter too small). */
+ * once, it would read s m times too small at a seam). */
 static void test_sums_mass(void)
 {
     appm__gather g;

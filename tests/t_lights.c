@@ -737,9 +737,9 @@ static void test_focus_roulette(void)
  * 5.10): the t-th is the first's numbers turned by t/4, so the four are
  * stratified against each other.  At a point of the plate beside the sphere,
  * over 256 passes of one pixel's numbers: the four samples' mean has the same
- * mean as one sample and 0.130 of its spread across passes (0.174 in 0.1.8; four equal samples
- * give the same spread, ratio 1; four independent ones 1/4; two turned by 1/2,
- * as until 0.1.7, 0.465).  And each sample is a shadow ray the photon budget
+ * mean as one sample and 0.130 of its spread across passes (0.174 in 0.1.8;
+ * four equal samples give the same spread, ratio 1; four independent ones 1/4;
+ * two turned by 1/2, as until 0.1.7, 0.465).  And each sample is a shadow ray the photon budget
  * counts (12.2): a pass of the studio casts three eye rays more for each
  * shading point than the same pass with one sample. */
 static void test_sky_samples(void)
