@@ -16546,6 +16546,11 @@ static void appm__ck_apply(appm_renderer *r, const appm__ck_glob *g)
     r->stats.seconds_photons = g->sec[2];
     r->stats.seconds_grid = g->sec[3];
     r->stats.seconds_gather = g->sec[4];
+    /* readings of the last pass that the checkpoint does not hold: none until the next pass,
+     * whatever this renderer read before the load */
+    r->stats.clamped = -1.0;
+    r->stats.emission_guided = 0.0;
+    r->stats.emission_lights = 0;
     r->err_stale = 1;
 }
 

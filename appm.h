@@ -578,11 +578,12 @@ typedef struct appm_stats {
                                     /* light or a sun may shine through a mirror or      */
                                     /* glass: appm_renderer_keeps_error)                 */
     double clamped;                 /* appm: fraction of gathering pixels at a radius bound
-                                       after the last pass (< 0: none; after a checkpoint's
-                                       load, none until the next pass)                     */
+                                       after the last pass (< 0: none; so after a
+                                       checkpoint's load until the next pass)              */
     unsigned threads;
     double emission_guided;         /* the share of the last pass's photon paths drawn
-                                       from learned densities (0: none; at most 3/4)       */
+                                       from learned densities (0: none; at most 3/4; 0
+                                       after a checkpoint's load until the next pass)      */
     unsigned emission_lights;       /* lights guided emission may guide (set by a pass;
                                        0 after a checkpoint's load until the next)         */
     uint64_t photons_per_pass;      /* M: photon paths a pass, config.photons or the

@@ -120,8 +120,9 @@ judge() {
 # run_hosted NAME COMMAND...: run_test for a program that runs inside a host (Node's
 # WASI). A WebAssembly program cannot make its host die by a signal: its own faults
 # (out of bounds, stack overflow) come back as a trap and exit status 1. So a status
-# above 128 (but for timeout's KILL, 137) is the host's crash: the output is shown,
-# the test runs once more, and the step is judged on that second run.
+# above 128 is the host's crash: the output is shown, the test runs once more, and the
+# step is judged on that second run. But 137, a SIGKILL from outside (the kernel's
+# out-of-memory killer), is not run again. (A hang ends by timeout's TERM: 124.)
 run_hosted() {
     name=$1
     shift

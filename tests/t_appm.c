@@ -1567,10 +1567,10 @@ static void test_covered(void)
                   (unsigned long long)g.sum[APPM__COMP_DIFFUSE].count, (unsigned long long)want[k]);
     }
     for (k = 0; k < 2; ++k) { /* the test's reach: 1 cm in front of x covers x out to 64 cm (o >= d / 64) */
-        /* a photon 1 cm up at 26.9 cm from x under the shelf: asked, covered, left out (a reach
-         * of 8 cm kept it); at 70 cm, beyond 64 o: not asked, kept (the probe would drop it) */
-        static const float px[2][2] = {{0.69f, 0.69f}, {1.2f, 0.5f}};
-        static const float R[2] = {0.3f, 0.8f};
+        /* a photon 1 cm up at 60 cm from x under the shelf: asked, covered, left out (a reach of
+         * 32 cm kept it); at 68 cm, beyond 64 o: not asked, kept (a reach of 100 cm dropped it) */
+        static const float px[2][2] = {{1.1f, 0.5f}, {1.18f, 0.5f}};
+        static const float R[2] = {0.8f, 0.8f};
         appm__gather g;
         appm__photon p;
         appm__ray ray;
