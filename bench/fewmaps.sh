@@ -86,22 +86,16 @@ rm -f "$out/img.pfm"
     echo
     echo "| scene | passes | appm (median) | best point of ppm's grid (median) | appm / best point, by seed |"
     echo "|---|---|---|---|---|"
-    awk -F, 'NR > 1 { k = $1 SUBSEP $2; e[k, $4, $3] = $5; pt[$4] = 1
+    awk -F, "$(cat bench/median.awk)"'NR > 1 { k = $1 SUBSEP $2; e[k, $4, $3] = $5; v[k, $4] = v[k, $4] " " $5; pt[$4] = 1
         if (!($3 in sd)) { sd[$3] = 1; so[++ns] = $3 }
         if (!(k in seen)) { seen[k] = 1; ord[++nk] = k } }
-    function med(k, q,    n, v, s, i, j, t) {
-        n = 0
-        for (s in sd) if ((k, q, s) in e) v[++n] = e[k, q, s]
-        for (i = 2; i <= n; ++i) for (j = i; j > 1 && v[j - 1] > v[j]; --j) { t = v[j]; v[j] = v[j - 1]; v[j - 1] = t }
-        return n % 2 ? v[(n + 1) / 2] : (v[n / 2] + v[n / 2 + 1]) / 2
-    }
     END {
         for (i = 1; i <= nk; ++i) {
             k = ord[i]; split(k, kk, SUBSEP); best = ""; bm = 1e30
-            for (q in pt) if (q != "appm" && med(k, q) < bm) { bm = med(k, q); best = q }
+            for (q in pt) if (q != "appm" && med(v[k, q]) < bm) { bm = med(v[k, q]); best = q }
             r = ""
             for (j = 1; j <= ns; ++j) r = r (r == "" ? "" : " / ") sprintf("%.3f", e[k, "appm", so[j]] / e[k, best, so[j]])
-            printf "| %s | %s | %.5f | %.5f (%s) | %s |\n", kk[1], kk[2], med(k, "appm"), bm, best, r
+            printf "| %s | %s | %.5f | %.5f (%s) | %s |\n", kk[1], kk[2], med(v[k, "appm"]), bm, best, r
         }
     }' "$out/results.csv"
 } > "$out/fewmaps.md"
