@@ -12877,7 +12877,7 @@ static size_t appm__store_compact(appm_renderer *r)
  *                             estimated MSE(r) = R(K) S / (M j r^2) + (mu2 r^2 dI / 2)^2,
  *                             r^6 = c_f R(K) S / (M j mu2^2 dI^2); read it beside
  *                             the pseudocode of algorithm.md 4.8
- *   10.4 appm                 the default: the paper's selector with six named
+ *   10.4 appm                 the default: the paper's selector with seven named
  *                             steps on top, each with its measured reason
  *   10.5 the estimator table  one entry per method
  *   10.6 the gather           the per-row task that queries the map and commits
@@ -12925,6 +12925,10 @@ static size_t appm__store_compact(appm_renderer *r)
 #define APPM__CUT_LAP 1                          /* step 6: the Laplacian's kernels renormalised too */
 #define APPM__CUT_FOOT 2.5                       /* step 6: a line counts if a q's foot is this many pixel widths from x's */
 #define APPM__CUT_CAND 24                        /* step 6: candidate lines per window */
+#define APPM__CBIAS_T 2.0                        /* step 7: measured caustic bias over the model's, to narrow */
+#define APPM__CBIAS_Z 2.0                        /* step 7: ... standing this many standard errors from 0 */
+#define APPM__CBIAS_PASSES 16.0                  /* step 7: ... over at least this many passes */
+#define APPM__CBIAS_SCALE 0.7                    /* step 7: the caustic radius narrowed by this factor */
 
 /* ---- 10.1 The gather's sums ---------------------------------------------------
  *
@@ -13534,10 +13538,10 @@ static double appm__paper_aux(const appm_renderer *r, const void *state, appm_au
 }
 
 
-/* ---- 10.4 appm: the paper's selector and six steps on top (the default) --------
+/* ---- 10.4 appm: the paper's selector and seven steps on top (the default) ------
  *
  * appm is 10.3 with these steps, each named where the code takes it and each
- * kept for the reason measured (docs/algorithm.md 5.1 - 5.6, the figures
+ * kept for the reason measured (docs/algorithm.md 5.1 - 5.6 and 5.13, the figures
  * in docs/experiments.md):
  *   step 1  two photon components, caustic (the last bounce specular) and
  *           diffuse, each with its own statistics and radius, c_f halved:
@@ -13560,7 +13564,10 @@ static double appm__paper_aux(const appm_renderer *r, const void *state, appm_au
  *   step 6  the kernel cut at a corner: where the surface ends inside the
  *           kernel, the estimate is divided by the kernel's mass on it: the
  *           seams of a box were 8 % dark; equal-pass RMSE 0.73x on
- *           CornellBox-Original (5.6).
+ *           CornellBox-Original (5.6);
+ *   step 7  the caustic radius 0.7x as wide where the caustic's measured
+ *           bias outruns the model's: a filament narrower than the Laplacian's
+ *           bandwidth, not a flat mirror's smooth light (5.13).
  * The pixel's photon term is the sum of the components', and so is its bias
  * (mu2 / 2) sum_c r_c^2 dI_c (the biases add before they are squared).  The
  * error bar measures that bias rather than modelling it: D_j, the pass's photon
@@ -13581,6 +13588,10 @@ typedef struct appm__adaptive_stats { /* the statistics of one photon component 
 typedef struct appm__adaptive_px { /* appm's per-pixel state: one record per photon component (step 1) */
     appm__adaptive_stats comp[APPM__NCOMP]; /* [APPM__COMP_DIFFUSE], [APPM__COMP_CAUSTIC] */
     double D, D_m2; /* Welford mean and M2 over the passes of D_j, summed over the components */
+    /* step 7: over the passes since the caustic component adapts, the Welford mean
+     * and M2 of its own D_j, their count, and the mean of what the model predicts
+     * of them, (7/8) (mu2 / 2) Rc_j^2 dI_c */
+    double Dc, Dc_m2, Dc_n, Pc;
 } appm__adaptive_px;
 
 #define APPM__KOFF(c, f) \
@@ -13591,7 +13602,9 @@ typedef struct appm__adaptive_px { /* appm's per-pixel state: one record per pho
         {"R" x, APPM__KOFF(c, R), 1, 0}, {"N" x, APPM__KOFF(c, N), 1, 1}, {"dI2p" x, APPM__KOFF(c, dI2p), 1, 0}
 static const appm__field appm__adaptive_fields[] = {
     APPM__KFIELDS(APPM__COMP_DIFFUSE, "_d"), APPM__KFIELDS(APPM__COMP_CAUSTIC, "_c"),
-    {"D", offsetof(appm__adaptive_px, D), 1, 0}, {"D_m2", offsetof(appm__adaptive_px, D_m2), 1, 0}};
+    {"D", offsetof(appm__adaptive_px, D), 1, 0}, {"D_m2", offsetof(appm__adaptive_px, D_m2), 1, 0},
+    {"Dc", offsetof(appm__adaptive_px, Dc), 1, 0}, {"Dc_m2", offsetof(appm__adaptive_px, Dc_m2), 1, 0},
+    {"Dc_n", offsetof(appm__adaptive_px, Dc_n), 1, 0}, {"Pc", offsetof(appm__adaptive_px, Pc), 1, 0}};
 
 /* -- Step 1: two components.  I = I_c + I_d, the caustic and diffuse photons
  * gathered with radii r_c, r_d; independent noise, so MSE = sum_k A_k / r_k^2 +
@@ -13825,6 +13838,53 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
     return (float)appm__adaptive_comp_radius(r, (const appm__adaptive_px *)state, APPM__COMP_DIFFUSE);
 }
 
+/* Step 7: whether the caustic's measured bias outruns the model's.  The radius
+ * formula weighs noise against the model's bias (mu2 / 2) r^2 dI_c, with dI_c
+ * the Laplacian at bandwidth h_c.  Across a filament of focused light narrower
+ * than h_c that Laplacian is the filament's, blurred: the model sees too little
+ * bias, and the formula sets a radius wider than the one that minimises the
+ * error (on caustic-glass, three quarters of the error at 30 s is bias, and a
+ * caustic radius 0.7x as wide everywhere cut the RMSE to 0.86-0.89x).  But a
+ * flat mirror's reflected light (the mirror box's floor) is smooth, its bias
+ * small, and there the same narrowing costs 4.5-8 % in noise.  What tells them
+ * apart is the bias measured for the error bar (7.2): D_c, the caustic term at
+ * Rc less the same photons' at Rc / sqrt 8, whose mean is 7/8 of the bias to
+ * second order whatever the light's shape.  The radius is narrowed where the
+ * mean of the D_c stands APPM__CBIAS_Z standard errors from 0 (a bias, not
+ * noise) and beyond APPM__CBIAS_T times what the model predicts of it over the
+ * same passes, (7/8) (mu2 / 2) Rc_j^2 dI_c (or with the other sign: the model
+ * has the bias's sign wrong), after APPM__CBIAS_PASSES such passes.  Measured
+ * against 0.1.12 (docs/algorithm.md 5.13): caustic-glass 0.93-0.96x the RMSE
+ * at 30 s, water-caustic 0.96x at 20 s, the mirror box within 1 % at equal
+ * passes, the textured scene 0.1-2 % worse (single pixels that pass the test
+ * by chance: D_c is noisier than the image). */
+static int appm__caustic_outruns(const appm__adaptive_px *a)
+{
+    double n = a->Dc_n, se;
+    if (n < APPM__CBIAS_PASSES) return 0;
+    se = sqrt(a->Dc_m2 / ((n - 1.0) * n));
+    if (!(fabs(a->Dc) > APPM__CBIAS_Z * se)) return 0;
+    return a->Dc > 0.0 ? a->Dc > APPM__CBIAS_T * (a->Pc > 0.0 ? a->Pc : 0.0)
+                       : a->Dc < APPM__CBIAS_T * (a->Pc < 0.0 ? a->Pc : 0.0);
+}
+
+/* Step 7's sums after a pass whose caustic D_j is d, gathered at radius Rc,
+ * with the caustic statistics already updated by the pass: from the pass at
+ * which the component adapts (APPM__KMIN_APPM photons) on, the Welford mean and
+ * M2 of the D_j and the running mean of the model's prediction of them, whose
+ * dI_c is the Laplacian's running mean after that pass. */
+static void appm__caustic_bias_add(appm__adaptive_px *a, double d, double Rc)
+{
+    const appm__adaptive_stats *p = &a->comp[APPM__COMP_CAUSTIC];
+    double dd, pred = (1.0 - 1.0 / APPM__INNER_S2) * 0.5 * APPM__MU2 * Rc * Rc * p->dI;
+    if (p->N < APPM__KMIN_APPM) return;
+    a->Dc_n += 1.0;
+    dd = d - a->Dc;
+    a->Dc += dd / a->Dc_n;
+    a->Dc_m2 += dd * (d - a->Dc);
+    a->Pc += (pred - a->Pc) / a->Dc_n;
+}
+
 /* Step 4: the caustic radius; until the pixel has seen APPM__KMIN_APPM caustic
  * photons it is the diffuse one (returned as -1: "the same"): widening in
  * search of caustic light that may not exist would widen every gather of a
@@ -13832,8 +13892,15 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
 static float appm__adaptive_radius_caustic(const appm_renderer *r, const void *state)
 {
     const appm__adaptive_px *a = (const appm__adaptive_px *)state;
+    double rad, lo, hi;
     if (a->comp[APPM__COMP_CAUSTIC].N < APPM__KMIN_APPM) return -1.0f;
-    return (float)appm__adaptive_comp_radius(r, a, APPM__COMP_CAUSTIC);
+    rad = appm__adaptive_comp_radius(r, a, APPM__COMP_CAUSTIC);
+    if (appm__caustic_outruns(a)) { /* step 7 */
+        appm__adaptive_bounds(r->r1, r->r_auto, appm__pass_shrink(r), APPM__RHI, &lo, &hi);
+        rad *= APPM__CBIAS_SCALE;
+        if (rad < lo) rad = lo;
+    }
+    return (float)rad;
 }
 
 /* The component with the larger photon term (ties: diffuse): the one whose
@@ -13860,7 +13927,10 @@ static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state
         appm__adaptive_update(&a->comp[c], r->pass, e[c], s[c], dl[c], w, g->sum[c].count);
         /* D_j (7.2); a pass whose estimates were dropped (all 0) adds none */
         d = appm__lumd(e[c]) - appm__gather_inner(g, c, 1.0 / (double)r->M);
-        if (d - d == 0.0 && (e[c][0] != 0.0 || e[c][1] != 0.0 || e[c][2] != 0.0 || s[c] != 0.0)) D += d;
+        if (d - d == 0.0 && (e[c][0] != 0.0 || e[c][1] != 0.0 || e[c][2] != 0.0 || s[c] != 0.0)) {
+            D += d;
+            if (c == APPM__COMP_CAUSTIC) appm__caustic_bias_add(a, d, g->Rc);
+        }
     }
     d = D - a->D; /* Welford, over every pass: the image's bias is the mean of the passes' */
     a->D += d / (double)r->pass;

@@ -1193,6 +1193,100 @@ static void test_bias_two_radii(void)
     }
 }
 
+/* Step 7 of 10.4 on the toy's photons, gathered by the renderer's own
+ * functions pass after pass as a pixel's caustic component would be.  On the
+ * toy's quadratic field the model (mu2 / 2) R^2 dI is exact, so the measured
+ * D_c stays near what it predicts (7/8 of it) and the radius keeps the
+ * formula's.  On a ridge of light 1/8 of the radius wide (a caustic's
+ * filament), the Laplacian at the bandwidth h = 1.25 R sees the ridge blurred,
+ * the measured bias is several times the predicted one, and the caustic radius
+ * is 0.7 times the formula's.  Then the test itself, case by case: too few
+ * passes, a mean within 2 standard errors of 0, a model of the other sign, a
+ * negative bias (a ridge's peak) beyond 2 times a negative prediction. */
+static appm__photon ridge_photon(appm__rng *rng, float w)
+{
+    appm__photon p = toy_photon(rng, 1);
+    float u = 2.0f * appm__rng_float(rng);
+    float psi = (1.0f + 20.0f * (float)exp(-0.5 * (double)(p.x * p.x) / ((double)w * w))) * u;
+    p.power[0] = p.power[1] = p.power[2] = psi;
+    return p;
+}
+
+static double caustic_run(int ridge, appm__adaptive_px *a, unsigned passes)
+{
+    const float R = 0.2f, h = 1.25f * R;
+    const unsigned M = 4000;
+    appm__rng rng;
+    unsigned j, i;
+    memset(a, 0, sizeof *a);
+    appm__rng_seed(&rng, 77, 0, APPM__DOMAIN_TEST, (uint64_t)ridge);
+    for (j = 1; j <= passes; ++j) {
+        appm__gather g;
+        double e[3], s, dl, d;
+        toy_gather_init(&g, R, h, 1);
+        g.inner = 1;
+        for (i = 0; i < M; ++i) {
+            appm__photon p = ridge ? ridge_photon(&rng, R / 8.0f) : toy_photon(&rng, 0);
+            appm__gather_photon(&g, &p, R * R, 4.0f * h * h);
+        }
+        appm__gather_finish(&g, APPM__COMP_DIFFUSE, 1.0 / M, e, &s, &dl);
+        appm__adaptive_update(&a->comp[APPM__COMP_CAUSTIC], j, e, s, dl, 1.0, g.sum[APPM__COMP_DIFFUSE].count);
+        d = appm__lumd(e) - appm__gather_inner(&g, APPM__COMP_DIFFUSE, 1.0 / M);
+        appm__caustic_bias_add(a, d, R);
+    }
+    return a->Pc != 0.0 ? a->Dc / a->Pc : HUGE_VAL;
+}
+
+static void test_caustic_outruns(void)
+{
+    static appm_renderer rr;
+    appm__adaptive_px a, b;
+    double q, ratio, rf, lo, hi;
+    memset(&rr, 0, sizeof rr);
+    rr.r1 = rr.r_auto = 0.2;
+    rr.r1_auto = 1;
+    rr.M = 4000;
+    rr.pass = 64;
+    q = caustic_run(0, &a, 64);
+    CHECK_MSG(a.Dc_n == 64.0 && q > 0.5 && q < 1.5 && !appm__caustic_outruns(&a),
+              "quadratic field: D_c / prediction %.3f over %g passes (want near 1, no narrowing)", q, a.Dc_n);
+    CHECK(appm__adaptive_radius_caustic(&rr, &a) == (float)appm__adaptive_comp_radius(&rr, &a, APPM__COMP_CAUSTIC));
+    ratio = caustic_run(1, &a, 64);
+    CHECK_MSG(ratio > 2.0 * APPM__CBIAS_T && a.Dc < 0.0 && appm__caustic_outruns(&a),
+              "ridge: D_c / prediction %.3f, D_c %.4g (want beyond %g, negative, narrowed)", ratio, a.Dc,
+              2.0 * APPM__CBIAS_T);
+    printf("step 7 toy, 64 passes: D_c / its prediction %.3f on the quadratic field, %.3f on the ridge\n", q, ratio);
+    rf = appm__adaptive_comp_radius(&rr, &a, APPM__COMP_CAUSTIC);
+    appm__adaptive_bounds(rr.r1, rr.r_auto, appm__pass_shrink(&rr), APPM__RHI, &lo, &hi);
+    CHECK_NEAR(appm__adaptive_radius_caustic(&rr, &a), (float)(rf * APPM__CBIAS_SCALE > lo ? rf * APPM__CBIAS_SCALE : lo),
+               1e-7 * rf);
+    /* the test's cases, on a state of hand-set sums */
+    memset(&b, 0, sizeof b);
+    b.Dc_n = 16.0;
+    b.Dc = 1.0;
+    b.Dc_m2 = 0.2 * 0.2 * 15.0 * 16.0; /* standard error 0.2 */
+    b.Pc = 0.4;
+    CHECK(appm__caustic_outruns(&b)); /* 5 s.e. from 0, 2.5 times the prediction */
+    b.Dc_n = 15.0;
+    CHECK(!appm__caustic_outruns(&b)); /* too few passes */
+    b.Dc_n = 16.0;
+    b.Pc = 0.6;
+    CHECK(!appm__caustic_outruns(&b)); /* under 2 times the prediction */
+    b.Pc = -0.6;
+    CHECK(appm__caustic_outruns(&b)); /* the model has the sign wrong */
+    b.Pc = 0.4;
+    b.Dc = 0.39;
+    CHECK(!appm__caustic_outruns(&b)); /* within 2 s.e. of 0 */
+    b.Dc = -1.0;
+    b.Pc = -0.4;
+    CHECK(appm__caustic_outruns(&b));
+    b.Pc = -0.6;
+    CHECK(!appm__caustic_outruns(&b));
+    b.Dc_m2 = 0.0; /* D_j all equal: no spread, the mean stands */
+    b.Pc = -0.1;
+    CHECK(appm__caustic_outruns(&b));
+}
+
 /* The sums of a gather whose kernel a line through x halves (mass 1/2, by
  * symmetry): the estimate is divided by the mass once, and the second moment
  * s, a sum of the kernel's square, twice (the radius formula reads s: divided
@@ -1677,6 +1771,7 @@ int main(void)
     test_cut_tail();
     test_cut_laplacian();
     test_bias_two_radii();
+    test_caustic_outruns();
     test_cut_lines();
     test_sums_mass();
     test_corner_bias();

@@ -88,6 +88,39 @@ static int replay_dir(const char *dir, const char *own)
     return n;
 }
 
+/* The checkpoint kept in regressions/ must still reach the check it was kept
+ * for, the budget's reading of -0, and not stop at the version or the field
+ * list in front of it: written again with each change of appm's state (from
+ * ok-appm-0 of the corpus with the reading made -0 and its checksum right).
+ * From 0.1.11 to 0.1.12 it was refused on its field list and tested nothing. */
+static void test_checkpoint_regression_reaches_its_check(void)
+{
+    static const char path[] = "tests/fuzz/regressions/checkpoint-budget-reading-negative-zero.ckpt";
+    size_t len;
+    unsigned char *data = read_all(path, &len);
+    fuzz_env e;
+    appm_scene *s = NULL;
+    appm_renderer *r = NULL;
+    appm_status st;
+    CHECK_MSG(data && len > 16, "%s: missing", path);
+    if (!data || len <= 16) {
+        free(data);
+        return;
+    }
+    memset(&e, 0, sizeof e);
+    appm_config_init(&e.cfg);
+    st = fuzz__ck_setup(&e, data, len, &s, &r);
+    CHECK(st == APPM_OK);
+    if (st == APPM_OK) {
+        st = appm_renderer_load(r, data, len, &e.diag);
+        CHECK_MSG(st == APPM_ERR_PARSE && strstr(e.diag.message, "a value no render produces"),
+                  "%s: status %d, '%s' (want the budget reading's refusal)", path, (int)st, e.diag.message);
+    }
+    appm_renderer_destroy(r);
+    appm_scene_destroy(s);
+    free(data);
+}
+
 int main(void)
 {
     size_t k;
@@ -100,6 +133,7 @@ int main(void)
         total += n;
     }
     total += replay_dir("tests/fuzz/regressions", NULL);
+    test_checkpoint_regression_reaches_its_check();
     printf("replayed %d files through %d targets\n", total, (int)FUZZ_TARGET_COUNT);
     return check_finish();
 }

@@ -1,10 +1,11 @@
 /* tests/fuzz/gen_checkpoint.c - writes the seed corpus of the checkpoint fuzz
  * target (tests/fuzz/corpus/checkpoint/): checkpoints of the renderer that
  * targets.h loads them into, for every method after 0 and 2 passes (ok-*),
- * and damaged ones (err-*).  Run again when the checkpoint format or a
- * method's state changes, from the repository root:
+ * and damaged ones (err-*); with a second folder, also the checkpoint of
+ * tests/fuzz/regressions/.  Run again when the checkpoint format, the library
+ * version or a method's state changes, from the repository root:
  *   cc -std=c99 -O1 tests/fuzz/gen_checkpoint.c -lm -pthread -o build/gen_checkpoint &&
- *   build/gen_checkpoint tests/fuzz/corpus/checkpoint */
+ *   build/gen_checkpoint tests/fuzz/corpus/checkpoint tests/fuzz/regressions */
 #include "../../appm.c"
 #include "targets.h"
 
@@ -36,8 +37,8 @@ int main(int argc, char **argv)
 {
     int m, passes, bad = 0;
     (void)fuzz_run; /* the replayer's entry, not needed here */
-    if (argc != 2) {
-        fprintf(stderr, "usage: gen_checkpoint FOLDER\n");
+    if (argc != 2 && argc != 3) {
+        fprintf(stderr, "usage: gen_checkpoint FOLDER [REGRESSIONS]\n");
         return 2;
     }
     for (m = 0; m < 2 * (int)APPM_METHOD_COUNT; ++m) /* m >= the method count: guided emission */
@@ -61,6 +62,14 @@ int main(int argc, char **argv)
             snprintf(name, sizeof name, "ok-%s%s-%d.ckpt", appm_method_name((appm_method)(m % APPM_METHOD_COUNT)),
                      m >= (int)APPM_METHOD_COUNT ? "-guided" : "", passes);
             bad |= put(argv[1], name, buf, n);
+            if (m == APPM_METHOD_APPM && passes == 0 && argc == 3) {
+                /* the budget's reading (the 8 bytes before the checksum) -0: the
+                 * fuzzer's find, kept in regressions/ (t_fuzz_regress checks that
+                 * it still reaches that check) */
+                forge(buf, n, n - 16, 0x8000000000000000ull, 8);
+                bad |= put(argv[2], "checkpoint-budget-reading-negative-zero.ckpt", buf, n);
+                forge(buf, n, n - 16, 0, 8);
+            }
             if (m == APPM_METHOD_APPM && passes == 2) {
                 snprintf(name, sizeof name, "err-%s-truncated.ckpt", appm_method_name((appm_method)m));
                 bad |= put(argv[1], name, buf, n / 2);
