@@ -13856,8 +13856,9 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
  * has the bias's sign wrong), after APPM__CBIAS_PASSES such passes.  Measured
  * against 0.1.12 (docs/algorithm.md 5.13): caustic-glass 0.93-0.96x the RMSE
  * at 30 s, water-caustic 0.96x at 20 s, the mirror box within 1 % at equal
- * passes, the textured scene 0.1-2 % worse (single pixels that pass the test
- * by chance: D_c is noisier than the image). */
+ * passes, the textured scene 0.1-2 % worse (scattered single pixels of its
+ * floor; neither a stricter test nor a neighbour that passes too kept the
+ * gain without that loss). */
 static int appm__caustic_outruns(const appm__adaptive_px *a)
 {
     double n = a->Dc_n, se;
