@@ -13848,15 +13848,17 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
  * flat mirror's reflected light (the mirror box's floor) is smooth, its bias
  * small, and there the same narrowing costs 4.5-8 % in noise.  What tells them
  * apart is the bias measured for the error bar (7.2): D_c, the caustic term at
- * Rc less the same photons' at Rc / sqrt 8, whose mean is 7/8 of the bias to
- * second order whatever the light's shape.  The radius is narrowed where the
+ * Rc less the same photons' at Rc / sqrt 8.  Where the light is smooth across
+ * the kernel its mean is 7/8 of the bias, as the model's is; on a filament wider
+ * than the inner radius it still holds most of it, and it does not look through
+ * the bandwidth h_c as the model does.  The radius is narrowed where the
  * mean of the D_c stands APPM__CBIAS_Z standard errors from 0 (a bias, not
  * noise) and beyond APPM__CBIAS_T times what the model predicts of it over the
  * same passes, (7/8) (mu2 / 2) Rc_j^2 dI_c (or with the other sign: the model
  * has the bias's sign wrong), after APPM__CBIAS_PASSES such passes.  Measured
- * against 0.1.12 (docs/algorithm.md 5.13): caustic-glass 0.93-0.96x the RMSE
- * at 30 s, water-caustic 0.96x at 20 s, the mirror box within 1 % at equal
- * passes, the textured scene 0.1-2 % worse (scattered single pixels of its
+ * against 0.1.12 (docs/algorithm.md 5.13): caustic-glass 0.94-0.97x the RMSE
+ * at 30 s, water-caustic 0.95-0.96x at 20 s, the mirror box within 1 % at equal
+ * passes, the textured scene 0.2-1.7 % worse (scattered single pixels of its
  * floor; neither a stricter test nor a neighbour that passes too kept the
  * gain without that loss). */
 static int appm__caustic_outruns(const appm__adaptive_px *a)
@@ -13865,8 +13867,7 @@ static int appm__caustic_outruns(const appm__adaptive_px *a)
     if (n < APPM__CBIAS_PASSES) return 0;
     se = sqrt(a->Dc_m2 / ((n - 1.0) * n));
     if (!(fabs(a->Dc) > APPM__CBIAS_Z * se)) return 0;
-    return a->Dc > 0.0 ? a->Dc > APPM__CBIAS_T * (a->Pc > 0.0 ? a->Pc : 0.0)
-                       : a->Dc < APPM__CBIAS_T * (a->Pc < 0.0 ? a->Pc : 0.0);
+    return a->Dc > 0.0 ? a->Dc > APPM__CBIAS_T * a->Pc : a->Dc < APPM__CBIAS_T * a->Pc;
 }
 
 /* Step 7's sums after a pass whose caustic D_j is d, gathered at radius Rc,
@@ -13889,7 +13890,8 @@ static void appm__caustic_bias_add(appm__adaptive_px *a, double d, double Rc)
 /* Step 4: the caustic radius; until the pixel has seen APPM__KMIN_APPM caustic
  * photons it is the diffuse one (returned as -1: "the same"): widening in
  * search of caustic light that may not exist would widen every gather of a
- * scene without any. */
+ * scene without any.  Then the formula's, narrowed by step 7 where the
+ * caustic's measured bias outruns the model's. */
 static float appm__adaptive_radius_caustic(const appm_renderer *r, const void *state)
 {
     const appm__adaptive_px *a = (const appm__adaptive_px *)state;
@@ -13928,10 +13930,12 @@ static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state
         appm__adaptive_update(&a->comp[c], r->pass, e[c], s[c], dl[c], w, g->sum[c].count);
         /* D_j (7.2); a pass whose estimates were dropped (all 0) adds none */
         d = appm__lumd(e[c]) - appm__gather_inner(g, c, 1.0 / (double)r->M);
-        if (d - d == 0.0 && (e[c][0] != 0.0 || e[c][1] != 0.0 || e[c][2] != 0.0 || s[c] != 0.0)) {
-            D += d;
-            if (c == APPM__COMP_CAUSTIC) appm__caustic_bias_add(a, d, g->Rc);
-        }
+        if (!(d - d == 0.0 && (e[c][0] != 0.0 || e[c][1] != 0.0 || e[c][2] != 0.0 || s[c] != 0.0))) d = 0.0;
+        D += d;
+        /* step 7 counts every pass too, an empty one as 0: averaged over the passes
+         * that found photons only, D_c would read 1 / (their share) times its mean
+         * against a prediction made for every pass */
+        if (c == APPM__COMP_CAUSTIC) appm__caustic_bias_add(a, d, g->Rc);
     }
     d = D - a->D; /* Welford, over every pass: the image's bias is the mean of the passes' */
     a->D += d / (double)r->pass;

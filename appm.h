@@ -714,7 +714,7 @@ APPM_API appm_status appm_renderer_load_file(appm_renderer *r, const char *path,
  *   the visible points of each rank's rows (92 bytes a pixel), its photons
  *   (32 bytes each, 4 more with guided emission) with their chunk records
  *   (8 bytes per 1024 paths), and after the gather its rows' pixel state (40
- *   bytes a pixel plus the method's: 24 ppm, 40 sppm, 80 appm-paper, 176
+ *   bytes a pixel plus the method's: 24 ppm, 40 sppm, 80 appm-paper, 208
  *   appm, 0 pt; 8 a chain with chains >= 2), plus a few words (statuses,
  *   dropped samples, guided emission's counts: 8 KiB a guided light, and 4
  *   bytes a row and a chunk of measured times).

@@ -12,7 +12,7 @@
 # pass.  Speed-up S(N) = T1 / T(N).  Measured inputs (environment overrides):
 #   W_PER_PX, R_PER_PX  seconds per pixel of W and R on one core
 #   D_PER_PX            bytes all-gathered per pixel and pass (appm: visible
-#                       point 96, pixel 64, state 176, photons ~32 a path)
+#                       point 96, pixel 64, state 208, photons ~32 a path)
 #   PIXELS              the frame (1920 x 1080 by default)
 #   D2_PER_PX, R2_PER_PX  the same for the design not built (docs/distributed.md
 #                       section 4: pixels owned, photons all-gathered: only the
@@ -23,7 +23,7 @@
 set -u
 W_PER_PX=${W_PER_PX:-1.9e-6}
 R_PER_PX=${R_PER_PX:-1.4e-7}
-D_PER_PX=${D_PER_PX:-368}
+D_PER_PX=${D_PER_PX:-400}
 D2_PER_PX=${D2_PER_PX:-36}
 R2_PER_PX=${R2_PER_PX:-6.5e-8}
 PIXELS=${PIXELS:-2073600}

@@ -45,7 +45,8 @@
 #define SPARSE 300
 #define DENSE 20000 /* enough caustic photons for appm's caustic component */
 /* appm's step 7 reads its sums only after 16 passes of them: saved at 20, resumed
- * to 28 (at DENSE photons, 12 x 10, 18-25 pixels of 120 narrowed from pass 16 on) */
+ * to 28 (at DENSE photons, 12 x 10, 19-29 pixels of 120 pass its test after each
+ * of passes 16 to 32, and their next pass narrows) */
 #define LATE_SAVE 20
 #define LATE_TOTAL 28
 

@@ -342,6 +342,7 @@ static void test_bias_commit(appm_scene *s)
         i = (size_t)(r->h / 2) * r->w + r->w / 2;
         a = (appm__adaptive_px *)appm__state(r, i);
         memset(a, 0, sizeof *a);
+        a->comp[APPM__COMP_CAUSTIC].N = 31; /* step 7's sums from pass 1 on (its photon is the 32nd) */
         memset(&r->pix[i], 0, sizeof r->pix[i]);
         for (k = 0; k < (int)APPM__MAX_THREADS; ++k) dropped += r->dropped[k];
         for (pass = 1; pass <= 3; ++pass) {
@@ -374,6 +375,9 @@ static void test_bias_commit(appm_scene *s)
         CHECK_MSG(fabs(a->D - mean) <= 1e-12 * fabs(Dd) && fabs(a->D_m2 - m2) <= 1e-9 * m2 && dropped == (uint64_t)-1,
                   "D %.15g against %.15g, D_m2 %.15g against %.15g (dropped %d)", a->D, mean, a->D_m2, m2,
                   (int)-dropped);
+        /* step 7's caustic D_c over the same passes, the empty third one as 0 */
+        CHECK_MSG(a->Dc_n == 3.0 && fabs(a->Dc - 2.0 * Dc / 3.0) <= 1e-12 * Dc, "D_c %.15g over %g passes, want %.15g over 3",
+                  a->Dc, a->Dc_n, 2.0 * Dc / 3.0);
     }
     appm_renderer_destroy(r);
 }
