@@ -13843,7 +13843,7 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
  * the Laplacian at bandwidth h_c.  Across a filament of focused light narrower
  * than h_c that Laplacian is the filament's, blurred: the model sees too little
  * bias, and the formula sets a radius wider than the one that minimises the
- * error (on caustic-glass, three quarters of the error at 30 s is bias, and a
+ * error (on caustic-glass, 76 % of the squared error at 30 s is bias, and a
  * caustic radius 0.7x as wide everywhere cut the RMSE to 0.86-0.89x).  But a
  * flat mirror's reflected light (the mirror box's floor) is smooth, its bias
  * small, and there the same narrowing costs 4.5-8 % in noise.  What tells them
@@ -13928,7 +13928,8 @@ static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state
     for (c = 0; c < APPM__NCOMP; ++c) {
         appm__gather_estimates(r, g, c, worker, e[c], &s[c], &dl[c]);
         appm__adaptive_update(&a->comp[c], r->pass, e[c], s[c], dl[c], w, g->sum[c].count);
-        /* D_j (7.2); a pass whose estimates were dropped (all 0) adds none */
+        /* D_j (7.2); a pass whose estimates were dropped (all 0), or that found no
+         * photon of the component, adds 0 */
         d = appm__lumd(e[c]) - appm__gather_inner(g, c, 1.0 / (double)r->M);
         if (!(d - d == 0.0 && (e[c][0] != 0.0 || e[c][1] != 0.0 || e[c][2] != 0.0 || s[c] != 0.0))) d = 0.0;
         D += d;

@@ -107,8 +107,7 @@ static void test_checkpoint_regression_reaches_its_check(void)
         free(data);
         return;
     }
-    memset(&e, 0, sizeof e);
-    appm_config_init(&e.cfg);
+    fuzz__env_init(&e, 0); /* as the checkpoint target and gen_checkpoint set it up */
     st = fuzz__ck_setup(&e, data, len, &s, &r);
     CHECK(st == APPM_OK);
     if (st == APPM_OK) {
