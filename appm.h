@@ -134,8 +134,8 @@
 
 #define APPM_VERSION_MAJOR 0
 #define APPM_VERSION_MINOR 1
-#define APPM_VERSION_PATCH 13
-#define APPM_VERSION "0.1.13"
+#define APPM_VERSION_PATCH 14
+#define APPM_VERSION "0.1.14"
 
 #ifndef APPM_API
 #if defined(_WIN32) && defined(APPM_BUILD_DLL)
@@ -165,7 +165,7 @@ typedef enum appm_status {
 /* Static English text for `s`; never NULL, never to be freed. */
 APPM_API const char *appm_status_string(appm_status s);
 
-/* "0.1.13": the version of the implementation that was compiled (APPM_VERSION is
+/* "0.1.14": the version of the implementation that was compiled (APPM_VERSION is
  * the version of the header).  The patch number changes with every change to
  * what a pass computes (an estimator's constant, the sampler, the emission),
  * so a checkpoint never resumes under passes other than those that wrote it. */
@@ -223,8 +223,9 @@ typedef struct appm_file_reader {
  * surface ends inside it (a wall meeting the floor, a box's edge, a mesh's
  * open edge where the surface ends against nothing: without it every seam and
  * rim is dark by the kernel's missing part), and a caustic radius 0.7x as wide
- * where the caustic's bias, measured at two radii, outruns the model's twice
- * over (a focused filament, since 0.1.13).  ppm and sppm keep their
+ * where the caustic's bias, measured at two radii (r and r / sqrt 1.5), outruns
+ * the model's twice over (a focused filament, since 0.1.13; the inner radius
+ * since 0.1.14).  ppm and sppm keep their
  * papers' estimators but for one test that every photon method shares: a
  * photon on a surface that covers the gathering point (a lamp hung just under
  * a ceiling, facing as it does) is not gathered there (docs/algorithm.md 5.6,

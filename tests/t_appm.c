@@ -1153,7 +1153,8 @@ static void test_cut_laplacian(void)
  * has the expectation (mu2 / 2) (R^2 - R'^2) Delta L, exactly on the toy's
  * quadratic field (a biweight's estimate of a quadratic has no higher term), so
  * (8/7) D (APPM__INNER_F D) estimates the estimate's bias (mu2 / 2) R^2 Delta L
- * = 0.125 at R = 0.2.  On a flat field D is 0 in expectation, and it stays 0
+ * = 0.125 at R = 0.2; and so does 3 D7, D7 the same at step 7's inner radius
+ * R / sqrt 1.5 (appm__gather_inner7), whose standard error is smaller.  On a flat field D is 0 in expectation, and it stays 0
  * where the photons end at a line 0.3 R from x that the kernel is cut at: the
  * estimate at R' is divided by the mass its own kernel keeps (a line at
  * 0.85 R'), not by the kernel's at R, which would leave (8/7) D near -0.08. */
@@ -1163,6 +1164,7 @@ static void test_bias_two_radii(void)
     int t, T = check_quick() ? 4000 : 12000, field; /* se about 0.002: INNER_F 1 (D for the bias) is 0.016 off */
     for (field = 0; field < 3; ++field) { /* the quadratic field; flat; flat and cut */
         double sum = 0.0, sum2 = 0.0, mean, se, want = field == 0 ? 0.5 * APPM__MU2 * R * R * TOY_LAPLACIAN : 0.0;
+        double sum7 = 0.0, sum27 = 0.0, mean7, se7;
         appm__rng rng;
         appm__rng_seed(&rng, 41, 0, APPM__DOMAIN_TEST, (uint64_t)field);
         for (t = 0; t < T; ++t) {
@@ -1185,18 +1187,30 @@ static void test_bias_two_radii(void)
             b = APPM__INNER_F * (appm__lumd(ev) - appm__gather_inner(&g, APPM__COMP_DIFFUSE, 1.0 / M));
             sum += b;
             sum2 += b * b;
+            b = appm__lumd(ev) - appm__gather_inner7(&g, APPM__COMP_DIFFUSE, 1.0 / M);
+            b *= APPM__CBIAS_S2 / (APPM__CBIAS_S2 - 1.0);
+            sum7 += b;
+            sum27 += b * b;
         }
         mean = sum / T;
         se = sqrt((sum2 / T - mean * mean) / (T - 1));
         CHECK_MSG(fabs(mean - want) < 4.0 * se && se < 0.02 * 0.125,
                   "field %d: (8/7) D = %.5f (se %.5f), the bias is %.5f", field, mean, se, want);
+        mean7 = sum7 / T;
+        se7 = sqrt((sum27 / T - mean7 * mean7) / (T - 1));
+        CHECK_MSG(fabs(mean7 - want) < 4.0 * se7 && se7 < 0.7 * se,
+                  "field %d: 3 D7 = %.5f (se %.5f, D's %.5f), the bias is %.5f", field, mean7, se7, se, want);
+        if (field == 0)
+            printf("the bias on the quadratic field: its standard error from R / sqrt 8 %.5f, from R / sqrt 1.5 %.5f\n",
+                   se, se7);
     }
 }
 
 /* Step 7 of 10.4 on the toy's photons, gathered by the renderer's own
  * functions pass after pass as a pixel's caustic component would be.  On the
  * toy's quadratic field the model (mu2 / 2) R^2 dI is exact, so the measured
- * D_c stays near what it predicts (7/8 of it, to the noise of 64 passes) and
+ * D_c (at R and R / sqrt 1.5) stays near what it predicts (1/3 of it, to the
+ * noise of 64 passes) and
  * the radius keeps the formula's.  On a ridge of light 1/8 of the radius wide
  * (a caustic's filament), the Laplacian at the bandwidth h = 1.25 R sees the
  * ridge blurred, the measured bias is many times the predicted one, and the
@@ -1233,7 +1247,7 @@ static double caustic_run(int ridge, appm__adaptive_px *a, unsigned passes)
         }
         appm__gather_finish(&g, APPM__COMP_DIFFUSE, 1.0 / M, e, &s, &dl);
         appm__adaptive_update(&a->comp[APPM__COMP_CAUSTIC], j, e, s, dl, 1.0, g.sum[APPM__COMP_DIFFUSE].count);
-        d = appm__lumd(e) - appm__gather_inner(&g, APPM__COMP_DIFFUSE, 1.0 / M);
+        d = appm__lumd(e) - appm__gather_inner7(&g, APPM__COMP_DIFFUSE, 1.0 / M);
         appm__caustic_bias_add(a, d, R);
     }
     return a->Pc != 0.0 ? a->Dc / a->Pc : HUGE_VAL;
@@ -1268,7 +1282,7 @@ static void test_caustic_outruns(void)
     CHECK_MSG(fabs(rf - lo) < 1e-12 * lo && appm__caustic_outruns(&a), "the formula's radius %g, the bound %g", rf, lo);
     CHECK_NEAR(appm__adaptive_radius_caustic(&rr, &a), (float)lo, 1e-7 * lo);
     /* the sums of one pass by hand: from the 32nd photon on, the model's prediction
-     * (7/8) (mu2 / 2) Rc^2 dI_c = (7/8) (1/16) 0.04 50 = 0.109375, and an empty pass
+     * (1 - 1/1.5) (mu2 / 2) Rc^2 dI_c = (1/3) (1/16) 0.04 50 = 1/24, and an empty pass
      * (d = 0) counts as a pass */
     memset(&b, 0, sizeof b);
     b.comp[APPM__COMP_CAUSTIC].N = 31;
@@ -1281,7 +1295,7 @@ static void test_caustic_outruns(void)
     CHECK(b.Dc_n == 2.0);
     CHECK_NEAR(b.Dc, 0.5, 1e-15);
     CHECK_NEAR(b.Dc_m2, 0.5, 1e-15);
-    CHECK_NEAR(b.Pc, 0.109375, 1e-15);
+    CHECK_NEAR(b.Pc, 1.0 / 24.0, 1e-15);
     /* the test's cases, on a state of hand-set sums */
     memset(&b, 0, sizeof b);
     b.Dc_n = 16.0;

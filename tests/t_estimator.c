@@ -316,8 +316,11 @@ static void test_appm_start(appm_scene *s)
  *   the diffuse component, R = 1/8: one photon of power P1 at x itself, whose
  *       weight is 1 in both kernels, so the estimate at R' = R / sqrt 8 is eight
  *       times the one at R, 3 P1 / (pi R^2 M), and D_d = -21 P1 / (pi R^2 M);
- *   the caustic component, Rc = 1/16: one photon of power P2 at d^2 = 0.75 Rc^2,
- *       beyond Rc', so D_c = its estimate at Rc, (1 - 0.75)^2 3 P2 / (pi Rc^2 M).
+ *   the caustic component, Rc = 1/16: one photon of power P2 at d^2 = 0.5 Rc^2,
+ *       beyond Rc' = Rc / sqrt 8, so D_c = its estimate at Rc, (1 - 0.5)^2 3 P2 /
+ *       (pi Rc^2 M); but within step 7's inner radius Rc / sqrt 1.5, where its
+ *       kernel is (1 - 1.5 0.5)^2 = 1/16 of 3 (1.5) P2 / (pi Rc^2 M), so step 7's
+ *       D_c is (1/4 - 1.5 / 16) 3 P2 / (pi Rc^2 M).
  * Pass 1 has both, pass 2 the same with the diffuse photon's power NaN (that
  * component is dropped, and adds nothing to D), pass 3 gathers nothing: the
  * pixel's D is the mean of D_c + D_d, D_c and 0, its D_m2 their M2, and the
@@ -326,7 +329,7 @@ static void test_bias_commit(appm_scene *s)
 {
     appm_renderer *r = appm_small(s, 0.0);
     const double P1 = 2.0, P2 = 3.0, R = 0.125, Rc = 0.0625; /* exact in float, as vp and g hold them */
-    double M, Dd, Dc, v[3], mean, m2;
+    double M, Dd, Dc, Dc7, v[3], mean, m2;
     size_t i;
     int k, pass;
     uint64_t dropped = 0;
@@ -335,7 +338,8 @@ static void test_bias_commit(appm_scene *s)
     if (check_passes(r, 1)) {
         M = (double)r->M;
         Dd = -21.0 * P1 / (APPM__PI * R * R * M);
-        Dc = 0.0625 * 3.0 * P2 / (APPM__PI * Rc * Rc * M);
+        Dc = 0.25 * 3.0 * P2 / (APPM__PI * Rc * Rc * M);
+        Dc7 = (0.25 - 1.5 / 16.0) * 3.0 * P2 / (APPM__PI * Rc * Rc * M);
         v[0] = Dd + Dc, v[1] = Dc, v[2] = 0.0;
         mean = (v[0] + v[1] + v[2]) / 3.0;
         m2 = (v[0] - mean) * (v[0] - mean) + (v[1] - mean) * (v[1] - mean) + mean * mean;
@@ -361,11 +365,12 @@ static void test_bias_commit(appm_scene *s)
                 g.sum[APPM__COMP_DIFFUSE].e[0] = g.sum[APPM__COMP_DIFFUSE].e[1] = p1;
                 g.sum[APPM__COMP_DIFFUSE].e[2] = p1;
                 g.sum[APPM__COMP_DIFFUSE].s = p1 * p1;
-                g.sum[APPM__COMP_DIFFUSE].ei = p1;
+                g.sum[APPM__COMP_DIFFUSE].ei = g.sum[APPM__COMP_DIFFUSE].e7 = p1;
                 g.sum[APPM__COMP_DIFFUSE].count = 1;
-                g.sum[APPM__COMP_CAUSTIC].e[0] = g.sum[APPM__COMP_CAUSTIC].e[1] = 0.0625 * P2;
-                g.sum[APPM__COMP_CAUSTIC].e[2] = 0.0625 * P2;
-                g.sum[APPM__COMP_CAUSTIC].s = 0.0625 * P2 * P2;
+                g.sum[APPM__COMP_CAUSTIC].e[0] = g.sum[APPM__COMP_CAUSTIC].e[1] = 0.25 * P2;
+                g.sum[APPM__COMP_CAUSTIC].e[2] = 0.25 * P2;
+                g.sum[APPM__COMP_CAUSTIC].s = 0.25 * P2 * P2;
+                g.sum[APPM__COMP_CAUSTIC].e7 = P2 / 16.0;
                 g.sum[APPM__COMP_CAUSTIC].count = 1;
             }
             r->pass = (uint64_t)pass;
@@ -375,9 +380,10 @@ static void test_bias_commit(appm_scene *s)
         CHECK_MSG(fabs(a->D - mean) <= 1e-12 * fabs(Dd) && fabs(a->D_m2 - m2) <= 1e-9 * m2 && dropped == (uint64_t)-1,
                   "D %.15g against %.15g, D_m2 %.15g against %.15g (dropped %d)", a->D, mean, a->D_m2, m2,
                   (int)-dropped);
-        /* step 7's caustic D_c over the same passes, the empty third one as 0 */
-        CHECK_MSG(a->Dc_n == 3.0 && fabs(a->Dc - 2.0 * Dc / 3.0) <= 1e-12 * Dc, "D_c %.15g over %g passes, want %.15g over 3",
-                  a->Dc, a->Dc_n, 2.0 * Dc / 3.0);
+        /* step 7's caustic D_c over the same passes, at its own inner radius, the empty
+         * third one as 0 */
+        CHECK_MSG(a->Dc_n == 3.0 && fabs(a->Dc - 2.0 * Dc7 / 3.0) <= 1e-12 * Dc7,
+                  "D_c %.15g over %g passes, want %.15g over 3", a->Dc, a->Dc_n, 2.0 * Dc7 / 3.0);
     }
     appm_renderer_destroy(r);
 }
