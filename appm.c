@@ -12946,8 +12946,8 @@ typedef struct appm__sums { /* one photon component's sums over a gather's photo
     double dl;           /* sum of D_h lum(Psi) */
     double ei;           /* biweight: sum of K(|d| / R') lum(Psi) at the inner radius R' = R / sqrt 8,
                           * the photons of the same gather: appm's bias estimate (appm__gather_inner) */
-    double e7;           /* the same at R' = R / sqrt 1.5: step 7's test (appm__gather_inner7), for the
-                          * caustic component (or the only one) */
+    double ecb;          /* the same at R' = R / sqrt 1.5: step 7's test (appm__gather_inner_cbias), for
+                          * the caustic component (or a gather's only one) */
     uint64_t count;      /* photons inside the kernel */
 } appm__sums;
 
@@ -12969,7 +12969,7 @@ typedef struct appm__gather {
     const appm__pmap *map; /* the map being queried (its side[] array), set by the query */
     unsigned max_p;      /* longest photon path that still counts */
     int biweight;
-    int inner;           /* biweight: also sum the photons at R / sqrt 8 and R / sqrt 1.5 (appm__sums.ei, e7) */
+    int inner;           /* biweight: also sum the photons at R / sqrt 8 and R / sqrt 1.5 (appm__sums.ei, ecb) */
     /* [APPM__COMP_DIFFUSE]: every photon, or with Rc > 0 the diffuse ones only;
      * [APPM__COMP_CAUSTIC]: with Rc > 0 the caustic photons, gathered with radius Rc */
     appm__sums sum[APPM__NCOMP];
@@ -13099,14 +13099,14 @@ static double appm__gather_inner(const appm__gather *g, int c, double invM)
     return appm__gather_inner_at(g, c, APPM__INNER_S2, g->sum[c].ei, invM);
 }
 
-/* The same at R / sqrt 1.5 (APPM__CBIAS_S2), from appm__sums.e7: step 7's D_c,
+/* The same at R / sqrt 1.5 (APPM__CBIAS_S2), from appm__sums.ecb: step 7's D_c,
  * lum(e) less this, is 1/3 of the bias at R.  The error bar's inner radius is
  * chosen to see as much of a narrow filament's bias as it can (7.4); a test of
  * whether there is a bias wants the most standard errors per unit of bias
  * instead, and for the biweight that grows as R' nears R (appm__caustic_outruns). */
-static double appm__gather_inner7(const appm__gather *g, int c, double invM)
+static double appm__gather_inner_cbias(const appm__gather *g, int c, double invM)
 {
-    return appm__gather_inner_at(g, c, APPM__CBIAS_S2, g->sum[c].e7, invM);
+    return appm__gather_inner_at(g, c, APPM__CBIAS_S2, g->sum[c].ecb, invM);
 }
 
 /* The caustic component's Laplacian bandwidth (10.4, step 2), given the
@@ -13610,8 +13610,8 @@ typedef struct appm__adaptive_px { /* appm's per-pixel state: one record per pho
     appm__adaptive_stats comp[APPM__NCOMP]; /* [APPM__COMP_DIFFUSE], [APPM__COMP_CAUSTIC] */
     double D, D_m2; /* Welford mean and M2 over the passes of D_j, summed over the components */
     /* step 7: over the passes since the caustic component adapts, the Welford mean
-     * and M2 of its own D_j, their count, and the mean of what the model predicts
-     * of them, (7/8) (mu2 / 2) Rc_j^2 dI_c */
+     * and M2 of its own D_j (at Rc and Rc / sqrt 1.5), their count, and the mean
+     * of what the model predicts of them, (1/3) (mu2 / 2) Rc_j^2 dI_c */
     double Dc, Dc_m2, Dc_n, Pc;
 } appm__adaptive_px;
 
@@ -13882,16 +13882,23 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
  * error bar's 8.  D_c's noise is what hides the bias: in caustic-glass's
  * caustic, where nine tenths of the squared error is bias, the mean of the
  * D_c at Rc / sqrt 8 stood a median of 1 standard error from 0 after 2000
- * passes.  Per unit of bias, a biweight's D at Rc / s has the standard
- * deviation sqrt(int (K_R - K_R/s)^2) / (1 - 1/s^2) (photons of one power,
- * spread evenly), which falls as s nears 1: relative to s^2 = 8 the test sees
- * 1.45x the standard errors at s^2 = 4, 2.14x at 2, 2.56x at 1.5 and 2.89x at
- * 1.25 (at 1.5 as many as 6.6x the passes would give; 1.9x on the toy field
- * of tests/t_appm.c, whose photons' powers vary).  Measured against the error bar's radius
- * (docs/algorithm.md 5.13), caustic-glass 0.91-0.95x the RMSE at 1500 passes
- * (s^2 = 2: 0.94-0.97x, 1.25: 0.92-0.94x), the textured scene, which lost
- * 0.2-1.7 % to step 7 at the error bar's radius, 0.99-1.00x, the mirror box
- * 0.996-0.998x. */
+ * passes.  Per unit of a bias smooth across the kernel, a biweight's D at
+ * Rc / s has a standard deviation proportional to
+ * sqrt(int (K_R - K_R/s)^2) / (1 - 1/s^2) (photons of one power, spread
+ * evenly), which falls as s nears 1: relative to s^2 = 8 the test sees 1.45x
+ * the standard errors at s^2 = 4, 1.70x at 3, 2.14x at 2, 2.56x at 1.5 and
+ * 2.89x at 1.25 (at 1.5 as many as 6.6x the passes would give; 1.9x on the
+ * toy's quadratic field in tests/t_appm.c, whose photons' powers vary).  On a
+ * filament narrower than the inner radius the trade is smaller: D holds only
+ * the part of its bias between the two radii, the less the closer they are.
+ * On the toy's ridge 1/8 of R wide D_c reads 9.1 times the prediction at
+ * R / sqrt 1.5 against 22 at R / sqrt 8: still well beyond T.  Measured
+ * against the error bar's radius (docs/algorithm.md 5.13): caustic-glass
+ * 0.91-0.95x the RMSE at 1500 passes (s^2 = 2: 0.94-0.97x, 1.25: 0.92-0.94x),
+ * whose caustic's photons spread inside Rc as evenly as a flat mirror's; the textured
+ * scene, which lost 0.2-1.7 % to step 7 at the error bar's radius,
+ * 0.99-1.00x (1.001-1.008x of 0.1.12's by the product of the ratios); the
+ * mirror box 0.996-0.998x. */
 static int appm__caustic_outruns(const appm__adaptive_px *a)
 {
     double n = a->Dc_n, se;
@@ -13947,14 +13954,14 @@ static int appm__adaptive_dominant(const appm__adaptive_px *a)
                : APPM__COMP_DIFFUSE;
 }
 
-/* A pass's D for one component: its estimate's luminance less the same
+/* A pass's D for one component: its estimate e's luminance less the same
  * photons' estimate at an inner radius; 0 where the pass's estimates were
- * dropped (all 0), where it found no photon of the component, or where D is
- * not finite. */
-static double appm__pass_d(const double *e, double s, double inner)
+ * dropped (e and the kernel's second moment m all 0), where it found no
+ * photon of the component, or where D is not finite. */
+static double appm__pass_d(const double *e, double m, double inner)
 {
     double d = appm__lumd(e) - inner;
-    return d - d == 0.0 && (e[0] != 0.0 || e[1] != 0.0 || e[2] != 0.0 || s != 0.0) ? d : 0.0;
+    return d - d == 0.0 && (e[0] != 0.0 || e[1] != 0.0 || e[2] != 0.0 || m != 0.0) ? d : 0.0;
 }
 
 static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state, const appm__vp *vp,
@@ -13975,7 +13982,7 @@ static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state
          * one as 0: averaged over the passes that found photons only, D_c would read
          * 1 / (their share) times its mean against a prediction made for every pass */
         if (c == APPM__COMP_CAUSTIC)
-            appm__caustic_bias_add(a, appm__pass_d(e[c], s[c], appm__gather_inner7(g, c, 1.0 / (double)r->M)), g->Rc);
+            appm__caustic_bias_add(a, appm__pass_d(e[c], s[c], appm__gather_inner_cbias(g, c, 1.0 / (double)r->M)), g->Rc);
     }
     d = D - a->D; /* Welford, over every pass: the image's bias is the mean of the passes' */
     a->D += d / (double)r->pass;
@@ -14321,10 +14328,11 @@ static const appm__estimator appm__estimators[APPM_METHOD_COUNT] = {
 
 /* One photon's share of one component's sums (lobe: the glossy lobe's value at
  * the photon's direction; ih and lw: 1 / the component's bandwidth, 0 for none,
- * and its kernels' masses; seven: the component step 7 reads, whose sums at
- * R / sqrt 1.5 are kept too). */
+ * and its kernels' masses; cbias: the component step 7 reads, the caustic one,
+ * whose sum at R / sqrt 1.5 is kept too; in a gather of one component, as the
+ * tests' toys make, that one). */
 static inline void appm__gather_sums(const appm__gather *g, const appm__photon *p, float d2, float R2, double ih,
-                                     const double *lw, double q, float lobe, appm__sums *sum, int seven)
+                                     const double *lw, double q, float lobe, appm__sums *sum, int cbias)
 {
     if (d2 < R2) {
         double k = 1.0;
@@ -14335,9 +14343,9 @@ static inline void appm__gather_sums(const appm__gather *g, const appm__photon *
             /* within R' = R / sqrt 1.5, where 1 - d^2 / R'^2 = 1.5 u - 0.5, and within
              * R / sqrt 8, where it is 8 u - 7; the tests read d2 and R2, not u, so that they
              * do not wait for u's division (nor does a mispredicted branch) */
-            if (g->inner && seven && d2 < (float)(1.0 / APPM__CBIAS_S2) * R2) {
-                double u7 = APPM__CBIAS_S2 * u - (APPM__CBIAS_S2 - 1.0);
-                sum->e7 += u7 * u7 * q;
+            if (g->inner && cbias && d2 < (float)(1.0 / APPM__CBIAS_S2) * R2) {
+                double ucb = APPM__CBIAS_S2 * u - (APPM__CBIAS_S2 - 1.0);
+                sum->ecb += ucb * ucb * q;
             }
             if (g->inner && d2 < (float)(1.0 / APPM__INNER_S2) * R2) {
                 double ui = APPM__INNER_S2 * u - (APPM__INNER_S2 - 1.0);

@@ -365,12 +365,12 @@ static void test_bias_commit(appm_scene *s)
                 g.sum[APPM__COMP_DIFFUSE].e[0] = g.sum[APPM__COMP_DIFFUSE].e[1] = p1;
                 g.sum[APPM__COMP_DIFFUSE].e[2] = p1;
                 g.sum[APPM__COMP_DIFFUSE].s = p1 * p1;
-                g.sum[APPM__COMP_DIFFUSE].ei = g.sum[APPM__COMP_DIFFUSE].e7 = p1;
+                g.sum[APPM__COMP_DIFFUSE].ei = g.sum[APPM__COMP_DIFFUSE].ecb = p1;
                 g.sum[APPM__COMP_DIFFUSE].count = 1;
                 g.sum[APPM__COMP_CAUSTIC].e[0] = g.sum[APPM__COMP_CAUSTIC].e[1] = 0.25 * P2;
                 g.sum[APPM__COMP_CAUSTIC].e[2] = 0.25 * P2;
                 g.sum[APPM__COMP_CAUSTIC].s = 0.25 * P2 * P2;
-                g.sum[APPM__COMP_CAUSTIC].e7 = P2 / 16.0;
+                g.sum[APPM__COMP_CAUSTIC].ecb = P2 / 16.0;
                 g.sum[APPM__COMP_CAUSTIC].count = 1;
             }
             r->pass = (uint64_t)pass;
