@@ -13895,8 +13895,8 @@ static float appm__adaptive_radius_diffuse(const appm_renderer *r, const void *s
  * R / sqrt 1.5 against 22 at R / sqrt 8: still well beyond T.  Measured
  * against the error bar's radius (docs/algorithm.md 5.13): caustic-glass
  * 0.91-0.95x the RMSE at 1500 passes (s^2 = 2: 0.94-0.97x, 1.25: 0.92-0.94x),
- * whose caustic's photons spread inside Rc as evenly as a flat mirror's; the textured
- * scene, which lost 0.2-1.7 % to step 7 at the error bar's radius,
+ * whose caustic's photons spread inside Rc as evenly as a flat mirror's; the
+ * textured scene, which lost 0.2-1.7 % to step 7 at the error bar's radius,
  * 0.99-1.00x (1.001-1.008x of 0.1.12's by the product of the ratios); the
  * mirror box 0.996-0.998x. */
 static int appm__caustic_outruns(const appm__adaptive_px *a)
@@ -13910,10 +13910,10 @@ static int appm__caustic_outruns(const appm__adaptive_px *a)
 
 /* Step 7's sums after a pass whose caustic D_j (at Rc / sqrt 1.5) is d,
  * gathered at radius Rc, with the caustic statistics already updated by the
- * pass: from the pass at
- * which the component adapts (APPM__KMIN_APPM photons) on, the Welford mean and
- * M2 of the D_j and the running mean of the model's prediction of them, whose
- * dI_c is the Laplacian's running mean after that pass. */
+ * pass: from the pass at which the component adapts (APPM__KMIN_APPM photons)
+ * on, the Welford mean and M2 of the D_j and the running mean of the model's
+ * prediction of them, whose dI_c is the Laplacian's running mean after that
+ * pass. */
 static void appm__caustic_bias_add(appm__adaptive_px *a, double d, double Rc)
 {
     const appm__adaptive_stats *p = &a->comp[APPM__COMP_CAUSTIC];
@@ -13969,6 +13969,7 @@ static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state
 {
     appm__adaptive_px *a = (appm__adaptive_px *)state;
     double e[APPM__NCOMP][3], s[APPM__NCOMP], dl[APPM__NCOMP], hr = g->h / r->r_auto;
+    const double invM = 1.0 / (double)r->M;
     double w = g->h > 0.0f ? hr * hr * hr * hr * hr * hr : 0.0; /* step 2's weight (h / r_auto)^6 */
     double D = 0.0, d;
     int c;
@@ -13977,12 +13978,12 @@ static void appm__adaptive_commit(appm_renderer *r, appm__pixel *px, void *state
     for (c = 0; c < APPM__NCOMP; ++c) {
         appm__gather_estimates(r, g, c, worker, e[c], &s[c], &dl[c]);
         appm__adaptive_update(&a->comp[c], r->pass, e[c], s[c], dl[c], w, g->sum[c].count);
-        D += appm__pass_d(e[c], s[c], appm__gather_inner(g, c, 1.0 / (double)r->M)); /* D_j (7.2) */
+        D += appm__pass_d(e[c], s[c], appm__gather_inner(g, c, invM)); /* D_j (7.2) */
         /* step 7's D_c, from its own inner radius; it counts every pass too, an empty
          * one as 0: averaged over the passes that found photons only, D_c would read
          * 1 / (their share) times its mean against a prediction made for every pass */
         if (c == APPM__COMP_CAUSTIC)
-            appm__caustic_bias_add(a, appm__pass_d(e[c], s[c], appm__gather_inner_cbias(g, c, 1.0 / (double)r->M)), g->Rc);
+            appm__caustic_bias_add(a, appm__pass_d(e[c], s[c], appm__gather_inner_cbias(g, c, invM)), g->Rc);
     }
     d = D - a->D; /* Welford, over every pass: the image's bias is the mean of the passes' */
     a->D += d / (double)r->pass;

@@ -45,8 +45,9 @@
 #define SPARSE 300
 #define DENSE 20000 /* enough caustic photons for appm's caustic component */
 /* appm's step 7 reads its sums only after 16 passes of them: saved at 20, resumed
- * to 28 (at DENSE photons, 12 x 10, 19-29 pixels of 120 pass its test after each
- * of passes 16 to 32, and their next pass narrows) */
+ * to 28 (at DENSE photons some of the 12 x 10 pixels pass its test from pass 16
+ * on, and their next pass narrows; were none to, its four fields would read as
+ * unused and test_fields_matter would fail) */
 #define LATE_SAVE 20
 #define LATE_TOTAL 28
 
